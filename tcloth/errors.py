@@ -1,0 +1,23 @@
+"""Exceptions raised by tcloth."""
+
+
+class SceneError(ValueError):
+    """Bad input: the message names the argument and the offending value."""
+
+
+class InstabilityError(RuntimeError):
+    """A step produced a non-finite state or left the documented position bound.
+
+    The simulator keeps the last good state (``positions()`` still reads it).
+    Attributes: ``step`` (index of the failing step), ``time`` (s), ``integrator``.
+    """
+
+    def __init__(self, message, step=None, time=None, integrator=None):
+        super().__init__(message)
+        self.step = step
+        self.time = time
+        self.integrator = integrator
+
+
+class StaleSimulatorError(RuntimeError):
+    """A simulator was used after ``tcloth.init`` re-initialised Taichi."""

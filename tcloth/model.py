@@ -1,0 +1,113 @@
+"""Model (static Taichi fields built once from a Scene) and State (per-step fields).
+
+Pinned particles are ordinary particles with inverse mass 0. Springs live in one list
+ordered so that the springs the force kernels walk one by one come first
+(``list_spring_count`` of them); springs of cloths handled by the grid stencil follow and
+are only read by diagnostics. Cloth grids are described by ``GridBlock`` records.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+import taichi as ti
+
+from . import runtime
+from .errors import SceneError
+
+
+@dataclass(frozen=True)
+class GridBlock:
+    """A regular cloth grid whose springs are evaluated by a neighbour stencil.
+
+    offset: id of particle (i=0, j=0); ids run row by row (id = offset + j*nx + i).
+    dx, dy: rest spacing (m). Each family is (k_s, k_d) or None.
+    """
+    offset: int
+    nx: int
+    ny: int
+    dx: float
+    dy: float
+    structural: tuple
+    shear: tuple
+    flexion: tuple
+
+
+def _vec_field(n):
+    return ti.Vector.field(3, runtime.real(), shape=n)
+
+
+class State:
+    """Per-step particle state.
+
+    Attributes:
+        x: positions, shape (particle_count,) of vec3, m.
+        v: velocities, shape (particle_count,) of vec3, m/s.
+        f: force accumulator, shape (particle_count,) of vec3, N.
+        forces_valid: True when ``f`` holds the forces at (x, v) (used by Verlet).
+    """
+
+    def __init__(self, n):
+        self.x = _vec_field(n)
+        self.v = _vec_field(n)
+        self.f = _vec_field(n)
+        self.forces_valid = False
+
+
+class Model:
+    """Static description of a scene as Taichi fields.
+
+    Attributes:
+        particle_count, spring_count, list_spring_count: sizes.
+        mass, inv_mass: shape (particle_count,), kg and 1/kg (0 = pinned).
+        spring_pairs: shape (spring_count,) of 2 x i32 particle ids.
+        spring_rest, spring_ks, spring_kd: shape (spring_count,); m, N/m, N s/m.
+        grids: list of GridBlock (empty when grid_stencil=False).
+        gravity: (3,) m/s^2 (NumPy); air_drag: N s/m.
+    """
+
+    def __init__(self, scene, grid_stencil=True):
+        self.generation = runtime.ensure_init()
+        self.scene = scene
+        self.particle_count = n = scene.num_particles
+        if n == 0:
+            raise SceneError("scene has no particles (got num_particles = 0)")
+        self.gravity = scene.gravity.copy()
+        self.air_drag = scene.air_drag
+        npr = runtime.numpy_real()
+        real = runtime.real()
+
+        self.mass = ti.field(real, shape=n)
+        self.inv_mass = ti.field(real, shape=n)
+        m = scene.masses
+        self.mass.from_numpy(m.astype(npr))
+        self.inv_mass.from_numpy(np.where(scene.pinned, 0.0, 1.0 / m).astype(npr))
+
+        springs = scene.springs
+        in_grid = np.zeros(scene.num_springs, dtype=bool)
+        self.grids = []
+        if grid_stencil:
+            for cloth in scene.cloths:
+                for sids in cloth.springs.values():
+                    in_grid[sids] = True
+                p = cloth.params
+                self.grids.append(GridBlock(cloth.offset, *cloth.resolution, *cloth.spacing,
+                                            p["structural"], p["shear"], p["flexion"]))
+        order = np.argsort(in_grid, kind="stable")
+        self.spring_count = ns = scene.num_springs
+        self.list_spring_count = int((~in_grid).sum())
+        self.spring_pairs = ti.Vector.field(2, ti.i32, shape=max(ns, 1))
+        self.spring_rest = ti.field(real, shape=max(ns, 1))
+        self.spring_ks = ti.field(real, shape=max(ns, 1))
+        self.spring_kd = ti.field(real, shape=max(ns, 1))
+        if ns:
+            self.spring_pairs.from_numpy(springs["pairs"][order].astype(np.int32))
+            self.spring_rest.from_numpy(springs["rest_length"][order].astype(npr))
+            self.spring_ks.from_numpy(springs["stiffness"][order].astype(npr))
+            self.spring_kd.from_numpy(springs["damping"][order].astype(npr))
+
+    def state(self):
+        """A new State with the scene's initial positions and velocities."""
+        s = State(self.particle_count)
+        npr = runtime.numpy_real()
+        s.x.from_numpy(self.scene.positions.astype(npr))
+        s.v.from_numpy(self.scene.velocities.astype(npr))
+        return s

@@ -1,0 +1,99 @@
+"""Taichi initialisation: architecture, precision and the runtime generation.
+
+``init`` may be called again; every call starts a new *generation*, and objects that
+hold Taichi fields from an earlier generation refuse to run (``StaleSimulatorError``).
+"""
+import taichi as ti
+
+from .errors import SceneError, StaleSimulatorError
+
+_ARCHS = {
+    "auto": lambda: None,
+    "cpu": lambda: ti.cpu,
+    "gpu": lambda: ti.gpu,
+    "cuda": lambda: ti.cuda,
+    "vulkan": lambda: ti.vulkan,
+    "metal": lambda: ti.metal,
+}
+_PRECISIONS = {"f32": ti.f32, "f64": ti.f64}
+
+
+class _Runtime:
+    generation = 0
+    initialised = False
+    real = ti.f32
+    precision = "f32"
+    arch_name = "cpu"
+
+
+def init(arch="cpu", precision="f32", **kwargs):
+    """(Re-)initialise Taichi for tcloth.
+
+    Args:
+        arch: "auto" | "cpu" | "gpu" | "cuda" | "vulkan" | "metal".
+        precision: "f32" (default, fast) or "f64" (accuracy studies).
+        **kwargs: passed on to ``ti.init`` (e.g. ``kernel_profiler=True``).
+    """
+    if arch not in _ARCHS:
+        raise SceneError(f"arch must be one of {sorted(_ARCHS)} (got {arch!r})")
+    if precision not in _PRECISIONS:
+        raise SceneError(f"precision must be 'f32' or 'f64' (got {precision!r})")
+    real = _PRECISIONS[precision]
+    ti_arch = _ARCHS[arch]()
+    kwargs.setdefault("log_level", ti.WARN)
+    if ti_arch is None:
+        ti.init(default_fp=real, **kwargs)
+    else:
+        ti.init(arch=ti_arch, default_fp=real, **kwargs)
+    _Runtime.generation += 1
+    _Runtime.initialised = True
+    _Runtime.real = real
+    _Runtime.precision = precision
+    _Runtime.arch_name = ti.lang.impl.current_cfg().arch.name
+    return _Runtime.generation
+
+
+def ensure_init():
+    """Initialise with defaults unless somebody already did."""
+    if not _Runtime.initialised:
+        init()
+    return _Runtime.generation
+
+
+def real():
+    """The Taichi float type of the current precision."""
+    return _Runtime.real
+
+
+def numpy_real():
+    return "float64" if _Runtime.precision == "f64" else "float32"
+
+
+def arch_name():
+    return _Runtime.arch_name
+
+
+def generation():
+    return _Runtime.generation
+
+
+def accumulator():
+    """Float type for reductions: f64 where the backend has it."""
+    return ti.f64 if _Runtime.arch_name in ("x64", "arm64", "cuda") else _Runtime.real
+
+
+SERIAL_BELOW = 2048
+
+
+def serial(field):
+    """True where a loop over ``field`` should run on one CPU thread: below SERIAL_BELOW
+    items the thread pool's start-up (about 0.1 ms per parallel loop) costs more than the
+    work. Evaluated at compile time (``ti.static``); never on GPUs."""
+    return _Runtime.arch_name in ("x64", "arm64") and field.shape[0] < SERIAL_BELOW
+
+
+def check_generation(gen, what="simulator"):
+    if gen != _Runtime.generation:
+        raise StaleSimulatorError(
+            f"this {what} was made before tcloth.init() was called again; its Taichi "
+            "fields are gone. Build a new tcloth.Simulator from the scene.")

@@ -1,0 +1,390 @@
+"""Scene: a plain description of particles, springs and forces (NumPy only, no Taichi).
+
+Units are SI throughout: metres, kilograms, seconds, newtons. A ``Scene`` validates every
+input when it is added, so that a ``Simulator`` built from it never sees bad data.
+"""
+import numpy as np
+
+from .errors import SceneError
+
+SPRING_KINDS = ("structural", "shear", "flexion", "custom")
+KIND_CODE = {name: code for code, name in enumerate(SPRING_KINDS)}
+
+
+def _fmt(value):
+    text = np.array2string(np.asarray(value), threshold=8, precision=6) \
+        if np.ndim(value) else repr(value)
+    return text if len(text) < 200 else text[:197] + "..."
+
+
+def as_vec3(name, value):
+    """A finite 3-vector as float64, or SceneError naming ``name``."""
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise SceneError(f"{name} must be a 3-vector of numbers (got {_fmt(value)})") from None
+    if arr.shape != (3,):
+        raise SceneError(f"{name} must be a 3-vector, shape (3,) (got shape {arr.shape}: {_fmt(value)})")
+    if not np.all(np.isfinite(arr)):
+        raise SceneError(f"{name} must be finite (got {_fmt(value)})")
+    return arr
+
+
+def as_points(name, value):
+    """A finite (N,3) float64 array with N >= 1."""
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise SceneError(f"{name} must be an (N,3) array of numbers (got {_fmt(value)})") from None
+    if arr.ndim != 2 or arr.shape[1] != 3 or arr.shape[0] == 0:
+        raise SceneError(f"{name} must have shape (N,3) with N >= 1 (got shape {arr.shape})")
+    bad = np.argwhere(~np.isfinite(arr))
+    if len(bad):
+        r, c = bad[0]
+        raise SceneError(f"{name} must be finite (got {name}[{r},{c}] = {arr[r, c]})")
+    return arr
+
+
+def as_scalar(name, value, minimum=None, strict=False):
+    """A finite float; ``minimum`` is inclusive unless ``strict``."""
+    try:
+        x = float(value)
+    except (TypeError, ValueError):
+        raise SceneError(f"{name} must be a number (got {_fmt(value)})") from None
+    if np.ndim(value) != 0:
+        raise SceneError(f"{name} must be a scalar (got {_fmt(value)})")
+    if not np.isfinite(x):
+        raise SceneError(f"{name} must be finite (got {x})")
+    if minimum is not None and (x <= minimum if strict else x < minimum):
+        raise SceneError(f"{name} must be {'>' if strict else '>='} {minimum} (got {x})")
+    return x
+
+
+def as_per_item(name, value, n, minimum=None, strict=False):
+    """A scalar broadcast to (n,), or an (n,) array; finite, bounded below."""
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise SceneError(f"{name} must be a number or an array of numbers (got {_fmt(value)})") from None
+    if arr.ndim == 0:
+        arr = np.full(n, float(arr))
+    elif arr.shape != (n,):
+        raise SceneError(f"{name} must be a scalar or have shape ({n},) (got shape {arr.shape})")
+    if minimum is None:
+        bad = ~np.isfinite(arr)
+        rule = "finite"
+    else:
+        below = arr <= minimum if strict else arr < minimum
+        bad = ~np.isfinite(arr) | below
+        rule = f"finite and {'>' if strict else '>='} {minimum}"
+    if bad.any():
+        k = int(np.argmax(bad))
+        where = f"{name}[{k}]" if np.ndim(value) else name
+        raise SceneError(f"{name} must be {rule} (got {where} = {arr[k]})")
+    return arr
+
+
+def as_int(name, value, minimum):
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise SceneError(f"{name} must be an integer (got {_fmt(value)})")
+    if value < minimum:
+        raise SceneError(f"{name} must be >= {minimum} (got {value})")
+    return int(value)
+
+
+def as_spring_params(name, value):
+    """A spring family's (k_s, k_d), or None when the family is absent."""
+    if value is None:
+        return None
+    if np.ndim(value) != 1 or len(value) != 2:
+        raise SceneError(f"{name} must be None or a pair (k_s, k_d) (got {_fmt(value)})")
+    return (as_scalar(f"{name}[0] (k_s)", value[0], minimum=0.0),
+            as_scalar(f"{name}[1] (k_d)", value[1], minimum=0.0))
+
+
+class Cloth:
+    """A Provot cloth on a regular grid, as added by ``Scene.add_cloth``.
+
+    Attributes:
+        particles: (ny, nx) int array of particle ids; row j, column i.
+        triangles: (T, 3) int array of particle ids, counter-clockwise seen from the front.
+        springs: dict family -> (M_family,) int array of spring ids.
+        resolution: (nx, ny); spacing: (dx, dy) in metres; offset: id of particle (0, 0).
+        params: dict family -> (k_s, k_d) or None.
+    """
+
+    def __init__(self, offset, resolution, spacing, params, plane):
+        self.offset = offset
+        self.resolution = resolution
+        self.spacing = spacing
+        self.params = params
+        self.plane = plane
+        nx, ny = resolution
+        self.particles = offset + np.arange(nx * ny).reshape(ny, nx)
+        p = self.particles
+        a, b, c, d = p[:-1, :-1], p[:-1, 1:], p[1:, 1:], p[1:, :-1]
+        self.triangles = np.concatenate([
+            np.stack([a, d, b], -1).reshape(-1, 3),
+            np.stack([b, d, c], -1).reshape(-1, 3)])
+        self.springs = {}
+
+    def grid_pairs(self, family):
+        """(M,2) particle pairs of one Provot family on this grid."""
+        p = self.particles
+        if family == "structural":
+            parts = [(p[:, :-1], p[:, 1:]), (p[:-1, :], p[1:, :])]
+        elif family == "shear":
+            parts = [(p[:-1, :-1], p[1:, 1:]), (p[:-1, 1:], p[1:, :-1])]
+        elif family == "flexion":
+            parts = [(p[:, :-2], p[:, 2:]), (p[:-2, :], p[2:, :])]
+        else:
+            raise SceneError(f"family must be structural, shear or flexion (got {family!r})")
+        return np.concatenate([np.stack([u.ravel(), v.ravel()], 1) for u, v in parts])
+
+
+class Rope:
+    """A chain of particles joined by springs, as added by ``Scene.add_rope``.
+
+    Attributes: particles (segments+1,) ids from start to end; springs (segments,) ids.
+    """
+
+    def __init__(self, particles, springs):
+        self.particles = particles
+        self.springs = springs
+
+
+class Scene:
+    """A plain description of a mass-spring system.
+
+    Args:
+        gravity: (3,) acceleration, m/s^2.
+        air_drag: viscous drag coefficient c >= 0: force -c * v on every particle (N s/m).
+    """
+
+    def __init__(self, gravity=(0.0, -9.81, 0.0), air_drag=0.0):
+        self.gravity = as_vec3("gravity", gravity)
+        self.air_drag = as_scalar("air_drag", air_drag, minimum=0.0)
+        self._x, self._v, self._m, self._pin = [], [], [], []
+        self._pairs, self._ks, self._kd, self._rest, self._kind = [], [], [], [], []
+        self._spring_keys = np.zeros(0, dtype=np.int64)
+        self.num_particles = 0
+        self.num_springs = 0
+        self.cloths = []
+        self.ropes = []
+
+    # -- particles -------------------------------------------------------------------------
+    def add_particles(self, positions, mass=1.0, velocities=None, pinned=False):
+        """Add N particles.
+
+        Args:
+            positions: (N,3) metres. mass: scalar or (N,) kg, > 0.
+            velocities: None (at rest) or (N,3) m/s.
+            pinned: bool or (N,) bool; a pinned particle has inverse mass 0 and moves only
+                with its own velocity (kinematic).
+        Returns:
+            (N,) int array of particle ids.
+        """
+        x = as_points("positions", positions)
+        n = len(x)
+        m = as_per_item("mass", mass, n, minimum=0.0, strict=True)
+        v = np.zeros_like(x) if velocities is None else as_points("velocities", velocities)
+        if v.shape != x.shape:
+            raise SceneError(f"velocities must have shape {x.shape} like positions (got {v.shape})")
+        pin = np.asarray(pinned)
+        if pin.dtype != bool or pin.shape not in ((), (n,)):
+            raise SceneError(f"pinned must be a bool or a ({n},) bool array (got {_fmt(pinned)})")
+        ids = self.num_particles + np.arange(n)
+        self._x.append(x)
+        self._v.append(v)
+        self._m.append(m)
+        self._pin.append(np.broadcast_to(pin, (n,)).copy())
+        self.num_particles += n
+        return ids
+
+    # -- springs ---------------------------------------------------------------------------
+    def add_springs(self, pairs, stiffness, damping=0.0, rest_length=None, kind="custom"):
+        """Add M springs ``f_ij = -k_s (|x_ij| - l0) d_ij - k_d (v_ij . d_ij) d_ij``.
+
+        Args:
+            pairs: (M,2) particle ids. stiffness k_s (N/m) and damping k_d (N s/m): scalar
+                or (M,), >= 0. rest_length: None (the current distance) or scalar/(M,), > 0.
+            kind: "structural" | "shear" | "flexion" | "custom".
+        Returns:
+            (M,) int array of spring ids.
+        """
+        if kind not in KIND_CODE:
+            raise SceneError(f"kind must be one of {SPRING_KINDS} (got {kind!r})")
+        try:
+            p = np.asarray(pairs)
+        except (TypeError, ValueError):
+            raise SceneError(f"pairs must be an (M,2) integer array (got {_fmt(pairs)})") from None
+        if p.ndim != 2 or p.shape[1] != 2 or p.shape[0] == 0 or p.dtype.kind not in "iu":
+            raise SceneError(f"pairs must be an (M,2) integer array with M >= 1 "
+                             f"(got shape {p.shape}, dtype {p.dtype})")
+        p = p.astype(np.int64)
+        bad = (p < 0) | (p >= self.num_particles)
+        if bad.any():
+            r, c = np.argwhere(bad)[0]
+            raise SceneError(f"pairs[{r},{c}] = {p[r, c]} is out of range: the scene has "
+                             f"{self.num_particles} particles")
+        same = p[:, 0] == p[:, 1]
+        if same.any():
+            r = int(np.argmax(same))
+            raise SceneError(f"pairs[{r}] = {p[r].tolist()} joins a particle to itself")
+        m = len(p)
+        ks = as_per_item("stiffness", stiffness, m, minimum=0.0)
+        kd = as_per_item("damping", damping, m, minimum=0.0)
+        x = self.positions
+        length = np.linalg.norm(x[p[:, 0]] - x[p[:, 1]], axis=1)
+        if (length == 0).any():
+            r = int(np.argmax(length == 0))
+            raise SceneError(f"pairs[{r}] = {p[r].tolist()} joins two coincident particles "
+                             "(zero-length spring: its direction is undefined)")
+        rest = length if rest_length is None else \
+            as_per_item("rest_length", rest_length, m, minimum=0.0, strict=True)
+        keys = np.minimum(p[:, 0], p[:, 1]) << 32 | np.maximum(p[:, 0], p[:, 1])
+        uniq, first, counts = np.unique(keys, return_index=True, return_counts=True)
+        if (counts > 1).any():
+            k = np.flatnonzero(keys == uniq[counts > 1][0])
+            raise SceneError(f"pairs has a duplicate spring: pairs[{k[0]}] = {p[k[0]].tolist()} "
+                             f"and pairs[{k[1]}] = {p[k[1]].tolist()}")
+        clash = np.isin(keys, self._spring_keys)
+        if clash.any():
+            r = int(np.argmax(clash))
+            raise SceneError(f"pairs[{r}] = {p[r].tolist()} duplicates a spring already in the scene")
+        sids = self.num_springs + np.arange(m)
+        self._pairs.append(p)
+        self._ks.append(ks)
+        self._kd.append(kd)
+        self._rest.append(rest)
+        self._kind.append(np.full(m, KIND_CODE[kind], dtype=np.int32))
+        self._spring_keys = np.concatenate([self._spring_keys, keys])
+        self.num_springs += m
+        return sids
+
+    # -- builders --------------------------------------------------------------------------
+    def add_cloth(self, resolution=(32, 32), size=(1.0, 1.0), center=(0.0, 1.0, 0.0),
+                  plane="xz", mass=0.2, structural=(1000.0, 0.05), shear=(200.0, 0.02),
+                  flexion=(50.0, 0.01), pinned=None):
+        """Add a Provot cloth: particles on a regular nx x ny grid.
+
+        Args:
+            resolution: (nx, ny) particles, each >= 2. size: (w, h) metres.
+            center: grid centre. plane: "xz" (i along +x, j along +z, horizontal) or
+                "xy" (i along +x, j along -y: row 0 is the top edge; hangs vertically).
+            mass: total cloth mass (kg), spread evenly over the particles.
+            structural, shear, flexion: (k_s, k_d) per family or None (absent).
+                structural = 4-neighbours, shear = diagonals, flexion = 2 apart.
+            pinned: list of (i, j) grid coordinates; None pins (0, 0) and (nx-1, 0).
+        Returns:
+            Cloth.
+        """
+        if np.ndim(resolution) != 1 or len(resolution) != 2:
+            raise SceneError(f"resolution must be a pair (nx, ny) (got {_fmt(resolution)})")
+        nx = as_int("resolution[0] (nx)", resolution[0], 2)
+        ny = as_int("resolution[1] (ny)", resolution[1], 2)
+        if np.ndim(size) != 1 or len(size) != 2:
+            raise SceneError(f"size must be a pair (w, h) (got {_fmt(size)})")
+        w = as_scalar("size[0] (w)", size[0], minimum=0.0, strict=True)
+        h = as_scalar("size[1] (h)", size[1], minimum=0.0, strict=True)
+        c = as_vec3("center", center)
+        if plane not in ("xz", "xy"):
+            raise SceneError(f"plane must be 'xz' or 'xy' (got {plane!r})")
+        total = as_scalar("mass", mass, minimum=0.0, strict=True)
+        params = {"structural": as_spring_params("structural", structural),
+                  "shear": as_spring_params("shear", shear),
+                  "flexion": as_spring_params("flexion", flexion)}
+        pins = [(0, 0), (nx - 1, 0)] if pinned is None else list(pinned)
+        pin = np.zeros((ny, nx), dtype=bool)
+        for k, ij in enumerate(pins):
+            if np.ndim(ij) != 1 or len(ij) != 2 or not all(
+                    isinstance(t, (int, np.integer)) for t in ij):
+                raise SceneError(f"pinned[{k}] must be an (i, j) pair of ints (got {_fmt(ij)})")
+            i, j = int(ij[0]), int(ij[1])
+            if not (0 <= i < nx and 0 <= j < ny):
+                raise SceneError(f"pinned[{k}] = {(i, j)} is outside the {nx} x {ny} grid")
+            pin[j, i] = True
+        dx, dy = w / (nx - 1), h / (ny - 1)
+        ii, jj = np.meshgrid(np.arange(nx) * dx - w / 2, np.arange(ny) * dy - h / 2)
+        if plane == "xz":
+            pos = np.stack([ii, np.zeros_like(ii), jj], -1)
+        else:
+            pos = np.stack([ii, -jj, np.zeros_like(ii)], -1)
+        cloth = Cloth(self.num_particles, (nx, ny), (dx, dy), params, plane)
+        self.add_particles(pos.reshape(-1, 3) + c, mass=total / (nx * ny), pinned=pin.ravel())
+        for family, kskd in params.items():
+            pairs = cloth.grid_pairs(family)
+            if kskd is None or len(pairs) == 0:
+                cloth.springs[family] = np.zeros(0, dtype=np.int64)
+                continue
+            cloth.springs[family] = self.add_springs(pairs, kskd[0], kskd[1], kind=family)
+        self.cloths.append(cloth)
+        return cloth
+
+    def add_rope(self, start, end, segments, mass, stiffness, damping=0.0, pinned=("start",)):
+        """Add a straight rope of ``segments`` springs from ``start`` to ``end``.
+
+        Args:
+            start, end: (3,) metres. segments: int >= 1. mass: total kg, spread evenly
+            over segments+1 particles. stiffness, damping: per spring (N/m, N s/m).
+            pinned: any of "start", "end".
+        Returns:
+            Rope.
+        """
+        a, b = as_vec3("start", start), as_vec3("end", end)
+        n = as_int("segments", segments, 1)
+        if np.allclose(a, b, rtol=0, atol=0):
+            raise SceneError(f"start and end must differ (both are {a.tolist()})")
+        total = as_scalar("mass", mass, minimum=0.0, strict=True)
+        ends = {"start": 0, "end": n}
+        if isinstance(pinned, str) or any(p not in ends for p in pinned):
+            raise SceneError(f"pinned must be a tuple of 'start' and/or 'end' (got {pinned!r})")
+        pin = np.zeros(n + 1, dtype=bool)
+        for p in pinned:
+            pin[ends[p]] = True
+        t = np.linspace(0.0, 1.0, n + 1)[:, None]
+        ids = self.add_particles(a + t * (b - a), mass=total / (n + 1), pinned=pin)
+        sids = self.add_springs(np.stack([ids[:-1], ids[1:]], 1), stiffness, damping,
+                                kind="structural")
+        rope = Rope(ids, sids)
+        self.ropes.append(rope)
+        return rope
+
+    # -- concatenated views (read-only copies) ---------------------------------------------
+    def _cat(self, parts, shape, dtype):
+        return np.concatenate(parts) if parts else np.zeros(shape, dtype=dtype)
+
+    @property
+    def positions(self):
+        """(N,3) initial positions, m."""
+        return self._cat(self._x, (0, 3), np.float64)
+
+    @property
+    def velocities(self):
+        """(N,3) initial velocities, m/s."""
+        return self._cat(self._v, (0, 3), np.float64)
+
+    @property
+    def masses(self):
+        """(N,) masses, kg."""
+        return self._cat(self._m, (0,), np.float64)
+
+    @property
+    def pinned(self):
+        """(N,) bool: True where the particle has inverse mass 0."""
+        return self._cat(self._pin, (0,), bool)
+
+    @property
+    def springs(self):
+        """dict of arrays over all M springs: pairs (M,2), stiffness, damping, rest_length,
+        kind (codes into SPRING_KINDS)."""
+        return {"pairs": self._cat(self._pairs, (0, 2), np.int64),
+                "stiffness": self._cat(self._ks, (0,), np.float64),
+                "damping": self._cat(self._kd, (0,), np.float64),
+                "rest_length": self._cat(self._rest, (0,), np.float64),
+                "kind": self._cat(self._kind, (0,), np.int32)}
+
+    def spring_counts(self):
+        """dict kind -> number of springs of that kind."""
+        kinds = self.springs["kind"]
+        return {name: int((kinds == code).sum()) for name, code in KIND_CODE.items()}

@@ -1,0 +1,27 @@
+import numpy as np
+import pytest
+
+import tcloth
+
+
+@pytest.fixture(scope="module")
+def f64():
+    """Taichi on the CPU in float64, for accuracy tests."""
+    tcloth.init(arch="cpu", precision="f64")
+    yield
+
+
+def random_network(n=7, seed=0, k=(50.0, 200.0), kd=0.0, pin=None, gravity=(0.0, 0.0, 0.0),
+                   velocity_scale=0.5):
+    """A small random spring network: scene, pairs, rest lengths."""
+    rng = np.random.default_rng(seed)
+    x = rng.normal(size=(n, 3))
+    v = velocity_scale * rng.normal(size=(n, 3))
+    scene = tcloth.Scene(gravity=gravity)
+    pinned = np.zeros(n, dtype=bool) if pin is None else pin
+    scene.add_particles(x, mass=rng.uniform(0.5, 2.0, n), velocities=v, pinned=pinned)
+    pairs = np.array([(i, j) for i in range(n) for j in range(i + 1, n)
+                      if rng.random() < 0.6 or j == i + 1])
+    rest = np.linalg.norm(x[pairs[:, 0]] - x[pairs[:, 1]], axis=1) * rng.uniform(0.8, 1.2, len(pairs))
+    scene.add_springs(pairs, stiffness=rng.uniform(*k, len(pairs)), damping=kd, rest_length=rest)
+    return scene
