@@ -11,10 +11,11 @@ from .runtime import serial
 
 @ti.kernel
 def _particle_sums(x: ti.template(), v: ti.template(), mass: ti.template(),
-                   gravity: ti.math.vec3, out: ti.template()):
+                   params: ti.template(), out: ti.template()):
     """out = [kinetic, gravity potential, P (3), L about the origin (3)]."""
     for k in range(8):
         out[k] = 0
+    gravity = ti.Vector([params[0], params[1], params[2]])
     ti.loop_config(serialize=ti.static(serial(x)))
     for p in range(x.shape[0]):
         mv = mass[p] * v[p]
@@ -49,8 +50,7 @@ class Diagnostics:
         self._out = ti.field(runtime.accumulator(), shape=8)
 
     def particle_sums(self, state):
-        _particle_sums(state.x, state.v, self.model.mass, self.model.gravity.tolist(),
-                       self._out)
+        _particle_sums(state.x, state.v, self.model.mass, self.model.params, self._out)
         return self._out.to_numpy().astype(np.float64)
 
     def spring_sums(self, state):

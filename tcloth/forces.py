@@ -12,6 +12,7 @@ from .runtime import serial
 STRUCTURAL = ((1, 0), (-1, 0), (0, 1), (0, -1))
 SHEAR = ((1, 1), (-1, -1), (1, -1), (-1, 1))
 FLEXION = ((2, 0), (-2, 0), (0, 2), (0, -2))
+STENCILS = (STRUCTURAL, SHEAR, FLEXION)
 
 
 @ti.func
@@ -25,12 +26,13 @@ def spring_force(xi, xj, vi, vj, ks, kd, rest):
 
 
 @ti.kernel
-def init_forces(v: ti.template(), mass: ti.template(), gravity: ti.math.vec3, drag: float,
+def init_forces(v: ti.template(), mass: ti.template(), params: ti.template(),
                 f_out: ti.template()):
-    """f = m g - c v: gravity and viscous air drag."""
+    """f = m g - c v: gravity and viscous air drag; params = (g_x, g_y, g_z, c)."""
+    gravity = ti.Vector([params[0], params[1], params[2]])
     ti.loop_config(serialize=ti.static(serial(f_out)))
     for p in range(f_out.shape[0]):
-        f_out[p] = mass[p] * gravity - drag * v[p]
+        f_out[p] = mass[p] * gravity - params[3] * v[p]
 
 
 @ti.kernel
@@ -59,45 +61,35 @@ def _stencil_sum(x, v, offset, nx, ny, i, j, xp, vp, ks, kd, dx, dy, stencil: ti
 
 
 @ti.kernel
-def eval_grid_springs(x: ti.template(), v: ti.template(), offset: ti.i32, nx: ti.i32,
-                      ny: ti.i32, dx: float, dy: float, params: ti.math.vec3,
-                      params_b: ti.math.vec3, families: ti.template(), f_out: ti.template()):
-    """Provot springs of one regular cloth grid, gathered per particle (no atomics).
+def eval_grid_springs(x: ti.template(), v: ti.template(), grid_ints: ti.template(),
+                      grid_reals: ti.template(), k: ti.i32, families: ti.template(),
+                      f_out: ti.template()):
+    """Provot springs of cloth grid k, gathered per particle (no atomics).
 
-    params = (k_s structural, k_s shear, k_s flexion), params_b the matching k_d.
+    grid_ints[k] = (offset, nx, ny); grid_reals[k] = (dx, dy, k_s structural, k_s shear,
+    k_s flexion, k_d structural, k_d shear, k_d flexion).
     families: static tuple of booleans (structural, shear, flexion).
     """
+    offset, nx, ny = grid_ints[k][0], grid_ints[k][1], grid_ints[k][2]
+    g = grid_reals[k]
     ti.loop_config(serialize=ti.static(serial(f_out)))
     for j, i in ti.ndrange(ny, nx):
         p = offset + j * nx + i
         xp, vp = x[p], v[p]
         acc = ti.Vector.zero(float, 3)
-        if ti.static(families[0]):
-            acc += _stencil_sum(x, v, offset, nx, ny, i, j, xp, vp, params[0], params_b[0],
-                                dx, dy, STRUCTURAL)
-        if ti.static(families[1]):
-            acc += _stencil_sum(x, v, offset, nx, ny, i, j, xp, vp, params[1], params_b[1],
-                                dx, dy, SHEAR)
-        if ti.static(families[2]):
-            acc += _stencil_sum(x, v, offset, nx, ny, i, j, xp, vp, params[2], params_b[2],
-                                dx, dy, FLEXION)
+        for fam in ti.static(range(3)):
+            if ti.static(families[fam]):
+                acc += _stencil_sum(x, v, offset, nx, ny, i, j, xp, vp, g[2 + fam], g[5 + fam],
+                                    g[0], g[1], STENCILS[fam])
         f_out[p] += acc
-
-
-def _grid_args(g):
-    fams = (g.structural, g.shear, g.flexion)
-    ks = [0.0 if p is None else p[0] for p in fams]
-    kd = [0.0 if p is None else p[1] for p in fams]
-    return ks, kd, tuple(p is not None for p in fams)
 
 
 def compute_forces(model, x, v, f_out):
     """Total force on every particle at positions x and velocities v, into f_out (N)."""
-    init_forces(v, model.mass, model.gravity.tolist(), model.air_drag, f_out)
-    for g in model.grids:
-        ks, kd, fams = _grid_args(g)
-        if any(fams):
-            eval_grid_springs(x, v, g.offset, g.nx, g.ny, g.dx, g.dy, ks, kd, fams, f_out)
+    init_forces(v, model.mass, model.params, f_out)
+    for k, g in enumerate(model.grids):
+        if any(g.families):
+            eval_grid_springs(x, v, model.grid_ints, model.grid_reals, k, g.families, f_out)
     if model.list_spring_count:
         eval_springs(x, v, model.spring_pairs, model.spring_ks, model.spring_kd,
                      model.spring_rest, model.list_spring_count, f_out)

@@ -30,6 +30,11 @@ class GridBlock:
     shear: tuple
     flexion: tuple
 
+    @property
+    def families(self):
+        """Static flags (structural, shear, flexion): which families exist."""
+        return (self.structural is not None, self.shear is not None, self.flexion is not None)
+
 
 def _vec_field(n):
     return ti.Vector.field(3, runtime.real(), shape=n)
@@ -62,6 +67,9 @@ class Model:
         spring_rest, spring_ks, spring_kd: shape (spring_count,); m, N/m, N s/m.
         grids: list of GridBlock (empty when grid_stencil=False).
         gravity: (3,) m/s^2 (NumPy); air_drag: N s/m.
+        params: field (g_x, g_y, g_z, air_drag) read by the kernels.
+        grid_ints, grid_reals: per GridBlock (offset, nx, ny) and
+            (dx, dy, k_s x 3 families, k_d x 3 families) for the stencil kernel.
     """
 
     def __init__(self, scene, grid_stencil=True):
@@ -74,6 +82,9 @@ class Model:
         self.air_drag = scene.air_drag
         npr = runtime.numpy_real()
         real = runtime.real()
+        # kernel parameters live in fields: vector kernel arguments cost ~40 us a launch
+        self.params = ti.field(real, shape=4)
+        self.params.from_numpy(np.array([*self.gravity, self.air_drag], dtype=npr))
 
         self.mass = ti.field(real, shape=n)
         self.inv_mass = ti.field(real, shape=n)
@@ -91,6 +102,13 @@ class Model:
                 p = cloth.params
                 self.grids.append(GridBlock(cloth.offset, *cloth.resolution, *cloth.spacing,
                                             p["structural"], p["shear"], p["flexion"]))
+        self.grid_ints = ti.Vector.field(3, ti.i32, shape=max(len(self.grids), 1))
+        self.grid_reals = ti.Vector.field(8, real, shape=max(len(self.grids), 1))
+        for k, g in enumerate(self.grids):
+            fams = (g.structural, g.shear, g.flexion)
+            self.grid_ints[k] = (g.offset, g.nx, g.ny)
+            self.grid_reals[k] = [g.dx, g.dy] + [0.0 if p is None else p[c]
+                                                 for c in (0, 1) for p in fams]
         order = np.argsort(in_grid, kind="stable")
         self.spring_count = ns = scene.num_springs
         self.list_spring_count = int((~in_grid).sum())

@@ -1,0 +1,148 @@
+"""The ``tcloth`` command line: ``tcloth render SCRIPT --out PATH``, ``tcloth list``.
+
+A scene script defines ``build(**params) -> tcloth.Scene`` and a dict ``CONFIG`` with any
+of: description, integrator, dt, steps_per_frame, frames, fps, camera, width, height,
+supersample, options (integrator options), render (Renderer options), precision.
+"""
+import argparse
+import ast
+import glob
+import importlib.util
+import os
+import sys
+import traceback
+
+from .errors import InstabilityError, SceneError
+
+DEFAULTS = {"integrator": "symplectic_euler", "dt": 1e-3, "steps_per_frame": 10,
+            "frames": 120, "fps": 30, "camera": None, "width": 640, "height": 480,
+            "supersample": 2, "options": {}, "render": {}, "precision": "f32"}
+
+
+class ScriptError(Exception):
+    """A scene script that cannot be used; the message names the path."""
+
+
+def load_script(path):
+    """Import a scene script; returns (module, CONFIG merged over DEFAULTS)."""
+    if not os.path.isfile(path):
+        raise ScriptError(f"scene script {path!r} does not exist")
+    name = "tcloth_scene_" + os.path.splitext(os.path.basename(path))[0]
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    try:
+        spec.loader.exec_module(module)
+    except Exception as e:
+        raise ScriptError(f"scene script {path!r} raised {type(e).__name__}: {e}") from e
+    if not callable(getattr(module, "build", None)):
+        raise ScriptError(f"scene script {path!r} defines no build(**params) function")
+    config = getattr(module, "CONFIG", {})
+    if not isinstance(config, dict):
+        raise ScriptError(f"scene script {path!r}: CONFIG must be a dict "
+                          f"(got {type(config).__name__})")
+    unknown = sorted(set(config) - set(DEFAULTS) - {"description"})
+    if unknown:
+        raise ScriptError(f"scene script {path!r}: unknown CONFIG key {unknown[0]!r} "
+                          f"(known: {sorted(DEFAULTS)})")
+    return module, {**DEFAULTS, **config}
+
+
+def describe(path):
+    """The first line of a script's docstring, read without running it."""
+    try:
+        with open(path) as f:
+            doc = ast.get_docstring(ast.parse(f.read())) or ""
+    except (OSError, SyntaxError) as e:
+        return f"(unreadable: {e})"
+    return doc.strip().splitlines()[0] if doc.strip() else "(no description)"
+
+
+def _render_parser(parser):
+    parser.add_argument("--out", help="output .mp4, or a folder for PNG frames "
+                                      "(default out/NAME.mp4)")
+    parser.add_argument("--frames", type=int, help="number of frames")
+    parser.add_argument("--integrator", help="integrator name")
+    parser.add_argument("--dt", type=float, help="time step, s")
+    parser.add_argument("--steps-per-frame", type=int, help="simulator steps per frame")
+    parser.add_argument("--arch", default="cpu", help="cpu | gpu | cuda | vulkan | metal | auto")
+    parser.add_argument("--precision", choices=["f32", "f64"], help="float precision")
+    parser.add_argument("--width", type=int, help="image width, pixels")
+    parser.add_argument("--height", type=int, help="image height, pixels")
+    parser.add_argument("--supersample", type=int, help="s x s samples per pixel")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--verbose", action="store_true", help="tracebacks on errors")
+
+
+def render_script(path, args):
+    """Run one scene script as the command line asks. Returns the record() stats."""
+    import tcloth
+
+    module, cfg = load_script(path)
+    for key in ("frames", "integrator", "dt", "steps_per_frame", "precision", "width",
+                "height", "supersample"):
+        if getattr(args, key) is not None:
+            cfg[key] = getattr(args, key)
+    name = os.path.splitext(os.path.basename(path))[0]
+    out = args.out or os.path.join("out", name + ".mp4")
+    tcloth.video.check_writable(out)
+    tcloth.init(arch=args.arch, precision=cfg["precision"])
+    try:
+        scene = module.build()
+    except SceneError:
+        raise
+    except Exception as e:
+        raise ScriptError(f"scene script {path!r}: build() raised {type(e).__name__}: {e}") from e
+    if not isinstance(scene, tcloth.Scene):
+        raise ScriptError(f"scene script {path!r}: build() must return a tcloth.Scene "
+                          f"(got {type(scene).__name__})")
+    sim = tcloth.Simulator(scene, cfg["integrator"], dt=cfg["dt"], **cfg["options"])
+    return tcloth.record(sim, out, frames=cfg["frames"], steps_per_frame=cfg["steps_per_frame"],
+                         fps=cfg["fps"], width=cfg["width"], height=cfg["height"],
+                         camera=cfg["camera"], supersample=cfg["supersample"],
+                         progress=not args.quiet, **cfg["render"])
+
+
+def _guarded(fn, verbose):
+    try:
+        fn()
+    except (ScriptError, SceneError, InstabilityError) as e:
+        if verbose:
+            traceback.print_exc()
+        kind = "unstable" if isinstance(e, InstabilityError) else "error"
+        print(f"tcloth: {kind}: {e}", file=sys.stderr)
+        return 3 if isinstance(e, InstabilityError) else 2
+    return 0
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(prog="tcloth", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True)
+    p_render = sub.add_parser("render", help="render a scene script to a video or PNG frames")
+    p_render.add_argument("script", help="path of a scene script, e.g. scenes/hanging_cloth.py")
+    _render_parser(p_render)
+    p_list = sub.add_parser("list", help="list scene scripts with a one-line description")
+    p_list.add_argument("folder", nargs="?", default="scenes")
+    args = parser.parse_args(argv)
+    if args.command == "list":
+        scripts = sorted(glob.glob(os.path.join(args.folder, "*.py")))
+        if not scripts:
+            print(f"tcloth: error: no scene scripts in {args.folder!r}", file=sys.stderr)
+            return 2
+        width = max(len(os.path.basename(s)) for s in scripts)
+        for s in scripts:
+            print(f"{os.path.basename(s):<{width}}  {describe(s)}")
+        return 0
+    return _guarded(lambda: render_script(args.script, args), args.verbose)
+
+
+def run_script(path, argv=None):
+    """What a scene script does when executed: ``python scenes/NAME.py [render options]``."""
+    parser = argparse.ArgumentParser(prog=os.path.basename(path),
+                                     description=describe(path))
+    _render_parser(parser)
+    args = parser.parse_args(argv)
+    sys.exit(_guarded(lambda: render_script(path, args), args.verbose))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
