@@ -6,6 +6,7 @@ import numpy as np
 import taichi as ti
 
 from . import runtime
+from . import colliders
 from .runtime import serial
 
 
@@ -66,9 +67,18 @@ class Diagnostics:
         """dict of energies in J: kinetic, spring, gravity, contact, total."""
         sums = self.particle_sums(state)
         e = {"kinetic": float(sums[0]), "spring": self.spring_sums(state)[0],
-             "gravity": float(sums[1]), "contact": 0.0}
+             "gravity": float(sums[1]), "contact": self.contact_energy(state)}
         e["total"] = sum(e.values())
         return e
+
+    def contact_energy(self, state):
+        """Penalty energy of all contacts, J; 0 without colliders."""
+        m = self.model
+        if not m.collider_count:
+            return 0.0
+        colliders.contact_energy(state.x, m.inv_mass, m.collider_records, m.collider_ranges, state.t,
+                       self._out)
+        return float(self._out.to_numpy()[0])
 
     def momentum(self, state):
         """(linear (3,) kg m/s, angular about the origin (3,) kg m^2/s)."""

@@ -1,4 +1,4 @@
-"""Force evaluation: gravity, viscous air drag and springs.
+"""Force evaluation: gravity, viscous air drag, springs and collider contacts.
 
 ``compute_forces(model, x, v, f_out)`` fills the force accumulator ``f_out`` at the state
 (x, v). Only the terms the scene has are launched: no springs, no spring kernel; a cloth
@@ -6,6 +6,7 @@ grid is one stencil launch per cloth, with families absent from the cloth compil
 """
 import taichi as ti
 
+from .colliders import collide
 from .runtime import serial
 
 # Grid stencil offsets (di, dj) of each Provot family: every spring a particle takes part in.
@@ -84,8 +85,8 @@ def eval_grid_springs(x: ti.template(), v: ti.template(), grid_ints: ti.template
         f_out[p] += acc
 
 
-def compute_forces(model, x, v, f_out):
-    """Total force on every particle at positions x and velocities v, into f_out (N)."""
+def compute_forces(model, x, v, f_out, t=0.0):
+    """Total force on every particle at positions x, velocities v and time t, into f_out."""
     init_forces(v, model.mass, model.params, f_out)
     for k, g in enumerate(model.grids):
         if any(g.families):
@@ -93,3 +94,6 @@ def compute_forces(model, x, v, f_out):
     if model.list_spring_count:
         eval_springs(x, v, model.spring_pairs, model.spring_ks, model.spring_kd,
                      model.spring_rest, model.list_spring_count, f_out)
+    if model.collider_count:
+        collide(x, v, model.mass, model.inv_mass, model.collider_records, model.collider_ranges,
+                t, f_out)

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 import taichi as ti
 
-from . import runtime
+from . import colliders, runtime
 from .errors import SceneError
 
 
@@ -48,6 +48,7 @@ class State:
         v: velocities, shape (particle_count,) of vec3, m/s.
         f: force accumulator, shape (particle_count,) of vec3, N.
         forces_valid: True when ``f`` holds the forces at (x, v) (used by Verlet).
+        t: the time of this state, s (moving colliders depend on it).
     """
 
     def __init__(self, n):
@@ -55,6 +56,7 @@ class State:
         self.v = _vec_field(n)
         self.f = _vec_field(n)
         self.forces_valid = False
+        self.t = 0.0
 
 
 class Model:
@@ -66,6 +68,8 @@ class Model:
         spring_pairs: shape (spring_count,) of 2 x i32 particle ids.
         spring_rest, spring_ks, spring_kd: shape (spring_count,); m, N/m, N s/m.
         grids: list of GridBlock (empty when grid_stencil=False).
+        collider_records: shape (collider_count,) rows of tcloth.colliders.RECORD numbers,
+            sorted by kind; collider_ranges: static ((first, count) per kind).
         gravity: (3,) m/s^2 (NumPy); air_drag: N s/m.
         params: field (g_x, g_y, g_z, air_drag) read by the kernels.
         grid_ints, grid_reals: per GridBlock (offset, nx, ny) and
@@ -121,6 +125,13 @@ class Model:
             self.spring_rest.from_numpy(springs["rest_length"][order].astype(npr))
             self.spring_ks.from_numpy(springs["stiffness"][order].astype(npr))
             self.spring_kd.from_numpy(springs["damping"][order].astype(npr))
+
+        rows, self.collider_ranges = colliders.pack(scene.colliders)
+        self.collider_count = len(rows)
+        self.collider_records = ti.Vector.field(colliders.RECORD, real,
+                                                shape=max(self.collider_count, 1))
+        if self.collider_count:
+            self.collider_records.from_numpy(rows.astype(npr))
 
     def state(self):
         """A new State with the scene's initial positions and velocities."""

@@ -171,6 +171,7 @@ class Scene:
         self.num_springs = 0
         self.cloths = []
         self.ropes = []
+        self.colliders = []
 
     # -- particles -------------------------------------------------------------------------
     def add_particles(self, positions, mass=1.0, velocities=None, pinned=False):
@@ -349,6 +350,80 @@ class Scene:
         rope = Rope(ids, sids)
         self.ropes.append(rope)
         return rope
+
+    # -- colliders -------------------------------------------------------------------------
+    def _add_collider(self, kind, friction, velocity, thickness, stiffness, damping,
+                      stick_velocity, **shape):
+        c = {"kind": kind, **shape,
+             "friction": as_scalar("friction", friction, minimum=0.0),
+             "velocity": as_vec3("velocity", velocity),
+             "thickness": as_scalar("thickness", thickness, minimum=0.0),
+             "stiffness": as_scalar("stiffness", stiffness, minimum=0.0, strict=True),
+             "damping": as_scalar("damping", damping, minimum=0.0),
+             "stick_velocity": as_scalar("stick_velocity", stick_velocity, minimum=0.0,
+                                         strict=True)}
+        self.colliders.append(c)
+        return c
+
+    def add_sphere(self, center, radius, friction=0.0, velocity=(0.0, 0.0, 0.0),
+                   thickness=0.005, stiffness=1000.0, damping=0.5, stick_velocity=1e-3):
+        """Add a sphere collider (see tcloth.colliders for the contact model).
+
+        Args:
+            center: (3,) m at t = 0; it moves with constant ``velocity`` (3,) m/s.
+            radius: m, > 0. friction: Coulomb mu >= 0.
+            thickness: contact offset (m, default 5 mm): particles rest this far out.
+            stiffness: penalty k (N/m, default 1000). damping: normal damping as a ratio
+                of critical for each particle (default 0.5). stick_velocity: friction
+                regularisation speed eps (m/s, default 1e-3).
+        Returns:
+            dict describing the collider.
+        """
+        return self._add_collider("sphere", friction, velocity, thickness, stiffness, damping,
+                                  stick_velocity, center=as_vec3("center", center),
+                                  radius=as_scalar("radius", radius, minimum=0.0, strict=True))
+
+    def add_plane(self, point=(0.0, 0.0, 0.0), normal=(0.0, 1.0, 0.0), friction=0.0,
+                  velocity=(0.0, 0.0, 0.0), thickness=0.005, stiffness=1000.0, damping=0.5,
+                  stick_velocity=1e-3):
+        """Add an infinite plane through ``point`` whose solid side is opposite ``normal``.
+
+        Other arguments as for add_sphere.
+        """
+        n = as_vec3("normal", normal)
+        length = np.linalg.norm(n)
+        if length < 1e-12:
+            raise SceneError(f"normal must be non-zero (got {n.tolist()})")
+        return self._add_collider("plane", friction, velocity, thickness, stiffness, damping,
+                                  stick_velocity, center=as_vec3("point", point),
+                                  normal=n / length)
+
+    def add_box(self, center, half_extents, rotation=None, friction=0.0,
+                velocity=(0.0, 0.0, 0.0), thickness=0.005, stiffness=1000.0, damping=0.5,
+                stick_velocity=1e-3):
+        """Add a box: ``half_extents`` (3,) > 0 along its local axes, the columns of
+        ``rotation`` (a 3x3 rotation matrix; None = axis-aligned).
+
+        Other arguments as for add_sphere.
+        """
+        h = as_vec3("half_extents", half_extents)
+        if (h <= 0).any():
+            raise SceneError(f"half_extents must all be > 0 (got {h.tolist()})")
+        if rotation is None:
+            r = np.eye(3)
+        else:
+            try:
+                r = np.asarray(rotation, dtype=np.float64)
+            except (TypeError, ValueError):
+                raise SceneError(f"rotation must be a 3x3 matrix (got {_fmt(rotation)})") from None
+            if r.shape != (3, 3) or not np.all(np.isfinite(r)):
+                raise SceneError(f"rotation must be a finite 3x3 matrix (got {_fmt(rotation)})")
+            if not np.allclose(r @ r.T, np.eye(3), atol=1e-6) or np.linalg.det(r) < 0:
+                raise SceneError(f"rotation must be a rotation matrix: orthonormal with "
+                                 f"determinant +1 (got {_fmt(r)}, det {np.linalg.det(r):.6g})")
+        return self._add_collider("box", friction, velocity, thickness, stiffness, damping,
+                                  stick_velocity, center=as_vec3("center", center),
+                                  half_extents=h, rotation=r)
 
     # -- concatenated views (read-only copies) ---------------------------------------------
     def _cat(self, parts, shape, dtype):

@@ -100,6 +100,7 @@ class Simulator:
                 self._raise_instability(bad)
             self._states.reverse()
             self.num_steps += 1
+            self.state.t = self.time
 
     def _raise_instability(self, particle):
         step = self.num_steps + 1

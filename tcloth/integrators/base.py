@@ -4,7 +4,8 @@ from ..forces import compute_forces
 
 
 class Integrator:
-    """One entry point: ``simulate(model, state_in, state_out, dt)``.
+    """One entry point: ``simulate(model, state_in, state_out, dt)``, which also sets
+    ``state_out.t = state_in.t + dt``.
 
     Subclasses list their options in ``defaults`` (name -> default); an unknown option
     raises SceneError naming it.
@@ -23,7 +24,7 @@ class Integrator:
     def forces_at(model, state):
         """Make ``state.f`` hold the forces at (state.x, state.v)."""
         if not state.forces_valid:
-            compute_forces(model, state.x, state.v, state.f)
+            compute_forces(model, state.x, state.v, state.f, state.t)
             state.forces_valid = True
 
     def simulate(self, model, state_in, state_out, dt):

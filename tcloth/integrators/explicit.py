@@ -83,6 +83,7 @@ class ForwardEuler(Integrator):
         self.forces_at(model, state_in)
         _forward_euler(state_in.x, state_in.v, state_in.f, model.inv_mass, dt,
                        state_out.x, state_out.v)
+        state_out.t = state_in.t + dt
 
 
 class SymplecticEuler(Integrator):
@@ -93,6 +94,7 @@ class SymplecticEuler(Integrator):
         self.forces_at(model, state_in)
         _symplectic_euler(state_in.x, state_in.v, state_in.f, model.inv_mass, dt,
                           state_out.x, state_out.v)
+        state_out.t = state_in.t + dt
 
 
 class Verlet(Integrator):
@@ -104,7 +106,8 @@ class Verlet(Integrator):
         self.forces_at(model, state_in)
         _verlet_drift(state_in.x, state_in.v, state_in.f, model.inv_mass, dt,
                       state_out.x, state_out.v)
-        compute_forces(model, state_out.x, state_out.v, state_out.f)
+        state_out.t = state_in.t + dt
+        compute_forces(model, state_out.x, state_out.v, state_out.f, state_out.t)
         _verlet_kick(state_in.f, model.inv_mass, dt, state_out.f, state_out.v)
         state_out.forces_valid = True
 
@@ -122,10 +125,12 @@ class RK4(Integrator):
         self.forces_at(model, state_in)
         _rk4_stage(x0, v0, x0, v0, state_in.f, model.inv_mass, dt, 1 / 6, 0.5, True,
                    state_out.x, state_out.v, s.x, s.v)
-        for weight, advance in ((1 / 3, 0.5), (1 / 3, 1.0)):
-            compute_forces(model, s.x, s.v, s.f)
+        t = state_in.t
+        for weight, advance, t_stage in ((1 / 3, 0.5, t + dt / 2), (1 / 3, 1.0, t + dt / 2)):
+            compute_forces(model, s.x, s.v, s.f, t_stage)
             _rk4_stage(x0, v0, s.x, s.v, s.f, model.inv_mass, dt, weight, advance, False,
                        state_out.x, state_out.v, s.x, s.v)
-        compute_forces(model, s.x, s.v, s.f)
+        compute_forces(model, s.x, s.v, s.f, t + dt)
         _rk4_stage(x0, v0, s.x, s.v, s.f, model.inv_mass, dt, 1 / 6, 0.0, False,
                    state_out.x, state_out.v, s.x, s.v)
+        state_out.t = t + dt
