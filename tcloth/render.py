@@ -1,14 +1,15 @@
 """Off-screen renderer written in Taichi kernels (CPU or GPU, no display).
 
-Every visible thing is ray-cast exactly: for each pixel a camera ray is tested against the
-primitives whose screen bounding box covers it. Cloth triangles and particle spheres are
-splatted over their boxes; the ground and colliders are tested at every pixel.
+Everything visible is ray-cast exactly. Cloth triangles and particle spheres are splatted:
+each primitive tests the camera rays of the pixels its projected bounding box covers.
+The ground and the colliders (spheres, boxes, planes) are tested at every pixel.
 
-Visibility is race-free and deterministic: pass 1 writes the hit distance of every
-primitive as int32 bits with ``atomic_min`` (positive floats order like their bits);
-pass 2 lets every primitive whose distance equals the stored one ``atomic_min`` its id;
-pass 3 shades each pixel from the winning id alone. The same scene gives the same image,
-bit for bit, on every run.
+Visibility is race-free and deterministic: pass 1 writes each primitive's hit distance as
+int32 bits with ``atomic_min`` (positive floats order like their bits); pass 2 lets every
+primitive whose distance equals the stored one ``atomic_min`` its id; the shading pass
+reads the winning id alone. The same scene gives the same image, bit for bit, every run.
+
+Shadows come from a shadow map: the same splatting seen from the light (orthographic).
 """
 import math
 
@@ -16,15 +17,19 @@ import numpy as np
 import taichi as ti
 
 from . import runtime
+from .colliders import BOX, PLANE, SPHERE
 from .errors import SceneError
 
 SKY_ID = 2147483647
 GROUND_ID = 2147483646
+COLLIDER_ID = 1 << 30          # collider c has id COLLIDER_ID + c
 
 FRONT_COLOUR = (0.85, 0.28, 0.18)
 BACK_COLOUR = (0.20, 0.42, 0.80)
 PARTICLE_COLOUR = (0.95, 0.78, 0.25)
-LIGHT_DIR = (0.45, 0.8, 0.4)
+COLLIDER_COLOUR = (0.50, 0.58, 0.66)
+LIGHT_DIR = (0.35, 0.85, 0.4)
+SHADOW_MAP = 1024
 
 
 class Camera:
@@ -39,9 +44,10 @@ class Camera:
         self.target = np.asarray(target, dtype=np.float64)
         up = np.asarray(up, dtype=np.float64)
         fwd = self.target - self.eye
-        if not np.all(np.isfinite(fwd)) or np.linalg.norm(fwd) == 0:
-            raise SceneError(f"camera eye and target must differ (got eye={self.eye.tolist()}, "
-                             f"target={self.target.tolist()})")
+        if self.eye.shape != (3,) or fwd.shape != (3,) or not np.all(np.isfinite(fwd)) \
+                or np.linalg.norm(fwd) == 0:
+            raise SceneError(f"camera eye and target must be distinct finite 3-vectors "
+                             f"(got eye={self.eye.tolist()}, target={self.target.tolist()})")
         if not 1.0 <= fov <= 170.0:
             raise SceneError(f"camera fov must be within [1, 170] degrees (got {fov})")
         self.fov = float(fov)
@@ -72,23 +78,6 @@ class Camera:
         if isinstance(config, dict):
             return cls(**config)
         raise SceneError(f"camera must be None, a dict or a tcloth.Camera (got {config!r})")
-
-
-@ti.func
-def _ray(eye, fwd, right, up, tan_half, aspect, col, row, w, h):
-    sx = (2.0 * (col + 0.5) / w - 1.0) * tan_half * aspect
-    sy = (1.0 - 2.0 * (row + 0.5) / h) * tan_half
-    return (fwd + sx * right + sy * up).normalized()
-
-
-@ti.func
-def _project(p, eye, fwd, right, up, tan_half, aspect, w, h):
-    """Pixel coordinates (col, row) and view depth z of point p."""
-    d = p - eye
-    z = d.dot(fwd)
-    col = (d.dot(right) / (z * tan_half * aspect) + 1.0) * 0.5 * w - 0.5
-    row = (1.0 - d.dot(up) / (z * tan_half)) * 0.5 * h - 0.5
-    return ti.Vector([col, row, z])
 
 
 @ti.func
@@ -125,6 +114,45 @@ def _hit_sphere(o, d, centre, radius):
 
 
 @ti.func
+def _box_frame(rec):
+    return ti.Matrix([[rec[9], rec[10], rec[11]], [rec[12], rec[13], rec[14]],
+                      [rec[15], rec[16], rec[17]]], ti.f32)
+
+
+@ti.func
+def _hit_box(o, d, centre, rot, half):
+    """Slab test in the box frame: entry t > 0, or -1 (a ray from inside does not hit)."""
+    ol = rot.transpose() @ (o - centre)
+    dl = rot.transpose() @ d
+    t_near, t_far = -1e30, 1e30
+    for k in ti.static(range(3)):
+        inv = 1.0 / dl[k] if abs(dl[k]) > 1e-12 else 1e30
+        t0 = (-half[k] - ol[k]) * inv
+        t1 = (half[k] - ol[k]) * inv
+        t_near = ti.max(t_near, ti.min(t0, t1))
+        t_far = ti.min(t_far, ti.max(t0, t1))
+    return t_near if (t_near <= t_far and t_near > 0.0) else -1.0
+
+
+@ti.func
+def _hit_collider(kind: ti.template(), rec, o, d, time):
+    """Ray parameter of the first hit on one collider record at ``time``, or -1."""
+    centre = ti.Vector([rec[0], rec[1], rec[2]], ti.f32) + time * ti.Vector(
+        [rec[3], rec[4], rec[5]], ti.f32)
+    t = -1.0
+    if ti.static(kind == SPHERE):
+        t = _hit_sphere(o, d, centre, rec[6])
+    elif ti.static(kind == PLANE):
+        n = ti.Vector([rec[6], rec[7], rec[8]], ti.f32)
+        dn = d.dot(n)
+        if dn < -1e-6:
+            t = (centre - o).dot(n) / dn
+    else:
+        t = _hit_box(o, d, centre, _box_frame(rec), ti.Vector([rec[6], rec[7], rec[8]], ti.f32))
+    return t
+
+
+@ti.func
 def _bits(t):
     return ti.bit_cast(ti.cast(t, ti.f32), ti.i32)
 
@@ -136,55 +164,72 @@ class Renderer:
     Args:
         sim: the Simulator. width, height: output pixels. camera: None (fit), dict or Camera.
         supersample: s x s samples per pixel, box-filtered (anti-aliasing).
-        ground: height (y, m) of a checkered ground plane; None puts it just below the
-            scene's lowest initial point; False draws none.
-        particle_radius: radius (m) of drawn free/rope particles; None picks one.
+        ground: height (y, m) of a checkered ground plane; None puts it below the scene
+            unless the scene has plane colliders (drawn instead); False draws none.
+        particle_radius: radius (m) of drawn free and rope particles; None picks one.
+        shadows: cast shadows from the light (a shadow map); default True.
     """
 
     def __init__(self, sim, width=640, height=480, camera=None, supersample=2, ground=None,
-                 particle_radius=None):
+                 particle_radius=None, shadows=True):
         for name, value in (("width", width), ("height", height), ("supersample", supersample)):
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
                 raise SceneError(f"{name} must be a positive integer (got {value!r})")
         self.sim = sim
         self.width, self.height, self.ss = int(width), int(height), int(supersample)
-        scene = sim.scene
+        scene, model = sim.scene, sim.model
         x0 = scene.positions
         self.camera = Camera.from_config(camera, x0)
-        extent = float(np.linalg.norm(x0.max(0) - x0.min(0))) or 1.0
+        lo, hi = x0.min(0), x0.max(0)
+        extent = float(np.linalg.norm(hi - lo)) or 1.0
+        has_planes = any(c["kind"] == "plane" for c in scene.colliders)
         if ground is None:
-            ground = float(x0[:, 1].min()) - 0.3 * extent
+            ground = False if has_planes else float(lo[1]) - 0.5 * extent
         self.ground = ground
-        self.checker = 10 ** math.floor(math.log10(extent / 2)) if extent > 0 else 0.1
+        self.checker = 10.0 ** math.floor(math.log10(extent)) / 4
+        self.records, self.ranges = model.collider_records, model.collider_ranges
+        self.collider_count = model.collider_count
+        self.shadows = bool(shadows)
 
         tris = [c.triangles for c in scene.cloths]
         self.tri_count = sum(len(t) for t in tris)
         in_cloth = np.zeros(scene.num_particles, dtype=bool)
         for c in scene.cloths:
             in_cloth[c.particles.ravel()] = True
-        balls = np.flatnonzero(~in_cloth)
+        free = np.flatnonzero(~in_cloth)
         sp = scene.springs
-        line = sp["pairs"][~in_cloth[sp["pairs"][:, 0]] & ~in_cloth[sp["pairs"][:, 1]]]
+        free_spring = ~in_cloth[sp["pairs"][:, 0]] & ~in_cloth[sp["pairs"][:, 1]]
+        line = sp["pairs"][free_spring]
         if particle_radius is None:
-            rest = sp["rest_length"][~in_cloth[sp["pairs"][:, 0]]]
+            rest = sp["rest_length"][free_spring]
             particle_radius = 0.35 * float(np.median(rest)) if len(rest) else 0.02 * extent
         self.radius = float(particle_radius)
-        # beads along free springs, spaced at most one radius apart at rest length
+        # beads along free springs, spaced about one radius apart at the initial length
         beads = [np.stack([np.full(k, i), np.full(k, j), (np.arange(k) + 1) / (k + 1)], 1)
-                 for (i, j), k in zip(line, np.ceil(
-                     np.linalg.norm(x0[line[:, 0]] - x0[line[:, 1]], axis=1) / self.radius
-                 ).astype(int) if len(line) else [])]
-        spheres = np.concatenate([np.stack([balls, balls, np.zeros(len(balls))], 1)] + beads) \
-            if len(balls) else np.zeros((0, 3))
+                 for (i, j), k in zip(line, np.ceil(np.linalg.norm(
+                     x0[line[:, 0]] - x0[line[:, 1]], axis=1) / self.radius).astype(int))]
+        spheres = np.concatenate([np.stack([free, free, np.zeros(len(free))], 1)] + beads)
         self.sphere_count = len(spheres)
 
         c = self.camera
-        self.view = ti.Vector.field(16, ti.f32, shape=())
-        self.view[None] = [*c.eye, *c.forward, *c.right, *c.up, math.tan(math.radians(c.fov) / 2),
-                           self.width / self.height, float(self.ground or 0.0), self.checker]
+        light = np.asarray(LIGHT_DIR) / np.linalg.norm(LIGHT_DIR)
+        lu = np.cross(light, (0.0, 0.0, 1.0))
+        lu /= np.linalg.norm(lu)
+        lw = np.cross(light, lu)
+        centre = 0.5 * (lo + hi)
+        # view: camera (eye, forward, right, up, tan(fov/2), aspect, ground y, checker),
+        # then the light's orthographic frame (origin, -L direction, u, w, half size)
+        half = 1.5 * extent
+        self.view = ti.field(ti.f32, shape=29)
+        self.view.from_numpy(np.array(
+            [*c.eye, *c.forward, *c.right, *c.up, math.tan(math.radians(c.fov) / 2),
+             self.width / self.height, float(self.ground or 0.0), self.checker,
+             *(centre + 4 * extent * light), *(-light), *lu, *lw, half], dtype=np.float32))
+        self.time = ti.field(ti.f32, shape=())
         W, H = self.width * self.ss, self.height * self.ss
         self.depth = ti.field(ti.i32, shape=(H, W))
         self.ids = ti.field(ti.i32, shape=(H, W))
+        self.shadow = ti.field(ti.i32, shape=(SHADOW_MAP, SHADOW_MAP) if self.shadows else (1, 1))
         self.colour = ti.Vector.field(3, ti.f32, shape=(H, W))
         self.image = ti.Vector.field(3, ti.u8, shape=(self.height, self.width))
         self.normals = ti.Vector.field(3, ti.f32, shape=scene.num_particles)
@@ -197,45 +242,93 @@ class Renderer:
             self.sphere_ends.from_numpy(spheres[:, :2].astype(np.int32))
             self.sphere_t.from_numpy(spheres[:, 2].astype(np.float32))
 
-    @ti.func
-    def _view(self):
-        """eye, forward, right, up, tan(fov/2), aspect, ground y, checker size."""
-        v = self.view[None]
-        return (ti.Vector([v[0], v[1], v[2]]), ti.Vector([v[3], v[4], v[5]]),
-                ti.Vector([v[6], v[7], v[8]]), ti.Vector([v[9], v[10], v[11]]),
-                v[12], v[13], v[14], v[15])
-
+    # -- per frame ---------------------------------------------------------------------------
     def render(self):
         """(H,W,3) uint8 image of the simulator's current state."""
         self.sim._check()
         x = self.sim.state.x
-        self._background(self.ground is not False)
+        self.time[None] = self.sim.time
         if self.tri_count:
             self._vertex_normals(x)
-            self._splat_triangles(x, False)
-            self._splat_triangles(x, True)
+        targets = [(self.depth, True)] + ([(self.shadow, False)] if self.shadows else [])
+        for depth, camera in targets[::-1]:
+            self._analytic(depth, camera, self.ground is not False and camera)
+            if self.tri_count:
+                self._splat_triangles(x, depth, camera, False)
+            if self.sphere_count:
+                self._splat_spheres(x, depth, camera, False)
+        if self.tri_count:
+            self._splat_triangles(x, self.depth, True, True)
         if self.sphere_count:
-            self._splat_spheres(x, False)
-            self._splat_spheres(x, True)
+            self._splat_spheres(x, self.depth, True, True)
         self._shade(x)
         self._resolve()
         return self.image.to_numpy()
 
+    # -- rays of the camera (perspective) and of the light (orthographic) --------------------
+    @ti.func
+    def _vec(self, k):
+        return ti.Vector([self.view[k], self.view[k + 1], self.view[k + 2]])
+
+    @ti.func
+    def _ray(self, camera: ti.template(), row, col, h, w):
+        """Origin and unit direction of the ray through pixel (row, col) of an h x w target."""
+        o = ti.Vector([0.0, 0.0, 0.0])
+        d = ti.Vector([0.0, 0.0, 0.0])
+        if ti.static(camera):
+            tan_half, aspect = self.view[12], self.view[13]
+            sx = (2.0 * (col + 0.5) / w - 1.0) * tan_half * aspect
+            sy = (1.0 - 2.0 * (row + 0.5) / h) * tan_half
+            o = self._vec(0)
+            d = (self._vec(3) + sx * self._vec(6) + sy * self._vec(9)).normalized()
+        else:
+            half = self.view[28]
+            o = (self._vec(16) + (2.0 * (col + 0.5) / w - 1.0) * half * self._vec(22)
+                 + (1.0 - 2.0 * (row + 0.5) / h) * half * self._vec(25))
+            d = self._vec(19)
+        return o, d
+
+    @ti.func
+    def _project(self, camera: ti.template(), p, h, w):
+        """(col, row, depth) of point p on an h x w target; depth <= 0 is behind."""
+        result = ti.Vector([0.0, 0.0, 0.0])
+        if ti.static(camera):
+            d = p - self._vec(0)
+            z = d.dot(self._vec(3))
+            tan_half, aspect = self.view[12], self.view[13]
+            result = ti.Vector([(d.dot(self._vec(6)) / (z * tan_half * aspect) + 1.0) * 0.5 * w - 0.5,
+                                (1.0 - d.dot(self._vec(9)) / (z * tan_half)) * 0.5 * h - 0.5, z])
+        else:
+            d = p - self._vec(16)
+            half = self.view[28]
+            result = ti.Vector([(d.dot(self._vec(22)) / half + 1.0) * 0.5 * w - 0.5,
+                                (1.0 - d.dot(self._vec(25)) / half) * 0.5 * h - 0.5,
+                                d.dot(self._vec(19))])
+        return result
+
+    # -- passes ------------------------------------------------------------------------------
     @ti.kernel
-    def _background(self, has_ground: ti.template()):
-        """Clear to sky; the ground plane y = ground_y is hit analytically."""
-        h, w = self.depth.shape
-        eye, fwd, right, up, tan_half, aspect, ground_y, _ = self._view()
+    def _analytic(self, depth: ti.template(), camera: ti.template(), has_ground: ti.template()):
+        """Clear to sky, then the ground plane and the colliders, hit analytically."""
+        h, w = depth.shape
+        time = self.time[None]
         for r, c in ti.ndrange(h, w):
-            self.depth[r, c] = SKY_ID
-            self.ids[r, c] = SKY_ID
+            o, d = self._ray(camera, r, c, h, w)
+            best, best_id = 1e30, SKY_ID
             if ti.static(has_ground):
-                d = _ray(eye, fwd, right, up, tan_half, aspect, c, r, w, h)
                 if d[1] < -1e-6:
-                    t = (ground_y - eye[1]) / d[1]
+                    t = (self.view[14] - o[1]) / d[1]
                     if t > 0.0:
-                        self.depth[r, c] = _bits(t)
-                        self.ids[r, c] = GROUND_ID
+                        best, best_id = t, GROUND_ID
+            for kind in ti.static(range(3)):
+                if ti.static(self.ranges[kind][1] > 0):
+                    for k in range(self.ranges[kind][0], self.ranges[kind][0] + self.ranges[kind][1]):
+                        t = _hit_collider(kind, self.records[k], o, d, time)
+                        if 0.0 < t < best:
+                            best, best_id = t, COLLIDER_ID + k
+            depth[r, c] = _bits(best) if best_id != SKY_ID else SKY_ID
+            if ti.static(camera):
+                self.ids[r, c] = best_id
 
     @ti.kernel
     def _vertex_normals(self, x: ti.template()):
@@ -249,34 +342,44 @@ class Renderer:
             self.normals[b] += n
             self.normals[c] += n
 
+    @ti.func
+    def _splat(self, depth: ti.template(), camera: ti.template(), resolve_id: ti.template(),
+               sphere: ti.template(), h, w, lo, hi, prim_id, a, b, c, radius):
+        """Test the rays of the pixels in [lo, hi] (col, row) against one triangle (a, b, c)
+        or one sphere (centre a, radius)."""
+        for r in range(ti.max(ti.cast(ti.floor(lo[1]), ti.i32), 0),
+                       ti.min(ti.cast(ti.ceil(hi[1]), ti.i32), h - 1) + 1):
+            for col in range(ti.max(ti.cast(ti.floor(lo[0]), ti.i32), 0),
+                             ti.min(ti.cast(ti.ceil(hi[0]), ti.i32), w - 1) + 1):
+                o, d = self._ray(camera, r, col, h, w)
+                hit = 0.0
+                if ti.static(sphere):
+                    hit = _hit_sphere(o, d, a, radius)
+                else:
+                    hit = _hit_triangle(o, d, a, b, c)[0]
+                if hit > 0.0:
+                    if ti.static(resolve_id):
+                        if _bits(hit) == depth[r, col]:
+                            ti.atomic_min(self.ids[r, col], prim_id)
+                    else:
+                        ti.atomic_min(depth[r, col], _bits(hit))
+
     @ti.kernel
-    def _splat_triangles(self, x: ti.template(), resolve_id: ti.template()):
+    def _splat_triangles(self, x: ti.template(), depth: ti.template(), camera: ti.template(),
+                         resolve_id: ti.template()):
         """Pass 1 (resolve_id=False): nearest distance. Pass 2: id of the nearest."""
-        h, w = self.depth.shape
-        eye, fwd, right, up, tan_half, aspect, _, _ = self._view()
+        h, w = depth.shape
         for k in range(self.tri_count):
             i = self.tris[k]
             a = ti.cast(x[i[0]], ti.f32)
             b = ti.cast(x[i[1]], ti.f32)
             c = ti.cast(x[i[2]], ti.f32)
-            pa = _project(a, eye, fwd, right, up, tan_half, aspect, w, h)
-            pb = _project(b, eye, fwd, right, up, tan_half, aspect, w, h)
-            pc = _project(c, eye, fwd, right, up, tan_half, aspect, w, h)
+            pa = self._project(camera, a, h, w)
+            pb = self._project(camera, b, h, w)
+            pc = self._project(camera, c, h, w)
             if pa[2] > 1e-3 and pb[2] > 1e-3 and pc[2] > 1e-3:
-                c0 = ti.max(ti.cast(ti.floor(ti.min(pa[0], pb[0], pc[0])), ti.i32), 0)
-                c1 = ti.min(ti.cast(ti.ceil(ti.max(pa[0], pb[0], pc[0])), ti.i32), w - 1)
-                r0 = ti.max(ti.cast(ti.floor(ti.min(pa[1], pb[1], pc[1])), ti.i32), 0)
-                r1 = ti.min(ti.cast(ti.ceil(ti.max(pa[1], pb[1], pc[1])), ti.i32), h - 1)
-                for r in range(r0, r1 + 1):
-                    for cc in range(c0, c1 + 1):
-                        d = _ray(eye, fwd, right, up, tan_half, aspect, cc, r, w, h)
-                        hit = _hit_triangle(eye, d, a, b, c)
-                        if hit[0] > 0.0:
-                            if ti.static(resolve_id):
-                                if _bits(hit[0]) == self.depth[r, cc]:
-                                    ti.atomic_min(self.ids[r, cc], k)
-                            else:
-                                ti.atomic_min(self.depth[r, cc], _bits(hit[0]))
+                self._splat(depth, camera, resolve_id, False, h, w, ti.min(pa, pb, pc),
+                            ti.max(pa, pb, pc), k, a, b, c, 0.0)
 
     @ti.func
     def _sphere_centre(self, x, k):
@@ -285,60 +388,96 @@ class Renderer:
         return ti.cast((1.0 - s) * x[e[0]] + s * x[e[1]], ti.f32)
 
     @ti.kernel
-    def _splat_spheres(self, x: ti.template(), resolve_id: ti.template()):
-        """Particles and beads along free springs as spheres; ids follow the triangles'."""
-        h, w = self.depth.shape
-        eye, fwd, right, up, tan_half, aspect, _, _ = self._view()
-        radius = self.radius
+    def _splat_spheres(self, x: ti.template(), depth: ti.template(), camera: ti.template(),
+                       resolve_id: ti.template()):
+        """Free particles and beads along free springs; ids follow the triangles'."""
+        h, w = depth.shape
+        radius = ti.static(self.radius)
         for k in range(self.sphere_count):
             centre = self._sphere_centre(x, k)
-            pc = _project(centre, eye, fwd, right, up, tan_half, aspect, w, h)
-            if pc[2] > radius + 1e-3:
-                reach = radius / (pc[2] - radius) / (tan_half * 2.0) * h + 2.0
-                c0 = ti.max(ti.cast(ti.floor(pc[0] - reach), ti.i32), 0)
-                c1 = ti.min(ti.cast(ti.ceil(pc[0] + reach), ti.i32), w - 1)
-                r0 = ti.max(ti.cast(ti.floor(pc[1] - reach), ti.i32), 0)
-                r1 = ti.min(ti.cast(ti.ceil(pc[1] + reach), ti.i32), h - 1)
-                for r in range(r0, r1 + 1):
-                    for cc in range(c0, c1 + 1):
-                        d = _ray(eye, fwd, right, up, tan_half, aspect, cc, r, w, h)
-                        t = _hit_sphere(eye, d, centre, radius)
-                        if t > 0.0:
-                            if ti.static(resolve_id):
-                                if _bits(t) == self.depth[r, cc]:
-                                    ti.atomic_min(self.ids[r, cc], self.tri_count + k)
-                            else:
-                                ti.atomic_min(self.depth[r, cc], _bits(t))
+            pc = self._project(camera, centre, h, w)
+            reach = 2.0 + radius / self.view[28] * 0.5 * h
+            visible = True
+            if ti.static(camera):
+                reach = 2.0 + radius / (pc[2] - radius) / (self.view[12] * 2.0) * h
+                visible = pc[2] > radius + 1e-3
+            if visible:
+                self._splat(depth, camera, resolve_id, True, h, w, pc - reach, pc + reach,
+                            self.tri_count + k, centre, centre, centre, radius)
+
+    @ti.func
+    def _lit(self, p, n):
+        """Fraction of direct light reaching point p with normal n (shadow map lookup)."""
+        light = -self._vec(19)
+        lit = ti.max(n.dot(light), 0.0)
+        if ti.static(self.shadows):
+            s = self._project(False, p, SHADOW_MAP, SHADOW_MAP)
+            r = ti.cast(ti.round(s[1]), ti.i32)
+            c = ti.cast(ti.round(s[0]), ti.i32)
+            if 0 <= r < SHADOW_MAP and 0 <= c < SHADOW_MAP:
+                blocker = self.shadow[r, c]
+                bias = 3.0 * self.view[28] / SHADOW_MAP
+                if blocker != SKY_ID and ti.bit_cast(blocker, ti.f32) < s[2] - bias:
+                    lit = 0.0
+        return lit
 
     @ti.kernel
     def _shade(self, x: ti.template()):
-        """Lambert + ambient + a little specular; cloth front and back in two colours."""
+        """Lambert + hemisphere ambient + a little specular, with shadows; cloth front and
+        back in two colours, checkered ground and planes."""
         h, w = self.depth.shape
-        eye, fwd, right, up, tan_half, aspect, _, checker = self._view()
-        light = ti.math.vec3(LIGHT_DIR).normalized()
+        time = self.time[None]
+        checker = self.view[15]
         for r, c in ti.ndrange(h, w):
-            d = _ray(eye, fwd, right, up, tan_half, aspect, c, r, w, h)
+            o, d = self._ray(True, r, c, h, w)
             k = self.ids[r, c]
             t = ti.bit_cast(self.depth[r, c], ti.f32)
+            p = o + t * d
             base = ti.math.vec3(0.0)
             n = ti.math.vec3(0.0, 1.0, 0.0)
-            lit = True
             if k == SKY_ID:
                 s = 0.5 + 0.5 * d[1]
                 base = (1.0 - s) * ti.math.vec3(0.93, 0.95, 0.98) + s * ti.math.vec3(0.55, 0.70, 0.92)
-                lit = False
-            elif k == GROUND_ID:
-                p = eye + t * d
-                cell = ti.cast(ti.floor(p[0] / checker) + ti.floor(p[2] / checker), ti.i32)
-                base = ti.math.vec3(0.78) if cell % 2 == 0 else ti.math.vec3(0.66)
-                fade = ti.exp(-0.02 * t / checker)
-                base = fade * base + (1.0 - fade) * ti.math.vec3(0.9, 0.92, 0.95)
+            elif k == GROUND_ID or (k >= COLLIDER_ID and self._kind(k - COLLIDER_ID) == PLANE):
+                if k != GROUND_ID:
+                    rec = self.records[k - COLLIDER_ID]
+                    n = ti.Vector([rec[6], rec[7], rec[8]], ti.f32)
+                # squares on the two axes least aligned with the normal
+                an = ti.abs(n)
+                skip = 0 if an[0] >= an[1] and an[0] >= an[2] else (1 if an[1] >= an[2] else 2)
+                cell = 0
+                for a in ti.static(range(3)):
+                    if a != skip:
+                        cell += ti.cast(ti.floor(p[a] / checker), ti.i32)
+                base = ti.math.vec3(0.80) if cell % 2 == 0 else ti.math.vec3(0.62)
+                # fade distant squares to their mean before they alias
+                fade = ti.exp(-0.015 * t / checker)
+                base = fade * base + (1.0 - fade) * ti.math.vec3(0.71)
+            elif k >= COLLIDER_ID:
+                rec = self.records[k - COLLIDER_ID]
+                centre = ti.Vector([rec[0], rec[1], rec[2]], ti.f32) + time * ti.Vector(
+                    [rec[3], rec[4], rec[5]], ti.f32)
+                base = ti.math.vec3(COLLIDER_COLOUR)
+                if self._kind(k - COLLIDER_ID) == SPHERE:
+                    n = (p - centre).normalized()
+                else:
+                    rot = _box_frame(rec)
+                    q = rot.transpose() @ (p - centre)
+                    e = ti.abs(q) - ti.Vector([rec[6], rec[7], rec[8]], ti.f32)
+                    axis = 0
+                    if e[1] > e[axis]:
+                        axis = 1
+                    if e[2] > e[axis]:
+                        axis = 2
+                    nl = ti.Vector([0.0, 0.0, 0.0])
+                    nl[axis] = 1.0 if q[axis] >= 0.0 else -1.0
+                    n = rot @ nl
             elif k < self.tri_count:
                 i = self.tris[k]
                 a = ti.cast(x[i[0]], ti.f32)
                 b = ti.cast(x[i[1]], ti.f32)
                 cv = ti.cast(x[i[2]], ti.f32)
-                hit = _hit_triangle(eye, d, a, b, cv)
+                hit = _hit_triangle(o, d, a, b, cv)
                 u, v = hit[1], hit[2]
                 ns = ((1.0 - u - v) * self.normals[i[0]] + u * self.normals[i[1]]
                       + v * self.normals[i[2]])
@@ -349,17 +488,28 @@ class Renderer:
                 if not front:
                     n = -n
             else:
-                centre = self._sphere_centre(x, k - self.tri_count)
-                n = (eye + t * d - centre).normalized()
+                n = (p - self._sphere_centre(x, k - self.tri_count)).normalized()
                 base = ti.math.vec3(PARTICLE_COLOUR)
-            if lit:
-                diffuse = ti.max(n.dot(light), 0.0)
-                hemi = 0.5 + 0.5 * n[1]
-                spec = ti.max((light - d).normalized().dot(n), 0.0)
+            if k != SKY_ID:
+                if n.dot(d) > 0.0:
+                    n = -n
+                lit = self._lit(p, n)
+                half = (-self._vec(19) - d).normalized()
+                spec = ti.max(half.dot(n), 0.0)
                 for _ in ti.static(range(5)):
                     spec = spec * spec
-                base = base * (0.25 + 0.15 * hemi + 0.7 * diffuse) + 0.15 * spec
-            self.colour[r, c] = base
+                hemi = 0.5 + 0.5 * n[1]
+                base = base * (0.22 + 0.18 * hemi + 0.65 * lit) + 0.12 * spec * ti.min(lit, 1.0)
+            self.colour[r, c] = ti.cast(base, ti.f32)
+
+    @ti.func
+    def _kind(self, k):
+        kind = BOX
+        if k < self.ranges[PLANE][0]:
+            kind = SPHERE
+        elif k < self.ranges[BOX][0]:
+            kind = PLANE
+        return kind
 
     @ti.kernel
     def _resolve(self):
@@ -377,11 +527,11 @@ def render(sim, width=640, height=480, camera=None, supersample=2, **options):
     """(H,W,3) uint8 image of ``sim``'s current state; no display needed.
 
     The Renderer is kept on the simulator and reused while the arguments stay the same.
-    Options: ground, particle_radius (see Renderer).
+    Options: ground, particle_radius, shadows (see Renderer).
     """
-    key = (width, height, repr(camera), supersample, repr(sorted(options.items())))
+    key = (width, height, repr(camera), supersample, repr(sorted(options.items())),
+           runtime.generation())
     cached = getattr(sim, "_renderer", None)
-    if cached is None or cached[0] != key or cached[2] != runtime.generation():
-        sim._renderer = (key, Renderer(sim, width, height, camera, supersample, **options),
-                         runtime.generation())
+    if cached is None or cached[0] != key:
+        sim._renderer = (key, Renderer(sim, width, height, camera, supersample, **options))
     return sim._renderer[1].render()
