@@ -1,5 +1,11 @@
 """tcloth: a mass-spring cloth and particle-system sandbox on Taichi."""
-from . import cli
+import os
+
+# Taichi prints a version banner on import; tcloth's output (e.g. `tcloth list`) stays clean
+# unless the user asks for it.
+os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "False")
+
+from . import cli  # noqa: E402  (after the environment default above)
 from .errors import InstabilityError, SceneError, StaleSimulatorError
 from .render import Camera, Renderer, render
 from .runtime import init

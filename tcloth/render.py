@@ -168,10 +168,11 @@ class Renderer:
             unless the scene has plane colliders (drawn instead); False draws none.
         particle_radius: radius (m) of drawn free and rope particles; None picks one.
         shadows: cast shadows from the light (a shadow map); default True.
+        cloth_colours: None, or one (front RGB, back RGB) pair per cloth, values in [0, 1].
     """
 
     def __init__(self, sim, width=640, height=480, camera=None, supersample=2, ground=None,
-                 particle_radius=None, shadows=True):
+                 particle_radius=None, shadows=True, cloth_colours=None):
         for name, value in (("width", width), ("height", height), ("supersample", supersample)):
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
                 raise SceneError(f"{name} must be a positive integer (got {value!r})")
@@ -193,6 +194,13 @@ class Renderer:
 
         tris = [c.triangles for c in scene.cloths]
         self.tri_count = sum(len(t) for t in tris)
+        palette = np.array(cloth_colours if cloth_colours is not None else
+                           [(FRONT_COLOUR, BACK_COLOUR)] * len(tris), dtype=np.float64)
+        if palette.size == 0:
+            palette = palette.reshape(0, 2, 3)
+        if palette.shape != (len(tris), 2, 3) or not np.all((palette >= 0) & (palette <= 1)):
+            raise SceneError(f"cloth_colours must hold one (front, back) pair of RGB values in "
+                             f"[0, 1] per cloth ({len(tris)} cloths; got {cloth_colours!r})")
         in_cloth = np.zeros(scene.num_particles, dtype=bool)
         for c in scene.cloths:
             in_cloth[c.particles.ravel()] = True
@@ -234,8 +242,13 @@ class Renderer:
         self.image = ti.Vector.field(3, ti.u8, shape=(self.height, self.width))
         self.normals = ti.Vector.field(3, ti.f32, shape=scene.num_particles)
         self.tris = ti.Vector.field(3, ti.i32, shape=max(self.tri_count, 1))
+        self.tri_cloth = ti.field(ti.i32, shape=max(self.tri_count, 1))
+        self.palette = ti.Vector.field(3, ti.f32, shape=(max(len(tris), 1), 2))
         if self.tri_count:
             self.tris.from_numpy(np.concatenate(tris).astype(np.int32))
+            self.tri_cloth.from_numpy(np.concatenate(
+                [np.full(len(t), k, dtype=np.int32) for k, t in enumerate(tris)]))
+            self.palette.from_numpy(palette.astype(np.float32))
         self.sphere_ends = ti.Vector.field(2, ti.i32, shape=max(self.sphere_count, 1))
         self.sphere_t = ti.field(ti.f32, shape=max(self.sphere_count, 1))
         if self.sphere_count:
@@ -483,7 +496,7 @@ class Renderer:
                       + v * self.normals[i[2]])
                 ng = (b - a).cross(cv - a)
                 front = ng.dot(d) < 0.0
-                base = ti.math.vec3(FRONT_COLOUR) if front else ti.math.vec3(BACK_COLOUR)
+                base = self.palette[self.tri_cloth[k], 0 if front else 1]
                 n = ns.normalized() if ns.norm() > 1e-20 else ng.normalized()
                 if not front:
                     n = -n

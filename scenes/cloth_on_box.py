@@ -1,0 +1,28 @@
+"""A cloth dropped on a rotated box folds over its edges onto the ground."""
+import numpy as np
+
+import tcloth
+
+CONFIG = {
+    "integrator": "symplectic_euler",
+    "dt": 2.5e-4,
+    "steps_per_frame": 133,
+    "frames": 150,
+    "camera": {"eye": (1.8, 1.4, 2.2), "target": (0.0, 0.3, 0.0), "fov": 40.0},
+}
+
+
+def build(resolution=(48, 48), size=(1.2, 1.2), angle=0.5, friction=0.4):
+    scene = tcloth.Scene(gravity=(0.0, -9.81, 0.0), air_drag=2e-4)
+    scene.add_cloth(resolution=resolution, size=size, center=(0.0, 0.9, 0.0), plane="xz",
+                    mass=0.2, structural=(400.0, 0.05), shear=(80.0, 0.02),
+                    flexion=(10.0, 0.005), pinned=[])
+    c, s = np.cos(angle), np.sin(angle)
+    scene.add_box(center=(0.0, 0.25, 0.0), half_extents=(0.3, 0.25, 0.2),
+                  rotation=[[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]], friction=friction)
+    scene.add_plane(point=(0.0, 0.0, 0.0), normal=(0.0, 1.0, 0.0), friction=0.5)
+    return scene
+
+
+if __name__ == "__main__":
+    tcloth.cli.run_script(__file__)

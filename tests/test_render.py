@@ -1,0 +1,164 @@
+"""Renderer, recording and the command line."""
+import glob
+import os
+import subprocess
+import sys
+
+import imageio_ffmpeg
+import numpy as np
+import pytest
+
+import tcloth
+from tcloth.render import COLLIDER_ID, Camera
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+RED, GREEN, BLUE = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)
+
+
+@pytest.fixture(scope="module")
+def f32():
+    tcloth.init(arch="cpu")
+
+
+def project(camera, points, width, height):
+    """Independent pinhole projection to pixel (col, row)."""
+    d = points - camera.eye
+    z = d @ camera.forward
+    t = np.tan(np.radians(camera.fov) / 2)
+    col = (d @ camera.right / (z * t * width / height) + 1) * width / 2 - 0.5
+    row = (1 - d @ camera.up / (z * t)) * height / 2 - 0.5
+    return col, row
+
+
+def two_quads():
+    """Two overlapping square cloths facing +z; the nearer (z = 0.5) is shifted right."""
+    scene = tcloth.Scene(gravity=(0, 0, 0))
+    near = scene.add_cloth(resolution=(2, 2), size=(1, 1), center=(0.3, 0, 0.5), plane="xy",
+                           structural=None, shear=None, flexion=None, pinned=[])
+    far = scene.add_cloth(resolution=(2, 2), size=(1, 1), center=(-0.3, 0, 0.0), plane="xy",
+                          structural=None, shear=None, flexion=None, pinned=[])
+    return scene, near, far
+
+
+def render_two_quads():
+    scene, near, far = two_quads()
+    sim = tcloth.Simulator(scene)
+    r = tcloth.Renderer(sim, 96, 64, camera={"eye": (0, 0, 4), "target": (0, 0, 0)},
+                        supersample=1, ground=False, shadows=False,
+                        cloth_colours=[(RED, BLUE), (GREEN, BLUE)])
+    return r, r.render()
+
+
+def test_depth_test_shows_the_nearer_triangle_and_is_bit_identical(f32):
+    r, img = render_two_quads()
+    # pixel columns: only far (left), overlap, only near (right); row through the middle
+    cam = r.camera
+    cols, _ = project(cam, np.array([[-0.5, 0, 0], [0.2, 0, 0], [0.75, 0, 0]]), 96, 64)
+    row = 32
+    left, mid, right = (img[row, int(round(c))] for c in cols)
+    assert left[1] > 3 * left[0] and mid[0] > 3 * mid[1] and right[0] > 3 * right[1]
+    ids = r.ids.to_numpy()
+    assert ids[row, int(round(cols[1]))] in (0, 1)          # a triangle of the near cloth
+    assert ids[row, int(round(cols[0]))] in (2, 3)
+    for _ in range(2):
+        again = render_two_quads()[1]
+        assert np.array_equal(img, again)
+
+
+@pytest.mark.parametrize("from_above", [True, False])
+def test_cloth_covers_its_projected_box_and_shows_the_side_facing_the_camera(f32, from_above):
+    scene = tcloth.Scene()
+    cloth = scene.add_cloth(resolution=(9, 7), size=(1.0, 0.7), center=(0.1, 1.0, -0.2))
+    sim = tcloth.Simulator(scene)
+    eye = (0.4, 2.8, 1.4) if from_above else (0.4, -0.8, 1.4)
+    cam = Camera(eye, (0.1, 1.0, -0.2), fov=35.0)
+    r = tcloth.Renderer(sim, 160, 120, camera=cam, supersample=1, ground=False, shadows=False,
+                        cloth_colours=[(RED, BLUE)])
+    img = r.render()
+    mask = r.ids.to_numpy() < COLLIDER_ID
+    rows, cols = np.nonzero(mask)
+    corners = scene.positions[cloth.particles[[0, 0, -1, -1], [0, -1, 0, -1]]]
+    pc, pr = project(cam, corners, 160, 120)
+    assert abs(cols.min() - pc.min()) <= 1.5 and abs(cols.max() - pc.max()) <= 1.5
+    assert abs(rows.min() - pr.min()) <= 1.5 and abs(rows.max() - pr.max()) <= 1.5
+    covered = img[mask].astype(int)
+    if from_above:       # the front (normal +y) faces the camera: red
+        assert np.all(covered[:, 0] > covered[:, 2])
+    else:
+        assert np.all(covered[:, 2] > covered[:, 0])
+
+
+def test_record_writes_mp4_with_requested_frames_and_size(f32, tmp_path):
+    scene = tcloth.Scene()
+    scene.add_cloth(resolution=(8, 8))
+    sim = tcloth.Simulator(scene, dt=5e-4)
+    out = str(tmp_path / "clip.mp4")
+    stats = tcloth.record(sim, out, frames=7, steps_per_frame=3, width=96, height=64,
+                          progress=False)
+    assert stats["frames"] == 7 and sim.num_steps == 18
+    reader = imageio_ffmpeg.read_frames(out)
+    meta = next(reader)
+    frames = list(reader)
+    assert meta["size"] == (96, 64) and len(frames) == 7
+    assert all(len(f) == 96 * 64 * 3 for f in frames)
+    assert not glob.glob(str(tmp_path / "*partial*"))
+
+
+def test_record_png_folder_and_odd_size_refused_for_mp4(f32, tmp_path):
+    scene = tcloth.Scene()
+    scene.add_rope((0, 1, 0), (1, 1, 0), 5, 0.1, 50.0)
+    sim = tcloth.Simulator(scene, dt=1e-3)
+    tcloth.record(sim, str(tmp_path / "frames"), frames=3, steps_per_frame=2, width=64,
+                  height=48, progress=False)
+    names = sorted(os.listdir(tmp_path / "frames"))
+    assert names == ["frame_00000.png", "frame_00001.png", "frame_00002.png"]
+    with open(tmp_path / "frames" / names[0], "rb") as f:
+        assert f.read(8) == b"\x89PNG\r\n\x1a\n"
+    with pytest.raises(tcloth.SceneError, match="even width"):
+        tcloth.record(sim, str(tmp_path / "odd.mp4"), frames=2, width=63, height=48,
+                      progress=False)
+
+
+def run_cli(*args, cwd=ROOT):
+    return subprocess.run([sys.executable, "-m", "tcloth", *args], cwd=cwd,
+                          capture_output=True, text=True, timeout=600)
+
+
+SCENES = sorted(glob.glob(os.path.join(ROOT, "scenes", "*.py")))
+
+
+@pytest.mark.parametrize("script", SCENES, ids=[os.path.basename(s) for s in SCENES])
+def test_every_scene_script_renders_headless(script, tmp_path):
+    out = tmp_path / "frames"
+    res = run_cli("render", script, "--out", str(out), "--frames", "2", "--steps-per-frame",
+                  "5", "--width", "64", "--height", "48", "--supersample", "1", "--quiet")
+    assert res.returncode == 0, res.stderr
+    assert len(os.listdir(out)) == 2
+
+
+def test_cli_list_describes_scenes():
+    res = run_cli("list")
+    assert res.returncode == 0
+    assert len(res.stdout.strip().splitlines()) == len(SCENES)
+    assert "hanging_cloth.py" in res.stdout
+
+
+def test_cli_errors_are_clear_with_exit_code_2(tmp_path):
+    res = run_cli("render", "no/such/scene.py")
+    assert res.returncode == 2 and "no/such/scene.py" in res.stderr and "does not exist" in res.stderr
+    assert "Traceback" not in res.stderr
+    nobuild = tmp_path / "nobuild.py"
+    nobuild.write_text("CONFIG = {}\n")
+    res = run_cli("render", str(nobuild))
+    assert res.returncode == 2 and "build" in res.stderr
+    raising = tmp_path / "raising.py"
+    raising.write_text("def build():\n    raise RuntimeError('boom')\n")
+    res = run_cli("render", str(raising), "--out", str(tmp_path / "x"))
+    assert res.returncode == 2 and "boom" in res.stderr and "Traceback" not in res.stderr
+    res = run_cli("render", str(raising), "--out", str(tmp_path / "x"), "--verbose")
+    assert "Traceback" in res.stderr
+    blocked = tmp_path / "file"
+    blocked.write_text("")
+    res = run_cli("render", os.path.join(ROOT, "scenes", "rope.py"), "--out",
+                  str(blocked / "sub" / "out.mp4"))
+    assert res.returncode == 2 and "output folder" in res.stderr
