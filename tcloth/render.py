@@ -4,10 +4,11 @@ Everything visible is ray-cast exactly. Cloth triangles and particle spheres are
 each primitive tests the camera rays of the pixels its projected bounding box covers.
 The ground and the colliders (spheres, boxes, planes) are tested at every pixel.
 
-Visibility is race-free and deterministic: pass 1 writes each primitive's hit distance as
-int32 bits with ``atomic_min`` (positive floats order like their bits); pass 2 lets every
-primitive whose distance equals the stored one ``atomic_min`` its id; the shading pass
-reads the winning id alone. The same scene gives the same image, bit for bit, every run.
+Visibility is race-free and deterministic: every hit is one int64 key, the hit distance's
+float32 bits above the primitive id (positive floats order like their bits), combined
+with ``atomic_min``: the nearest hit wins, ties go to the smaller id, whatever the order
+of the threads. The shading pass reads the winning id alone. The same scene gives the
+same image, bit for bit, every run.
 
 Shadows come from a shadow map: the same splatting seen from the light (orthographic).
 """
@@ -21,6 +22,7 @@ from .colliders import BOX, PLANE, SPHERE
 from .errors import SceneError
 
 SKY_ID = 2147483647
+SKY_KEY = (2147483647 << 32) | SKY_ID
 GROUND_ID = 2147483646
 COLLIDER_ID = 1 << 30          # collider c has id COLLIDER_ID + c
 
@@ -29,7 +31,7 @@ BACK_COLOUR = (0.20, 0.42, 0.80)
 PARTICLE_COLOUR = (0.95, 0.78, 0.25)
 COLLIDER_COLOUR = (0.50, 0.58, 0.66)
 LIGHT_DIR = (0.35, 0.85, 0.4)
-SHADOW_MAP = 1024
+SHADOW_MAP = 768
 
 
 class Camera:
@@ -153,8 +155,19 @@ def _hit_collider(kind: ti.template(), rec, o, d, time):
 
 
 @ti.func
-def _bits(t):
-    return ti.bit_cast(ti.cast(t, ti.f32), ti.i32)
+def _key(t, prim_id):
+    """int64 key ordering hits by distance t > 0, then by id."""
+    return (ti.cast(ti.bit_cast(ti.cast(t, ti.f32), ti.i32), ti.i64) << 32) | ti.cast(prim_id, ti.i64)
+
+
+@ti.func
+def _key_t(key):
+    return ti.bit_cast(ti.cast(key >> 32, ti.i32), ti.f32)
+
+
+@ti.func
+def _key_id(key):
+    return ti.cast(key & 0x7FFFFFFF, ti.i32)
 
 
 @ti.data_oriented
@@ -228,16 +241,20 @@ class Renderer:
         # view: camera (eye, forward, right, up, tan(fov/2), aspect, ground y, checker),
         # then the light's orthographic frame (origin, -L direction, u, w, half size)
         half = 1.5 * extent
-        self.view = ti.field(ti.f32, shape=29)
-        self.view.from_numpy(np.array(
+        # compile-time constants: a Renderer is made per camera, so its kernels bake them in
+        self.view = tuple(float(v) for v in np.array(
             [*c.eye, *c.forward, *c.right, *c.up, math.tan(math.radians(c.fov) / 2),
              self.width / self.height, float(self.ground or 0.0), self.checker,
              *(centre + 4 * extent * light), *(-light), *lu, *lw, half], dtype=np.float32))
         self.time = ti.field(ti.f32, shape=())
+        self._static_ready = False
         W, H = self.width * self.ss, self.height * self.ss
-        self.depth = ti.field(ti.i32, shape=(H, W))
-        self.ids = ti.field(ti.i32, shape=(H, W))
-        self.shadow = ti.field(ti.i32, shape=(SHADOW_MAP, SHADOW_MAP) if self.shadows else (1, 1))
+        self.depth = ti.field(ti.i64, shape=(H, W))
+        shadow_shape = (SHADOW_MAP, SHADOW_MAP) if self.shadows else (1, 1)
+        self.shadow = ti.field(ti.i64, shape=shadow_shape)
+        # colliders that do not move cast the same shadow every frame: computed once
+        self.moving = any(np.any(c["velocity"] != 0) for c in scene.colliders)
+        self.shadow_static = None if self.moving else ti.field(ti.i64, shape=shadow_shape)
         self.colour = ti.Vector.field(3, ti.f32, shape=(H, W))
         self.image = ti.Vector.field(3, ti.u8, shape=(self.height, self.width))
         self.normals = ti.Vector.field(3, ti.f32, shape=scene.num_particles)
@@ -265,23 +282,31 @@ class Renderer:
             self._vertex_normals(x)
         targets = [(self.depth, True)] + ([(self.shadow, False)] if self.shadows else [])
         for depth, camera in targets[::-1]:
-            self._analytic(depth, camera, self.ground is not False and camera)
+            if camera or self.moving:
+                self._analytic(depth, camera, self.ground is not False and camera)
+            else:
+                if self._static_ready is False:
+                    self._analytic(self.shadow_static, False, False)
+                    self._static_ready = True
+                self.shadow.copy_from(self.shadow_static)
             if self.tri_count:
-                self._splat_triangles(x, depth, camera, False)
+                self._splat_triangles(x, depth, camera)
             if self.sphere_count:
-                self._splat_spheres(x, depth, camera, False)
-        if self.tri_count:
-            self._splat_triangles(x, self.depth, True, True)
-        if self.sphere_count:
-            self._splat_spheres(x, self.depth, True, True)
+                self._splat_spheres(x, depth, camera)
         self._shade(x)
         self._resolve()
         return self.image.to_numpy()
 
+    def ids(self):
+        """(H*s, W*s) int array: the id seen at each sample of the last render (cloth
+        triangles 0.., then spheres; colliders from 2**30; ground and sky the largest)."""
+        return (self.depth.to_numpy() & 0x7FFFFFFF).astype(np.int32)
+
     # -- rays of the camera (perspective) and of the light (orthographic) --------------------
     @ti.func
-    def _vec(self, k):
-        return ti.Vector([self.view[k], self.view[k + 1], self.view[k + 2]])
+    def _vec(self, k: ti.template()):
+        return ti.Vector([ti.static(self.view[k]), ti.static(self.view[k + 1]),
+                          ti.static(self.view[k + 2])])
 
     @ti.func
     def _ray(self, camera: ti.template(), row, col, h, w):
@@ -289,13 +314,13 @@ class Renderer:
         o = ti.Vector([0.0, 0.0, 0.0])
         d = ti.Vector([0.0, 0.0, 0.0])
         if ti.static(camera):
-            tan_half, aspect = self.view[12], self.view[13]
+            tan_half, aspect = ti.static(self.view[12]), ti.static(self.view[13])
             sx = (2.0 * (col + 0.5) / w - 1.0) * tan_half * aspect
             sy = (1.0 - 2.0 * (row + 0.5) / h) * tan_half
             o = self._vec(0)
             d = (self._vec(3) + sx * self._vec(6) + sy * self._vec(9)).normalized()
         else:
-            half = self.view[28]
+            half = ti.static(self.view[28])
             o = (self._vec(16) + (2.0 * (col + 0.5) / w - 1.0) * half * self._vec(22)
                  + (1.0 - 2.0 * (row + 0.5) / h) * half * self._vec(25))
             d = self._vec(19)
@@ -308,12 +333,12 @@ class Renderer:
         if ti.static(camera):
             d = p - self._vec(0)
             z = d.dot(self._vec(3))
-            tan_half, aspect = self.view[12], self.view[13]
+            tan_half, aspect = ti.static(self.view[12]), ti.static(self.view[13])
             result = ti.Vector([(d.dot(self._vec(6)) / (z * tan_half * aspect) + 1.0) * 0.5 * w - 0.5,
                                 (1.0 - d.dot(self._vec(9)) / (z * tan_half)) * 0.5 * h - 0.5, z])
         else:
             d = p - self._vec(16)
-            half = self.view[28]
+            half = ti.static(self.view[28])
             result = ti.Vector([(d.dot(self._vec(22)) / half + 1.0) * 0.5 * w - 0.5,
                                 (1.0 - d.dot(self._vec(25)) / half) * 0.5 * h - 0.5,
                                 d.dot(self._vec(19))])
@@ -330,18 +355,20 @@ class Renderer:
             best, best_id = 1e30, SKY_ID
             if ti.static(has_ground):
                 if d[1] < -1e-6:
-                    t = (self.view[14] - o[1]) / d[1]
+                    t = (ti.static(self.view[14]) - o[1]) / d[1]
                     if t > 0.0:
                         best, best_id = t, GROUND_ID
             for kind in ti.static(range(3)):
-                if ti.static(self.ranges[kind][1] > 0):
+                # planes receive shadows but cast none worth a shadow-map test
+                if ti.static(self.ranges[kind][1] > 0 and (camera or kind != PLANE)):
                     for k in range(self.ranges[kind][0], self.ranges[kind][0] + self.ranges[kind][1]):
                         t = _hit_collider(kind, self.records[k], o, d, time)
                         if 0.0 < t < best:
                             best, best_id = t, COLLIDER_ID + k
-            depth[r, c] = _bits(best) if best_id != SKY_ID else SKY_ID
-            if ti.static(camera):
-                self.ids[r, c] = best_id
+            key = ti.i64(SKY_KEY)
+            if best_id != SKY_ID:
+                key = _key(best, best_id)
+            depth[r, c] = key
 
     @ti.kernel
     def _vertex_normals(self, x: ti.template()):
@@ -356,8 +383,8 @@ class Renderer:
             self.normals[c] += n
 
     @ti.func
-    def _splat(self, depth: ti.template(), camera: ti.template(), resolve_id: ti.template(),
-               sphere: ti.template(), h, w, lo, hi, prim_id, a, b, c, radius):
+    def _splat(self, depth: ti.template(), camera: ti.template(), sphere: ti.template(), h, w,
+               lo, hi, prim_id, a, b, c, radius):
         """Test the rays of the pixels in [lo, hi] (col, row) against one triangle (a, b, c)
         or one sphere (centre a, radius)."""
         for r in range(ti.max(ti.cast(ti.floor(lo[1]), ti.i32), 0),
@@ -371,16 +398,11 @@ class Renderer:
                 else:
                     hit = _hit_triangle(o, d, a, b, c)[0]
                 if hit > 0.0:
-                    if ti.static(resolve_id):
-                        if _bits(hit) == depth[r, col]:
-                            ti.atomic_min(self.ids[r, col], prim_id)
-                    else:
-                        ti.atomic_min(depth[r, col], _bits(hit))
+                    ti.atomic_min(depth[r, col], _key(hit, prim_id))
 
     @ti.kernel
-    def _splat_triangles(self, x: ti.template(), depth: ti.template(), camera: ti.template(),
-                         resolve_id: ti.template()):
-        """Pass 1 (resolve_id=False): nearest distance. Pass 2: id of the nearest."""
+    def _splat_triangles(self, x: ti.template(), depth: ti.template(), camera: ti.template()):
+        """Cloth triangles; id k for triangle k."""
         h, w = depth.shape
         for k in range(self.tri_count):
             i = self.tris[k]
@@ -391,7 +413,7 @@ class Renderer:
             pb = self._project(camera, b, h, w)
             pc = self._project(camera, c, h, w)
             if pa[2] > 1e-3 and pb[2] > 1e-3 and pc[2] > 1e-3:
-                self._splat(depth, camera, resolve_id, False, h, w, ti.min(pa, pb, pc),
+                self._splat(depth, camera, False, h, w, ti.min(pa, pb, pc),
                             ti.max(pa, pb, pc), k, a, b, c, 0.0)
 
     @ti.func
@@ -401,21 +423,20 @@ class Renderer:
         return ti.cast((1.0 - s) * x[e[0]] + s * x[e[1]], ti.f32)
 
     @ti.kernel
-    def _splat_spheres(self, x: ti.template(), depth: ti.template(), camera: ti.template(),
-                       resolve_id: ti.template()):
+    def _splat_spheres(self, x: ti.template(), depth: ti.template(), camera: ti.template()):
         """Free particles and beads along free springs; ids follow the triangles'."""
         h, w = depth.shape
         radius = ti.static(self.radius)
         for k in range(self.sphere_count):
             centre = self._sphere_centre(x, k)
             pc = self._project(camera, centre, h, w)
-            reach = 2.0 + radius / self.view[28] * 0.5 * h
+            reach = 2.0 + radius / ti.static(self.view[28]) * 0.5 * h
             visible = True
             if ti.static(camera):
-                reach = 2.0 + radius / (pc[2] - radius) / (self.view[12] * 2.0) * h
+                reach = 2.0 + radius / (pc[2] - radius) / (ti.static(self.view[12]) * 2.0) * h
                 visible = pc[2] > radius + 1e-3
             if visible:
-                self._splat(depth, camera, resolve_id, True, h, w, pc - reach, pc + reach,
+                self._splat(depth, camera, True, h, w, pc - reach, pc + reach,
                             self.tri_count + k, centre, centre, centre, radius)
 
     @ti.func
@@ -423,14 +444,14 @@ class Renderer:
         """Fraction of direct light reaching point p with normal n (shadow map lookup)."""
         light = -self._vec(19)
         lit = ti.max(n.dot(light), 0.0)
-        if ti.static(self.shadows):
+        if ti.static(self.shadows) and lit > 0.0:
             s = self._project(False, p, SHADOW_MAP, SHADOW_MAP)
             r = ti.cast(ti.round(s[1]), ti.i32)
             c = ti.cast(ti.round(s[0]), ti.i32)
             if 0 <= r < SHADOW_MAP and 0 <= c < SHADOW_MAP:
                 blocker = self.shadow[r, c]
-                bias = 3.0 * self.view[28] / SHADOW_MAP
-                if blocker != SKY_ID and ti.bit_cast(blocker, ti.f32) < s[2] - bias:
+                bias = 3.0 * ti.static(self.view[28]) / SHADOW_MAP
+                if blocker != ti.i64(SKY_KEY) and _key_t(blocker) < s[2] - bias:
                     lit = 0.0
         return lit
 
@@ -440,11 +461,11 @@ class Renderer:
         back in two colours, checkered ground and planes."""
         h, w = self.depth.shape
         time = self.time[None]
-        checker = self.view[15]
+        checker = ti.static(self.view[15])
         for r, c in ti.ndrange(h, w):
             o, d = self._ray(True, r, c, h, w)
-            k = self.ids[r, c]
-            t = ti.bit_cast(self.depth[r, c], ti.f32)
+            k = _key_id(self.depth[r, c])
+            t = _key_t(self.depth[r, c])
             p = o + t * d
             base = ti.math.vec3(0.0)
             n = ti.math.vec3(0.0, 1.0, 0.0)
@@ -464,7 +485,7 @@ class Renderer:
                         cell += ti.cast(ti.floor(p[a] / checker), ti.i32)
                 base = ti.math.vec3(0.80) if cell % 2 == 0 else ti.math.vec3(0.62)
                 # fade distant squares to their mean before they alias
-                fade = ti.exp(-0.015 * t / checker)
+                fade = 1.0 / (1.0 + 0.02 * t / checker)
                 base = fade * base + (1.0 - fade) * ti.math.vec3(0.71)
             elif k >= COLLIDER_ID:
                 rec = self.records[k - COLLIDER_ID]
@@ -542,9 +563,15 @@ def render(sim, width=640, height=480, camera=None, supersample=2, **options):
     The Renderer is kept on the simulator and reused while the arguments stay the same.
     Options: ground, particle_radius, shadows (see Renderer).
     """
+    return renderer_for(sim, width, height, camera, supersample, **options).render()
+
+
+def renderer_for(sim, width=640, height=480, camera=None, supersample=2, **options):
+    """The simulator's Renderer for these arguments, made on first use and then reused
+    (a new Renderer compiles its kernels again)."""
     key = (width, height, repr(camera), supersample, repr(sorted(options.items())),
            runtime.generation())
     cached = getattr(sim, "_renderer", None)
     if cached is None or cached[0] != key:
         sim._renderer = (key, Renderer(sim, width, height, camera, supersample, **options))
-    return sim._renderer[1].render()
+    return sim._renderer[1]

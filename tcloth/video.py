@@ -13,7 +13,7 @@ import zlib
 import numpy as np
 
 from .errors import InstabilityError, SceneError
-from .render import Renderer
+from .render import renderer_for
 
 
 def write_png(path, image):
@@ -129,7 +129,8 @@ def record(sim, path, frames=240, steps_per_frame=10, fps=30, width=640, height=
         steps_per_frame: simulator steps between frames. fps: video frame rate.
         quality: H.264 quality 0-10 (imageio-ffmpeg's scale).
     Returns:
-        dict: frames, path, sim_ms_per_step, render_ms_per_frame, encode_ms_per_frame, fps.
+        dict: frames, path, sim_ms_per_step, render_ms_per_frame, encode_ms_per_frame, fps
+        (means), and median_sim_ms, median_render_ms, median_encode_ms (per frame).
     On InstabilityError the frames up to the last good one are kept, completed under
     ``path``, and the error is raised again with the frame count added to its message.
     """
@@ -137,25 +138,24 @@ def record(sim, path, frames=240, steps_per_frame=10, fps=30, width=640, height=
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
             raise SceneError(f"{name} must be a positive integer (got {value!r})")
     check_writable(path)
-    renderer = Renderer(sim, width, height, camera, supersample, **render_options)
+    renderer = renderer_for(sim, width, height, camera, supersample, **render_options)
     sink = _Mp4Sink(path, width, height, fps, quality) if path.lower().endswith(".mp4") \
         else _PngSink(path)
     bar = Progress(frames, os.path.basename(path), progress)
-    t_sim = t_render = t_encode = 0.0
+    t_sim, t_render, t_encode = [], [], []
     start = time.perf_counter()
     try:
         for k in range(frames):
             if k:
                 t0 = time.perf_counter()
                 sim.step(steps_per_frame)
-                t_sim += time.perf_counter() - t0
+                t_sim.append(time.perf_counter() - t0)
             t0 = time.perf_counter()
             image = renderer.render()
             t1 = time.perf_counter()
             sink.write(image)
-            t2 = time.perf_counter()
-            t_render += t1 - t0
-            t_encode += t2 - t1
+            t_render.append(t1 - t0)
+            t_encode.append(time.perf_counter() - t1)
             bar.update(k + 1)
     except InstabilityError as err:
         sink.close()
@@ -167,10 +167,13 @@ def record(sim, path, frames=240, steps_per_frame=10, fps=30, width=640, height=
     sink.close()
     total = time.perf_counter() - start
     stats = {"frames": frames, "path": path,
-             "sim_ms_per_step": 1e3 * t_sim / max((frames - 1) * steps_per_frame, 1),
-             "render_ms_per_frame": 1e3 * t_render / frames,
-             "encode_ms_per_frame": 1e3 * t_encode / frames,
-             "fps": frames / total}
+             "sim_ms_per_step": 1e3 * sum(t_sim) / max((frames - 1) * steps_per_frame, 1),
+             "render_ms_per_frame": 1e3 * sum(t_render) / frames,
+             "encode_ms_per_frame": 1e3 * sum(t_encode) / frames,
+             "fps": frames / total,
+             "median_sim_ms": 1e3 * float(np.median(t_sim)) if t_sim else 0.0,
+             "median_render_ms": 1e3 * float(np.median(t_render)),
+             "median_encode_ms": 1e3 * float(np.median(t_encode))}
     if progress:
         sys.stderr.write(
             f"wrote {path}: {frames} frames; simulation {stats['sim_ms_per_step']:.3f} ms/step "

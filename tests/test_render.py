@@ -57,7 +57,7 @@ def test_depth_test_shows_the_nearer_triangle_and_is_bit_identical(f32):
     row = 32
     left, mid, right = (img[row, int(round(c))] for c in cols)
     assert left[1] > 3 * left[0] and mid[0] > 3 * mid[1] and right[0] > 3 * right[1]
-    ids = r.ids.to_numpy()
+    ids = r.ids()
     assert ids[row, int(round(cols[1]))] in (0, 1)          # a triangle of the near cloth
     assert ids[row, int(round(cols[0]))] in (2, 3)
     for _ in range(2):
@@ -75,7 +75,7 @@ def test_cloth_covers_its_projected_box_and_shows_the_side_facing_the_camera(f32
     r = tcloth.Renderer(sim, 160, 120, camera=cam, supersample=1, ground=False, shadows=False,
                         cloth_colours=[(RED, BLUE)])
     img = r.render()
-    mask = r.ids.to_numpy() < COLLIDER_ID
+    mask = r.ids() < COLLIDER_ID
     rows, cols = np.nonzero(mask)
     corners = scene.positions[cloth.particles[[0, 0, -1, -1], [0, -1, 0, -1]]]
     pc, pr = project(cam, corners, 160, 120)
