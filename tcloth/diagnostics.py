@@ -43,6 +43,18 @@ def _spring_sums(x: ti.template(), pairs: ti.template(), ks: ti.template(),
         ti.atomic_max(out[1], ti.cast(stretch / rest[s], out.dtype))
 
 
+@ti.kernel
+def _attraction_energy(x: ti.template(), mass: ti.template(), G: float, softening: float,
+                       out: ti.template()):
+    """out[0] = -sum_{i<j} G m_i m_j / sqrt(r_ij^2 + softening^2)."""
+    out[0] = 0
+    eps2 = softening * softening
+    for i in range(x.shape[0]):
+        for j in range(i + 1, x.shape[0]):
+            d = x[j] - x[i]
+            out[0] += ti.cast(-G * mass[i] * mass[j] / ti.sqrt(d.dot(d) + eps2), out.dtype)
+
+
 class Diagnostics:
     """Reductions over one model; owns a small accumulator field."""
 
@@ -64,10 +76,13 @@ class Diagnostics:
         return float(out[0]), float(out[1])
 
     def energy(self, state):
-        """dict of energies in J: kinetic, spring, gravity, contact, total."""
+        """dict of energies in J: kinetic, spring, gravity, contact, (attraction,) total."""
         sums = self.particle_sums(state)
         e = {"kinetic": float(sums[0]), "spring": self.spring_sums(state)[0],
              "gravity": float(sums[1]), "contact": self.contact_energy(state)}
+        if self.model.attraction is not None:
+            _attraction_energy(state.x, self.model.mass, *self.model.attraction, self._out)
+            e["attraction"] = float(self._out.to_numpy()[0])
         e["total"] = sum(e.values())
         return e
 

@@ -1,4 +1,4 @@
-"""Force evaluation: gravity, viscous air drag, springs and collider contacts.
+"""Force evaluation: gravity, viscous air drag, springs, wind, attraction and contacts.
 
 ``compute_forces(model, x, v, f_out)`` fills the force accumulator ``f_out`` at the state
 (x, v). Only the terms the scene has are launched: no springs, no spring kernel; a cloth
@@ -8,6 +8,7 @@ import taichi as ti
 
 from .colliders import collide
 from .runtime import serial
+from .scene import wind_velocity
 
 # Grid stencil offsets (di, dj) of each Provot family: every spring a particle takes part in.
 STRUCTURAL = ((1, 0), (-1, 0), (0, 1), (0, -1))
@@ -85,6 +86,48 @@ def eval_grid_springs(x: ti.template(), v: ti.template(), grid_ints: ti.template
         f_out[p] += acc
 
 
+@ti.kernel
+def eval_wind(x: ti.template(), v: ti.template(), triangles: ti.template(),
+              params: ti.template(), t: float, f_out: ti.template()):
+    """Wejchert & Haumann quadratic wind on every triangle, a third to each particle.
+
+    params = (velocity (3), gust amplitude (3), frequency, phase, drag, lift, tangential).
+    """
+    wind = ti.Vector([params[0], params[1], params[2]]) + ti.Vector(
+        [params[3], params[4], params[5]]) * ti.sin(2.0 * 3.141592653589793 * params[6] * t
+                                                    + params[7])
+    ti.loop_config(serialize=ti.static(serial(triangles)))
+    for k in range(triangles.shape[0]):
+        a, b, c = triangles[k][0], triangles[k][1], triangles[k][2]
+        cross = (x[b] - x[a]).cross(x[c] - x[a])
+        twice_area = cross.norm()
+        if twice_area > 0.0:
+            n = cross / twice_area
+            area = 0.5 * twice_area
+            v_rel = wind - (v[a] + v[b] + v[c]) / 3.0
+            u = v_rel.dot(n)
+            vt = v_rel - u * n
+            force = area * (params[8] * u * abs(u) * n + params[10] * vt.norm() * vt
+                            + params[9] * abs(u) * vt)
+            for q in ti.static(range(3)):
+                f_out[triangles[k][q]] += force / 3.0
+
+
+@ti.kernel
+def eval_attraction(x: ti.template(), mass: ti.template(), G: float, softening: float,
+                    f_out: ti.template()):
+    """Softened inverse-square attraction, gathered per particle over all others."""
+    eps2 = softening * softening
+    for i in range(x.shape[0]):
+        acc = ti.Vector.zero(float, 3)
+        for j in range(x.shape[0]):
+            if j != i:
+                d = x[j] - x[i]
+                r2 = d.dot(d) + eps2
+                acc += mass[j] * d / (r2 * ti.sqrt(r2))
+        f_out[i] += G * mass[i] * acc
+
+
 def compute_forces(model, x, v, f_out, t=0.0):
     """Total force on every particle at positions x, velocities v and time t, into f_out."""
     init_forces(v, model.mass, model.params, f_out)
@@ -94,6 +137,13 @@ def compute_forces(model, x, v, f_out, t=0.0):
     if model.list_spring_count:
         eval_springs(x, v, model.spring_pairs, model.spring_ks, model.spring_kd,
                      model.spring_rest, model.list_spring_count, f_out)
+    if model.wind is not None:
+        if model.wind["callable"] is not None:
+            model.wind_array[:3] = wind_velocity(model.wind, t)
+            model.wind_params.from_numpy(model.wind_array)
+        eval_wind(x, v, model.triangles, model.wind_params, t, f_out)
+    if model.attraction is not None:
+        eval_attraction(x, model.mass, model.attraction[0], model.attraction[1], f_out)
     if model.collider_count:
         collide(x, v, model.mass, model.inv_mass, model.collider_records, model.collider_ranges,
                 t, f_out)

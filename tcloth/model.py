@@ -68,6 +68,11 @@ class Model:
         spring_pairs: shape (spring_count,) of 2 x i32 particle ids.
         spring_rest, spring_ks, spring_kd: shape (spring_count,); m, N/m, N s/m.
         grids: list of GridBlock (empty when grid_stencil=False).
+        wind: the scene's wind dict or None (None too without cloth triangles);
+            triangles (triangle_count,) of 3 x i32 and wind_params (velocity (3),
+            amplitude (3), frequency, phase, drag, lift, tangential) when set.
+        attraction: (G, softening) or None.
+        strain_limit: dict or None; limit_index: ids of the limited springs.
         collider_records: shape (collider_count,) rows of tcloth.colliders.RECORD numbers,
             sorted by kind; collider_ranges: static ((first, count) per kind).
         gravity: (3,) m/s^2 (NumPy); air_drag: N s/m.
@@ -126,12 +131,41 @@ class Model:
             self.spring_ks.from_numpy(springs["stiffness"][order].astype(npr))
             self.spring_kd.from_numpy(springs["damping"][order].astype(npr))
 
+        self._build_wind_and_limits(scene, order, real, npr)
         rows, self.collider_ranges = colliders.pack(scene.colliders)
         self.collider_count = len(rows)
         self.collider_records = ti.Vector.field(colliders.RECORD, real,
                                                 shape=max(self.collider_count, 1))
         if self.collider_count:
             self.collider_records.from_numpy(rows.astype(npr))
+
+    def _build_wind_and_limits(self, scene, order, real, npr):
+        tris = [c.triangles for c in scene.cloths]
+        self.wind = scene.wind if scene.wind is not None and tris else None
+        if self.wind is not None:
+            t = np.concatenate(tris)
+            self.triangle_count = len(t)
+            self.triangles = ti.Vector.field(3, ti.i32, shape=len(t))
+            self.triangles.from_numpy(t.astype(np.int32))
+            w = self.wind
+            self.wind_params = ti.field(real, shape=11)
+            self.wind_array = np.array(
+                [*w["velocity"], *w["amplitude"], w["frequency"], w["phase"], w["drag"],
+                 w["lift"], w["tangential"]], dtype=npr)
+            self.wind_params.from_numpy(self.wind_array)
+        self.attraction = scene.attraction
+        self.strain_limit = scene.strain_limit
+        if self.strain_limit is not None:
+            position = np.empty(len(order), dtype=np.int64)
+            position[order] = np.arange(len(order))      # scene spring id -> model row
+            idx = position[self.strain_limit["springs"]].astype(np.int32)
+            self.limit_count = len(idx)
+            self.limit_index = ti.field(ti.i32, shape=max(len(idx), 1))
+            if len(idx):
+                self.limit_index.from_numpy(idx)
+            self.limit_dx = ti.Vector.field(3, real, shape=self.particle_count)
+            self.limit_hits = ti.field(ti.i32, shape=self.particle_count)
+            self.limit_x0 = ti.Vector.field(3, real, shape=self.particle_count)
 
     def state(self):
         """A new State with the scene's initial positions and velocities."""

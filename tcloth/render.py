@@ -441,18 +441,28 @@ class Renderer:
 
     @ti.func
     def _lit(self, p, n):
-        """Fraction of direct light reaching point p with normal n (shadow map lookup)."""
+        """Direct light reaching point p with normal n: Lambert times the fraction of a
+        2 x 2 shadow-map neighbourhood that does not block it (percentage-closer filter),
+        with a bias that grows at grazing light (no self-shadowing acne)."""
         light = -self._vec(19)
-        lit = ti.max(n.dot(light), 0.0)
+        cos_l = n.dot(light)
+        lit = ti.max(cos_l, 0.0)
         if ti.static(self.shadows) and lit > 0.0:
             s = self._project(False, p, SHADOW_MAP, SHADOW_MAP)
-            r = ti.cast(ti.round(s[1]), ti.i32)
-            c = ti.cast(ti.round(s[0]), ti.i32)
-            if 0 <= r < SHADOW_MAP and 0 <= c < SHADOW_MAP:
-                blocker = self.shadow[r, c]
-                bias = 3.0 * ti.static(self.view[28]) / SHADOW_MAP
-                if blocker != ti.i64(SKY_KEY) and _key_t(blocker) < s[2] - bias:
-                    lit = 0.0
+            texel = 2.0 * ti.static(self.view[28]) / SHADOW_MAP
+            bias = texel * (1.5 + 2.0 * ti.sqrt(1.0 - cos_l * cos_l) / ti.max(cos_l, 0.2))
+            r0 = ti.cast(ti.floor(s[1]), ti.i32)
+            c0 = ti.cast(ti.floor(s[0]), ti.i32)
+            visible = 0.0
+            for dr, dc in ti.static(ti.ndrange(2, 2)):
+                r, c = r0 + dr, c0 + dc
+                blocked = False
+                if 0 <= r < SHADOW_MAP and 0 <= c < SHADOW_MAP:
+                    blocker = self.shadow[r, c]
+                    blocked = blocker != ti.i64(SKY_KEY) and _key_t(blocker) < s[2] - bias
+                if not blocked:
+                    visible += 0.25
+            lit *= visible
         return lit
 
     @ti.kernel

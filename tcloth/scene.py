@@ -102,6 +102,22 @@ def as_spring_params(name, value):
             as_scalar(f"{name}[1] (k_d)", value[1], minimum=0.0))
 
 
+def wind_velocity(wind, t):
+    """The wind velocity (3,) at time t of a ``Scene.wind`` dict (validated)."""
+    f = wind["callable"]
+    if f is None:
+        return wind["velocity"] + wind["amplitude"] * np.sin(
+            2 * np.pi * wind["frequency"] * t + wind["phase"])
+    try:
+        value = f(t)
+    except Exception as e:
+        raise SceneError(f"wind gust callable raised {type(e).__name__} at t = {t}: {e}") from e
+    try:
+        return as_vec3("wind gust callable's result", value)
+    except SceneError as e:
+        raise SceneError(f"{e} at t = {t}") from None
+
+
 class Cloth:
     """A Provot cloth on a regular grid, as added by ``Scene.add_cloth``.
 
@@ -172,6 +188,9 @@ class Scene:
         self.cloths = []
         self.ropes = []
         self.colliders = []
+        self.wind = None
+        self.attraction = None
+        self.strain_limit = None
 
     # -- particles -------------------------------------------------------------------------
     def add_particles(self, positions, mass=1.0, velocities=None, pinned=False):
@@ -424,6 +443,90 @@ class Scene:
         return self._add_collider("box", friction, velocity, thickness, stiffness, damping,
                                   stick_velocity, center=as_vec3("center", center),
                                   half_extents=h, rotation=r)
+
+    # -- wind, attraction, strain limiting ------------------------------------------------
+    def set_wind(self, velocity=(0.0, 0.0, 0.0), drag=0.5, lift=0.0, tangential=0.0,
+                 gust=None):
+        """Quadratic wind on cloth triangles (Wejchert & Haumann 1991).
+
+        On a triangle of area A and unit normal n, with relative velocity
+        v_rel = wind(t) - (mean velocity of its particles), u = v_rel . n and its in-plane
+        part v_t = v_rel - u n, the force is
+            drag * A * u |u| n                 (pressure drag, normal)
+          + tangential * A * |v_t| v_t         (skin friction, tangential)
+          + lift * A * |u| v_t                 (lift: tangential, largest at 45 degrees,
+                                                zero face-on and edge-on),
+        split equally onto its three particles. drag carries the air density and the 1/2
+        (kg/m^3): for air, 0.5 * 1.2 * C_d with C_d about 1 gives 0.6.
+
+        Args:
+            velocity: (3,) mean wind, m/s.
+            drag, lift, tangential: coefficients >= 0, kg/m^3.
+            gust: None; a dict(amplitude=(3,), frequency=Hz, phase=rad) adding
+                amplitude * sin(2 pi frequency t + phase) in the kernel; or a callable
+                t -> (3,) wind velocity evaluated once per force evaluation (velocity is
+                then ignored). Neither recompiles kernels.
+        """
+        wind = {"velocity": as_vec3("velocity", velocity),
+                "drag": as_scalar("drag", drag, minimum=0.0),
+                "lift": as_scalar("lift", lift, minimum=0.0),
+                "tangential": as_scalar("tangential", tangential, minimum=0.0),
+                "amplitude": np.zeros(3), "frequency": 0.0, "phase": 0.0, "callable": None}
+        if callable(gust):
+            wind["callable"] = gust
+            wind_velocity(wind, 0.0)
+        elif isinstance(gust, dict):
+            unknown = sorted(set(gust) - {"amplitude", "frequency", "phase"})
+            if unknown:
+                raise SceneError(f"gust has an unknown key {unknown[0]!r} "
+                                 "(keys: amplitude, frequency, phase)")
+            wind["amplitude"] = as_vec3("gust['amplitude']", gust.get("amplitude", (0, 0, 0)))
+            wind["frequency"] = as_scalar("gust['frequency']", gust.get("frequency", 0.0), 0.0)
+            wind["phase"] = as_scalar("gust['phase']", gust.get("phase", 0.0))
+        elif gust is not None:
+            raise SceneError(f"gust must be None, a dict or a callable t -> (3,) (got {gust!r})")
+        self.wind = wind
+        return wind
+
+    def add_attraction(self, G, softening=0.0):
+        """Inverse-square attraction between all particle pairs (O(n^2)):
+        f_i = sum_j G m_i m_j (x_j - x_i) / (|x_j - x_i|^2 + softening^2)^(3/2), with
+        potential -G m_i m_j / sqrt(r^2 + softening^2) reported as energy()["attraction"].
+
+        Args: G (N m^2/kg^2) >= 0; softening (m) >= 0 (Plummer).
+        """
+        self.attraction = (as_scalar("G", G, minimum=0.0),
+                           as_scalar("softening", softening, minimum=0.0))
+        return self.attraction
+
+    def limit_strain(self, max_stretch=0.1, iterations=20, kinds=("structural", "shear"),
+                     springs=None):
+        """Provot (1995) strain limiting, applied after every step.
+
+        Limited springs longer than (1 + max_stretch) rest length are shortened by moving
+        their ends (inverse-mass weighted: a pinned end stays put), ``iterations`` Jacobi
+        passes in parallel; velocities get the same correction divided by dt.
+
+        Args:
+            max_stretch: > 0 (0.1 = 10 %). iterations: passes per step, >= 1.
+            kinds: the spring kinds limited (default structural and shear).
+            springs: None, or spring ids to limit instead of whole kinds.
+        """
+        if springs is None:
+            if isinstance(kinds, str) or not kinds or any(k not in KIND_CODE for k in kinds):
+                raise SceneError(f"kinds must be a non-empty tuple of {SPRING_KINDS} "
+                                 f"(got {kinds!r})")
+            ids = np.flatnonzero(np.isin(self.springs["kind"], [KIND_CODE[k] for k in kinds]))
+        else:
+            ids = np.asarray(springs)
+            if ids.ndim != 1 or ids.dtype.kind not in "iu" or len(ids) == 0 or \
+                    ids.min() < 0 or ids.max() >= self.num_springs:
+                raise SceneError(f"springs must be a 1-D array of spring ids in "
+                                 f"[0, {self.num_springs}) (got {_fmt(springs)})")
+        self.strain_limit = {"max_stretch": as_scalar("max_stretch", max_stretch, 0.0, strict=True),
+                             "iterations": as_int("iterations", iterations, 1),
+                             "springs": np.unique(ids)}
+        return self.strain_limit
 
     # -- concatenated views (read-only copies) ---------------------------------------------
     def _cat(self, parts, shape, dtype):

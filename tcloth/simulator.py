@@ -5,6 +5,7 @@ import taichi as ti
 from . import runtime
 from .runtime import serial
 from .diagnostics import Diagnostics
+from .constraints import limit_strain
 from .errors import InstabilityError, SceneError
 from .integrators import INTEGRATORS
 from .model import Model
@@ -94,6 +95,9 @@ class Simulator:
             s_in, s_out = self._states
             s_out.forces_valid = False
             self.integrator.simulate(self.model, s_in, s_out, self.dt)
+            if self.model.strain_limit is not None and self.model.limit_count:
+                limit_strain(self.model, s_out, self.dt)
+                s_out.forces_valid = False
             bad = _first_bad_particle(s_out.x, s_out.v, self.position_bound,
                                       self.velocity_bound)
             if bad >= 0:

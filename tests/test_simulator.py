@@ -87,3 +87,40 @@ def test_pinned_particles_stay_put(f64):
     pins = cloth.particles[0, [0, 4]]
     assert np.array_equal(sim.positions()[pins], scene.positions[pins])
     assert np.all(sim.positions()[cloth.particles[1:, 2], 1] < scene.positions[cloth.particles[1:, 2], 1])
+
+
+FEATURE_KERNELS = {"springs": ("forces", "eval_springs"), "grid": ("forces", "eval_grid_springs"),
+                   "wind": ("forces", "eval_wind"), "attraction": ("forces", "eval_attraction"),
+                   "colliders": ("forces", "collide"), "strain": ("constraints", "_limit_pass")}
+
+
+def launches(monkeypatch, scene, steps=3):
+    """Count the launches of each feature kernel over a few steps."""
+    import importlib
+    counts = dict.fromkeys(FEATURE_KERNELS, 0)
+    for feature, (module, name) in FEATURE_KERNELS.items():
+        mod = importlib.import_module(f"tcloth.{module}")
+        kernel = getattr(mod, name)
+
+        def counted(*args, _k=kernel, _f=feature):
+            counts[_f] += 1
+            return _k(*args)
+        monkeypatch.setattr(mod, name, counted)
+    tcloth.Simulator(scene, dt=1e-4).step(steps)
+    return counts
+
+
+def test_absent_features_launch_nothing(f64, monkeypatch):
+    plain = tcloth.Scene()
+    plain.add_cloth(resolution=(4, 4), flexion=None)
+    assert launches(monkeypatch, plain) == {"springs": 0, "grid": 3, "wind": 0, "attraction": 0,
+                                            "colliders": 0, "strain": 0}
+    full = tcloth.Scene()
+    cloth = full.add_cloth(resolution=(4, 4))
+    full.add_springs([cloth.particles[[0, 3], [0, 3]]], stiffness=1.0)
+    full.set_wind((1, 0, 0))
+    full.add_attraction(1e-3)
+    full.add_sphere((0, 0, 0), 0.1)
+    full.limit_strain(0.1)
+    counts = launches(monkeypatch, full)
+    assert all(counts[f] >= 3 for f in FEATURE_KERNELS), counts
