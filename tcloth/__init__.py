@@ -7,6 +7,7 @@ os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "False")
 
 from . import cli  # noqa: E402  (after the environment default above)
 from .errors import InstabilityError, SceneError, StaleSimulatorError
+from .mesh import export_mesh, write_obj, write_ply
 from .render import Camera, Renderer, render
 from .runtime import init
 from .scene import Cloth, Rope, Scene
@@ -17,4 +18,5 @@ __version__ = "0.1.0"
 
 __all__ = ["init", "Scene", "Cloth", "Rope", "Simulator", "SceneError", "InstabilityError",
            "StaleSimulatorError", "Camera", "Renderer", "render", "record", "write_png",
+           "export_mesh", "write_obj", "write_ply",
            "__version__"]

@@ -69,6 +69,7 @@ def _render_parser(parser):
     parser.add_argument("--width", type=int, help="image width, pixels")
     parser.add_argument("--height", type=int, help="image height, pixels")
     parser.add_argument("--supersample", type=int, help="s x s samples per pixel")
+    parser.add_argument("--meshes", help="also write each frame's cloth mesh (OBJ) here")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument("--verbose", action="store_true", help="tracebacks on errors")
 
@@ -99,7 +100,7 @@ def render_script(path, args):
     return tcloth.record(sim, out, frames=cfg["frames"], steps_per_frame=cfg["steps_per_frame"],
                          fps=cfg["fps"], width=cfg["width"], height=cfg["height"],
                          camera=cfg["camera"], supersample=cfg["supersample"],
-                         progress=not args.quiet, **cfg["render"])
+                         progress=not args.quiet, mesh_dir=args.meshes, **cfg["render"])
 
 
 def _guarded(fn, verbose):

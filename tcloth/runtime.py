@@ -65,6 +65,11 @@ def real():
     return _Runtime.real
 
 
+def precision():
+    """"f32" or "f64"."""
+    return _Runtime.precision
+
+
 def numpy_real():
     return "float64" if _Runtime.precision == "f64" else "float32"
 

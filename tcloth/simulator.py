@@ -2,13 +2,13 @@
 import numpy as np
 import taichi as ti
 
-from . import runtime
-from .runtime import serial
-from .diagnostics import Diagnostics
+from . import checkpoint, runtime
 from .constraints import limit_strain
+from .diagnostics import Diagnostics
 from .errors import InstabilityError, SceneError
 from .integrators import INTEGRATORS
 from .model import Model
+from .runtime import serial
 from .scene import Scene, as_points, as_scalar
 
 _HINTS = {
@@ -61,7 +61,11 @@ class Simulator:
         self.position_bound = as_scalar("position_bound", position_bound, 0.0, strict=True)
         self.velocity_bound = as_scalar("velocity_bound", velocity_bound, 0.0, strict=True)
         self.integrator_name = integrator
+        self.settings = {"grid_stencil": bool(grid_stencil),
+                         "position_bound": self.position_bound,
+                         "velocity_bound": self.velocity_bound}
         self.model = Model(scene, grid_stencil=bool(grid_stencil))
+        self.precision = runtime.precision()
         self.integrator = INTEGRATORS[integrator](self.model, **options)
         self._generation = self.model.generation
         self._states = [self.model.state(), self.model.state()]
@@ -147,6 +151,35 @@ class Simulator:
                 raise SceneError(f"{name} must have shape ({n}, 3) (got {arr.shape})")
             field.from_numpy(arr.astype(npr))
         self.state.forces_valid = False
+
+    def save(self, path):
+        """Write scene, settings and state to ``path`` (.npz), atomically."""
+        self._check()
+        checkpoint.save(self, path)
+
+    @classmethod
+    def load(cls, path):
+        """A Simulator continuing exactly where the saved one stopped (bit for bit on the
+        CPU where the kernels are deterministic: grid stencils and scenes below
+        SERIAL_BELOW particles). The current precision must match the checkpoint's."""
+        meta, scene_arrays, files = checkpoint.read(path)
+        runtime.ensure_init()
+        if meta["precision"] != runtime.precision():
+            raise SceneError(f"checkpoint {path!r} was saved in precision "
+                             f"{meta['precision']!r}; call tcloth.init(precision="
+                             f"{meta['precision']!r}) before loading it")
+        scene = checkpoint.scene_from_arrays(meta["scene"], scene_arrays)
+        sim = cls(scene, meta["integrator"], dt=meta["dt"], **meta["settings"],
+                  **meta["options"])
+        npr = runtime.numpy_real()
+        state = sim.state
+        state.x.from_numpy(files["state_x"].astype(npr))
+        state.v.from_numpy(files["state_v"].astype(npr))
+        state.f.from_numpy(files["state_f"].astype(npr))
+        state.forces_valid = bool(meta["forces_valid"])
+        sim.num_steps = int(meta["num_steps"])
+        state.t = sim.time
+        return sim
 
     def energy(self):
         """dict of energies, J: kinetic, spring, gravity, contact, total."""

@@ -13,6 +13,7 @@ import zlib
 import numpy as np
 
 from .errors import InstabilityError, SceneError
+from .mesh import export_mesh
 from .render import renderer_for
 
 
@@ -120,7 +121,8 @@ def check_writable(path):
 
 
 def record(sim, path, frames=240, steps_per_frame=10, fps=30, width=640, height=480,
-           camera=None, supersample=2, quality=7, progress=True, **render_options):
+           camera=None, supersample=2, quality=7, progress=True, mesh_dir=None,
+           **render_options):
     """Simulate and render ``frames`` frames to ``path``.
 
     Args:
@@ -128,6 +130,7 @@ def record(sim, path, frames=240, steps_per_frame=10, fps=30, width=640, height=
         frames: number of frames (the first shows the current state).
         steps_per_frame: simulator steps between frames. fps: video frame rate.
         quality: H.264 quality 0-10 (imageio-ffmpeg's scale).
+        mesh_dir: also write each frame's cloth mesh there (frame_00000.obj, ...).
     Returns:
         dict: frames, path, sim_ms_per_step, render_ms_per_frame, encode_ms_per_frame, fps
         (means), and median_sim_ms, median_render_ms, median_encode_ms (per frame).
@@ -138,6 +141,8 @@ def record(sim, path, frames=240, steps_per_frame=10, fps=30, width=640, height=
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
             raise SceneError(f"{name} must be a positive integer (got {value!r})")
     check_writable(path)
+    if mesh_dir is not None:
+        check_writable(os.path.join(mesh_dir, "frame.obj"))
     renderer = renderer_for(sim, width, height, camera, supersample, **render_options)
     sink = _Mp4Sink(path, width, height, fps, quality) if path.lower().endswith(".mp4") \
         else _PngSink(path)
@@ -156,6 +161,8 @@ def record(sim, path, frames=240, steps_per_frame=10, fps=30, width=640, height=
             sink.write(image)
             t_render.append(t1 - t0)
             t_encode.append(time.perf_counter() - t1)
+            if mesh_dir is not None:
+                export_mesh(sim, os.path.join(mesh_dir, f"frame_{k:05d}.obj"))
             bar.update(k + 1)
     except InstabilityError as err:
         sink.close()
