@@ -25,3 +25,21 @@ def random_network(n=7, seed=0, k=(50.0, 200.0), kd=0.0, pin=None, gravity=(0.0,
     rest = np.linalg.norm(x[pairs[:, 0]] - x[pairs[:, 1]], axis=1) * rng.uniform(0.8, 1.2, len(pairs))
     scene.add_springs(pairs, stiffness=rng.uniform(*k, len(pairs)), damping=kd, rest_length=rest)
     return scene
+
+
+def energy_gradient(sim, x0, term, entries=None, h=1e-6):
+    """Central finite differences of sim.energy()[term] at positions x0, (N,3); entries:
+    the (particle, coordinate) pairs to difference (default all)."""
+    grad = np.full(x0.shape, np.nan)
+    if entries is None:
+        entries = [(p, c) for p in range(len(x0)) for c in range(3)]
+    for p, c in entries:
+        e = []
+        for s in (1, -1):
+            x = x0.copy()
+            x[p, c] += s * h
+            sim.set_state(positions=x)
+            e.append(sim.energy()[term])
+        grad[p, c] = (e[0] - e[1]) / (2 * h)
+    sim.set_state(positions=x0)
+    return grad

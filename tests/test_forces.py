@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 import tcloth
-from conftest import random_network
+from conftest import energy_gradient, random_network
 
 
 def numpy_forces(scene, x, v):
@@ -25,17 +25,7 @@ def test_spring_force_is_minus_energy_gradient(f64):
     sim = tcloth.Simulator(scene)
     x0 = scene.positions
     force = sim.forces()
-    h = 1e-6
-    grad = np.zeros_like(x0)
-    for p in range(len(x0)):
-        for c in range(3):
-            e = []
-            for s in (1, -1):
-                x = x0.copy()
-                x[p, c] += s * h
-                sim.set_state(positions=x)
-                e.append(sim.energy()["spring"])
-            grad[p, c] = (e[0] - e[1]) / (2 * h)
+    grad = energy_gradient(sim, x0, "spring")
     assert np.allclose(force, -grad, rtol=1e-6, atol=1e-6 * np.abs(force).max())
 
 

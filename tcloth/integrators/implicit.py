@@ -1,0 +1,466 @@
+"""Backward Euler (Baraff & Witkin 1998), solved as a minimisation with Newton's method.
+
+One step of size h finds the end positions x (and v = (x - x0) / h) that minimise the
+incremental potential
+
+    E(x) = 1/(2 h^2) |x - x0 - h v0|_M^2 + U(x) + D(x) - f_lag . x
+
+U: springs k_s/2 (|x_ij| - l0)^2, gravity -m g . x, collider penalties k/2 depth^2.
+D: dissipation, with directions frozen at the start of the step: spring damping
+   k_d / (2h) ((x_ij - x0_ij) . d0)^2, air drag c / (2h) |x - x0|^2, contact normal damping
+   for particles approaching a collider, and Coulomb friction as the convex potential
+   mu fn0 h psi(|v_t|) (psi' = min(|v_t| / eps, 1)) with the normal force fn0 and normal of
+   the start of the step, which gives exactly the explicit friction law at the end velocity.
+f_lag: wind and attraction, evaluated at the start of the step (explicit).
+
+grad E = 0 is backward Euler. Newton's method: the Hessian-vector products of all terms are
+Taichi kernels (matrix free); each Newton step solves H dx = -grad E by conjugate gradients
+with a block-Jacobi (3 x 3 per particle) preconditioner, filtered so that pinned particles
+do not move (Baraff & Witkin's filtered CG); a backtracking line search on E makes every
+iteration decrease E, so a step never gains energy. Spring Hessians are made positive
+semi-definite by clamping the transverse term k (1 - l0/|x_ij|) at zero for compressed
+springs (definiteness fix). ``newton_iterations=1, line_search=False`` is Baraff &
+Witkin's single linearised solve.
+"""
+import numpy as np
+import taichi as ti
+
+from .. import runtime
+from ..colliders import signed_distance
+from ..forces import eval_attraction, eval_wind
+from ..runtime import serial
+from .base import Integrator
+
+
+@ti.data_oriented
+class BackwardEuler(Integrator):
+    """Implicit Euler by Newton + preconditioned CG. Options (defaults):
+
+    newton_iterations (8): maximum Newton iterations per step.
+    newton_tol (1e-4): stop when an iteration changes no velocity by more than
+        newton_tol * (1 m/s + max |v0|).
+    cg_tol (1e-4): CG stops at this residual relative to the right-hand side.
+    cg_max_iterations (500).
+    line_search (True): backtracking on E (Armijo); False takes full Newton steps.
+
+    After each step ``stats`` holds newton_iterations, cg_iterations (total) and
+    residual (the last CG relative residual).
+    """
+    name = "backward_euler"
+    defaults = {"newton_iterations": 8, "newton_tol": 1e-4, "cg_tol": 1e-4,
+                "cg_max_iterations": 500, "line_search": True}
+
+    def __init__(self, model, **options):
+        super().__init__(model, **options)
+        n, real = model.particle_count, runtime.real()
+        (self.x_hat, self.x0, self.grad, self.dx, self.f_lag, self.r, self.z, self.p, self.ap,
+         self.x_try) = (ti.Vector.field(3, real, shape=n) for _ in range(10))
+        self.precond = ti.Matrix.field(3, 3, real, shape=n)
+        self.d0 = ti.Vector.field(3, real, shape=max(model.spring_count, 1))
+        c = max(model.collider_count, 1)
+        self.fn0 = ti.field(real, shape=(n, c))
+        self.n0 = ti.Vector.field(3, real, shape=(n, c))
+        self.acc = ti.field(runtime.accumulator(), shape=2)
+        self.stats = {}
+        self._lagged = model.wind is not None or model.attraction is not None
+
+    # -- the step ------------------------------------------------------------------------
+    def simulate(self, model, state_in, state_out, dt):
+        h, t1 = dt, state_in.t + dt
+        opt = self.options
+        self._begin(model, state_in.x, state_in.v, h, state_in.t)
+        if self._lagged:
+            self.f_lag.fill(0)
+            if model.wind is not None:
+                eval_wind(state_in.x, state_in.v, model.triangles, model.wind_params,
+                          state_in.t, self.f_lag)
+            if model.attraction is not None:
+                eval_attraction(state_in.x, model.mass, *model.attraction, self.f_lag)
+        x = state_out.x
+        x.copy_from(self.x_hat)
+        self._pin(x)
+        cg_total, residual, it = 0, 0.0, 0
+        energy = self._energy_and_gradient(model, x, h, t1)
+        for it in range(1, opt["newton_iterations"] + 1):
+            iters, residual = self._solve(model, x, h, t1)
+            cg_total += iters
+            slope = self._dot(self.grad, self.dx)
+            alpha = 1.0
+            if opt["line_search"]:
+                while True:
+                    self._axpy_into(self.x_try, x, alpha, self.dx)
+                    trial = self._energy(model, self.x_try, h, t1)
+                    if trial <= energy + 1e-4 * alpha * slope or alpha < 1e-4:
+                        break
+                    alpha *= 0.5
+                x.copy_from(self.x_try)
+            else:
+                self._axpy_into(x, x, 1.0, self.dx)
+            step = alpha * self._max_norm(self.dx) / h
+            energy = self._energy_and_gradient(model, x, h, t1)
+            if step < opt["newton_tol"] * (1.0 + self._max_norm(state_in.v)):
+                break
+        self._finish(state_in.x, x, 1.0 / h, state_out.v)
+        state_out.t = t1
+        self.stats = {"newton_iterations": it, "cg_iterations": cg_total, "residual": residual}
+
+    def _solve(self, model, x, h, t):
+        """Preconditioned CG on H dx = -grad (filtered: pinned entries stay 0)."""
+        opt = self.options
+        self._precondition(model, x, h, t)
+        self.dx.fill(0)
+        self._negate_filtered(model.inv_mass, self.grad, self.r)
+        b_norm = np.sqrt(self._dot(self.r, self.r))
+        if b_norm == 0.0:
+            return 0, 0.0
+        rz = self._apply_precond(model.inv_mass, self.r, self.z, self.p, True)
+        rel, k = 1.0, 0
+        for k in range(1, opt["cg_max_iterations"] + 1):
+            self._hessian_product(model, x, self.p, h, t, self.ap)
+            pap = self._dot(self.p, self.ap)
+            if pap <= 0.0:
+                break
+            alpha = rz / pap
+            rr = self._cg_update(model.inv_mass, alpha, self.p, self.ap, self.dx, self.r)
+            rel = np.sqrt(rr) / b_norm
+            if rel < opt["cg_tol"]:
+                break
+            rz_new = self._apply_precond(model.inv_mass, self.r, self.z, self.p, False)
+            self._cg_direction(rz_new / rz, self.z, self.p)
+            rz = rz_new
+        return k, rel
+
+    # -- energy, gradient, Hessian products (Python wrappers) ------------------------------
+    def _energy(self, model, x, h, t):
+        return self._terms(model, x, h, t, False)
+
+    def _energy_and_gradient(self, model, x, h, t):
+        return self._terms(model, x, h, t, True)
+
+    def _terms(self, model, x, h, t, with_grad):
+        self.acc.fill(0)
+        self._particle_terms(x, model.mass, model.inv_mass, model.params, h, with_grad)
+        if model.spring_count:
+            self._spring_terms(x, model.inv_mass, model.spring_pairs, model.spring_ks,
+                               model.spring_kd, model.spring_rest, model.spring_count, h,
+                               with_grad)
+        if model.collider_count:
+            self._contact_terms(x, model.inv_mass, model.collider_records,
+                                model.collider_ranges, h, t, with_grad)
+        return float(self.acc.to_numpy()[0])
+
+    def _hessian_product(self, model, x, p, h, t, out):
+        self._particle_hessian(model.mass, model.inv_mass, model.params, p, h, out)
+        if model.spring_count:
+            self._spring_hessian(x, model.inv_mass, model.spring_pairs, model.spring_ks,
+                                 model.spring_kd, model.spring_rest, model.spring_count, p, h,
+                                 out)
+        if model.collider_count:
+            self._contact_hessian(x, model.inv_mass, model.collider_records,
+                                  model.collider_ranges, p, h, t, out)
+
+    def hessian_product(self, model, x, p, h, t=0.0):
+        """H p at positions x (fields); for tests and tools. Returns (N,3) NumPy."""
+        self._hessian_product(model, x, p, h, t, self.ap)
+        return self.ap.to_numpy()
+
+    # -- kernels: set-up and finish ------------------------------------------------------
+    @ti.kernel
+    def _begin_particles(self, x: ti.template(), v: ti.template(), h: float):
+        for p in range(x.shape[0]):
+            self.x0[p] = x[p]
+            self.x_hat[p] = x[p] + h * v[p]
+
+    @ti.kernel
+    def _begin_springs(self, x: ti.template(), pairs: ti.template(), count: ti.i32):
+        for s in range(count):
+            d = x[pairs[s][0]] - x[pairs[s][1]]
+            self.d0[s] = d / ti.max(d.norm(), 1e-30)
+
+    @ti.kernel
+    def _begin_contacts(self, x: ti.template(), inv_mass: ti.template(),
+                        records: ti.template(), ranges: ti.template(), t: float):
+        """Lagged normal force and normal of each (particle, collider) contact."""
+        for p in range(x.shape[0]):
+            for kind in ti.static(range(3)):
+                if ti.static(ranges[kind][1] > 0):
+                    for c in range(ranges[kind][0], ranges[kind][0] + ranges[kind][1]):
+                        rec = records[c]
+                        phi, n = signed_distance(kind, rec, x[p], t)
+                        depth = rec[18] - phi
+                        fn = 0.0
+                        if depth > 0.0 and inv_mass[p] > 0.0:
+                            fn = rec[19] * depth
+                        self.fn0[p, c] = fn
+                        self.n0[p, c] = n
+
+    def _begin(self, model, x, v, h, t0):
+        self._begin_particles(x, v, h)
+        if model.spring_count:
+            self._begin_springs(x, model.spring_pairs, model.spring_count)
+        if model.collider_count:
+            self._begin_contacts(x, model.inv_mass, model.collider_records,
+                                 model.collider_ranges, t0)
+
+    @ti.kernel
+    def _pin(self, x: ti.template()):
+        for p in range(x.shape[0]):
+            x[p] = self.x_hat[p]
+
+    @ti.kernel
+    def _finish(self, x0: ti.template(), x: ti.template(), inv_h: float, v_out: ti.template()):
+        """v = (x - x0) / h; pinned particles keep v0 since their x = x0 + h v0."""
+        for p in range(x.shape[0]):
+            v_out[p] = (x[p] - x0[p]) * inv_h
+
+    # -- kernels: energy and gradient ------------------------------------------------------
+    @ti.kernel
+    def _particle_terms(self, x: ti.template(), mass: ti.template(), inv_mass: ti.template(),
+                        params: ti.template(), h: float, with_grad: ti.template()):
+        """Inertia, gravity, air drag and lagged forces."""
+        gravity = ti.Vector([params[0], params[1], params[2]])
+        ti.loop_config(serialize=ti.static(serial(x)))
+        for p in range(x.shape[0]):
+            m = mass[p]
+            dxh = x[p] - self.x_hat[p]
+            dx0 = x[p] - self.x0[p]
+            e = (0.5 * m / (h * h) * dxh.dot(dxh) - m * gravity.dot(x[p])
+                 + 0.5 * params[3] / h * dx0.dot(dx0))
+            g = m / (h * h) * dxh - m * gravity + params[3] / h * dx0
+            if ti.static(self._lagged):
+                e -= self.f_lag[p].dot(x[p])
+                g -= self.f_lag[p]
+            if inv_mass[p] > 0.0:
+                self.acc[0] += ti.cast(e, self.acc.dtype)
+            if ti.static(with_grad):
+                self.grad[p] = g
+
+    @ti.kernel
+    def _spring_terms(self, x: ti.template(), inv_mass: ti.template(), pairs: ti.template(),
+                      ks: ti.template(), kd: ti.template(), rest: ti.template(), count: ti.i32,
+                      h: float, with_grad: ti.template()):
+        """Spring energy k/2 (l - l0)^2 and frozen-direction damping k_d/(2h) (dx_ij.d0)^2."""
+        ti.loop_config(serialize=ti.static(serial(pairs)))
+        for s in range(count):
+            i, j = pairs[s][0], pairs[s][1]
+            d = x[i] - x[j]
+            length = d.norm()
+            n = d / ti.max(length, 1e-30)
+            stretch = length - rest[s]
+            rel = (d - (self.x0[i] - self.x0[j])).dot(self.d0[s])
+            self.acc[0] += ti.cast(0.5 * ks[s] * stretch * stretch
+                                   + 0.5 * kd[s] / h * rel * rel, self.acc.dtype)
+            if ti.static(with_grad):
+                g = ks[s] * stretch * n + kd[s] / h * rel * self.d0[s]
+                self.grad[i] += g
+                self.grad[j] -= g
+
+    @ti.func
+    def _contact_one(self, kind: ti.template(), rec, xp, p, c, m, h, t):
+        """(energy, gradient) of one particle against one collider: penalty k/2 depth^2 at
+        x, normal damping and friction with the start-of-step normal and force."""
+        phi, n = signed_distance(kind, rec, xp, t)
+        depth = rec[18] - phi
+        e = 0.0
+        g = ti.Vector.zero(float, 3)
+        k = rec[19]
+        if depth > 0.0:
+            e += 0.5 * k * depth * depth
+            g -= k * depth * n
+        fn0 = self.fn0[p, c]
+        if fn0 > 0.0:
+            n0 = self.n0[p, c]
+            v = (xp - self.x0[p]) / h - ti.Vector([rec[3], rec[4], rec[5]])
+            vn = v.dot(n0)
+            if vn < 0.0:
+                cd = 2.0 * rec[20] * ti.sqrt(k * m)
+                e += 0.5 * cd * h * vn * vn
+                g += cd * vn * n0
+            vt = v - vn * n0
+            s = vt.norm()
+            mu, eps = rec[21], rec[22]
+            if s < eps:
+                e += mu * fn0 * h * s * s / (2.0 * eps)
+                g += mu * fn0 / eps * vt
+            else:
+                e += mu * fn0 * h * (s - 0.5 * eps)
+                g += mu * fn0 / s * vt
+        return e, g
+
+    @ti.kernel
+    def _contact_terms(self, x: ti.template(), inv_mass: ti.template(), records: ti.template(),
+                       ranges: ti.template(), h: float, t: float, with_grad: ti.template()):
+        ti.loop_config(serialize=ti.static(serial(x)))
+        for p in range(x.shape[0]):
+            if inv_mass[p] > 0.0:
+                for kind in ti.static(range(3)):
+                    if ti.static(ranges[kind][1] > 0):
+                        for c in range(ranges[kind][0], ranges[kind][0] + ranges[kind][1]):
+                            e, g = self._contact_one(kind, records[c], x[p], p, c,
+                                                     1.0 / inv_mass[p], h, t)
+                            self.acc[0] += ti.cast(e, self.acc.dtype)
+                            if ti.static(with_grad):
+                                self.grad[p] += g
+
+    # -- kernels: Hessian products and preconditioner ------------------------------------
+    @ti.func
+    def _spring_block(self, xi, xj, ks, kd, rest, d0, h):
+        """3x3 Hessian block of one spring (PSD: transverse term clamped at 0)."""
+        d = xi - xj
+        length = d.norm()
+        n = d / ti.max(length, 1e-30)
+        nn = n.outer_product(n)
+        transverse = ti.max(1.0 - rest / ti.max(length, 1e-30), 0.0)
+        eye = ti.Matrix.identity(float, 3)
+        return ks * (nn + transverse * (eye - nn)) + kd / h * d0.outer_product(d0)
+
+    @ti.func
+    def _contact_block(self, kind: ti.template(), rec, xp, p, c, m, h, t):
+        """3x3 Hessian block of one contact (penalty k n n^T without the curvature term,
+        normal damping, friction)."""
+        phi, n = signed_distance(kind, rec, xp, t)
+        block = ti.Matrix.zero(float, 3, 3)
+        k = rec[19]
+        if rec[18] - phi > 0.0:
+            block += k * n.outer_product(n)
+        fn0 = self.fn0[p, c]
+        if fn0 > 0.0:
+            n0 = self.n0[p, c]
+            nn = n0.outer_product(n0)
+            v = (xp - self.x0[p]) / h - ti.Vector([rec[3], rec[4], rec[5]])
+            vn = v.dot(n0)
+            if vn < 0.0:
+                block += 2.0 * rec[20] * ti.sqrt(k * m) / h * nn
+            vt = v - vn * n0
+            s = vt.norm()
+            mu, eps = rec[21], rec[22]
+            tangent = ti.Matrix.identity(float, 3) - nn
+            if s < eps:
+                block += mu * fn0 / (eps * h) * tangent
+            else:
+                that = vt / s
+                block += mu * fn0 / (s * h) * (tangent - that.outer_product(that))
+        return block
+
+    @ti.kernel
+    def _particle_hessian(self, mass: ti.template(), inv_mass: ti.template(),
+                          params: ti.template(), p_in: ti.template(), h: float,
+                          out: ti.template()):
+        ti.loop_config(serialize=ti.static(serial(out)))
+        for p in range(out.shape[0]):
+            out[p] = (mass[p] / (h * h) + params[3] / h) * p_in[p]
+
+    @ti.kernel
+    def _spring_hessian(self, x: ti.template(), inv_mass: ti.template(), pairs: ti.template(),
+                        ks: ti.template(), kd: ti.template(), rest: ti.template(),
+                        count: ti.i32, p_in: ti.template(), h: float, out: ti.template()):
+        ti.loop_config(serialize=ti.static(serial(pairs)))
+        for s in range(count):
+            i, j = pairs[s][0], pairs[s][1]
+            block = self._spring_block(x[i], x[j], ks[s], kd[s], rest[s], self.d0[s], h)
+            y = block @ (p_in[i] - p_in[j])
+            out[i] += y
+            out[j] -= y
+
+    @ti.kernel
+    def _contact_hessian(self, x: ti.template(), inv_mass: ti.template(),
+                         records: ti.template(), ranges: ti.template(), p_in: ti.template(),
+                         h: float, t: float, out: ti.template()):
+        ti.loop_config(serialize=ti.static(serial(x)))
+        for p in range(x.shape[0]):
+            if inv_mass[p] > 0.0:
+                for kind in ti.static(range(3)):
+                    if ti.static(ranges[kind][1] > 0):
+                        for c in range(ranges[kind][0], ranges[kind][0] + ranges[kind][1]):
+                            out[p] += self._contact_block(kind, records[c], x[p], p, c,
+                                                          1.0 / inv_mass[p], h, t) @ p_in[p]
+
+    @ti.kernel
+    def _diagonal(self, x: ti.template(), mass: ti.template(), inv_mass: ti.template(),
+                  params: ti.template(), pairs: ti.template(), ks: ti.template(),
+                  kd: ti.template(), rest: ti.template(), count: ti.i32,
+                  records: ti.template(), ranges: ti.template(), h: float, t: float):
+        """3x3 diagonal blocks of H, then inverted in place (block-Jacobi)."""
+        for p in range(x.shape[0]):
+            self.precond[p] = (mass[p] / (h * h) + params[3] / h) * ti.Matrix.identity(float, 3)
+        for s in range(count):
+            i, j = pairs[s][0], pairs[s][1]
+            block = self._spring_block(x[i], x[j], ks[s], kd[s], rest[s], self.d0[s], h)
+            self.precond[i] += block
+            self.precond[j] += block
+        for p in range(x.shape[0]):
+            if inv_mass[p] > 0.0:
+                for kind in ti.static(range(3)):
+                    if ti.static(ranges[kind][1] > 0):
+                        for c in range(ranges[kind][0], ranges[kind][0] + ranges[kind][1]):
+                            self.precond[p] += self._contact_block(
+                                kind, records[c], x[p], p, c, 1.0 / inv_mass[p], h, t)
+            self.precond[p] = self.precond[p].inverse()
+
+    def _precondition(self, model, x, h, t):
+        self._diagonal(x, model.mass, model.inv_mass, model.params, model.spring_pairs,
+                       model.spring_ks, model.spring_kd, model.spring_rest, model.spring_count,
+                       model.collider_records, model.collider_ranges, h, t)
+
+    # -- kernels: vector algebra ---------------------------------------------------------
+    @ti.kernel
+    def _dot(self, a: ti.template(), b: ti.template()) -> ti.f64:
+        total = ti.cast(0.0, ti.f64)
+        ti.loop_config(serialize=ti.static(serial(a)))
+        for p in range(a.shape[0]):
+            total += ti.cast(a[p].dot(b[p]), ti.f64)
+        return total
+
+    @ti.kernel
+    def _max_norm(self, a: ti.template()) -> ti.f64:
+        best = ti.cast(0.0, ti.f64)
+        ti.loop_config(serialize=ti.static(serial(a)))
+        for p in range(a.shape[0]):
+            ti.atomic_max(best, ti.cast(a[p].norm(), ti.f64))
+        return best
+
+    @ti.kernel
+    def _axpy_into(self, out: ti.template(), x: ti.template(), alpha: float, d: ti.template()):
+        ti.loop_config(serialize=ti.static(serial(out)))
+        for p in range(out.shape[0]):
+            out[p] = x[p] + alpha * d[p]
+
+    @ti.kernel
+    def _negate_filtered(self, inv_mass: ti.template(), g: ti.template(), r: ti.template()):
+        """r = -g, zero on pinned particles (their motion is prescribed)."""
+        ti.loop_config(serialize=ti.static(serial(r)))
+        for p in range(r.shape[0]):
+            r[p] = -g[p] if inv_mass[p] > 0.0 else ti.Vector.zero(float, 3)
+
+    @ti.kernel
+    def _apply_precond(self, inv_mass: ti.template(), r: ti.template(), z: ti.template(),
+                       p_dir: ti.template(), first: ti.template()) -> ti.f64:
+        """z = P^-1 r (filtered); on the first iteration also p = z. Returns r . z."""
+        rz = ti.cast(0.0, ti.f64)
+        ti.loop_config(serialize=ti.static(serial(r)))
+        for p in range(r.shape[0]):
+            zp = self.precond[p] @ r[p] if inv_mass[p] > 0.0 else ti.Vector.zero(float, 3)
+            z[p] = zp
+            if ti.static(first):
+                p_dir[p] = zp
+            rz += ti.cast(r[p].dot(zp), ti.f64)
+        return rz
+
+    @ti.kernel
+    def _cg_update(self, inv_mass: ti.template(), alpha: float, p_dir: ti.template(),
+                   ap: ti.template(), x: ti.template(), r: ti.template()) -> ti.f64:
+        """x += alpha p; r -= alpha A p on free particles (filtered). Returns r . r."""
+        rr = ti.cast(0.0, ti.f64)
+        ti.loop_config(serialize=ti.static(serial(r)))
+        for p in range(r.shape[0]):
+            if inv_mass[p] > 0.0:
+                x[p] += alpha * p_dir[p]
+                r[p] -= alpha * ap[p]
+                rr += ti.cast(r[p].dot(r[p]), ti.f64)
+        return rr
+
+    @ti.kernel
+    def _cg_direction(self, beta: float, z: ti.template(), p_dir: ti.template()):
+        ti.loop_config(serialize=ti.static(serial(z)))
+        for p in range(z.shape[0]):
+            p_dir[p] = z[p] + beta * p_dir[p]
