@@ -72,10 +72,10 @@ def test_hessian_product_matches_finite_differences_of_the_gradient(f64):
 def test_backward_euler_converges_with_order_one(f64):
     scene = random_network(n=5, seed=11, k=(20.0, 60.0))
     t_end = 0.4
-    ref = tcloth.Simulator(scene, "rk4", dt=t_end / 3200)
-    ref.step(3200)
+    ref = tcloth.Simulator(scene, "rk4", dt=t_end / 1600)
+    ref.step(1600)
     errors = []
-    for steps in (100, 200, 400):
+    for steps in (50, 100, 200):
         sim = tcloth.Simulator(scene, "backward_euler", dt=t_end / steps, newton_tol=1e-10,
                                cg_tol=1e-12, newton_iterations=30)
         sim.step(steps)
@@ -86,15 +86,15 @@ def test_backward_euler_converges_with_order_one(f64):
 
 def test_static_equilibrium_matches_a_long_explicit_run(f64):
     def hanging():
-        scene = tcloth.Scene(air_drag=0.02)
+        scene = tcloth.Scene(air_drag=0.05)      # damping time m/c = 0.056 s
         scene.add_cloth(resolution=(6, 6), size=(0.5, 0.5), mass=0.1, plane="xy",
                         structural=(300.0, 0.5), shear=(60.0, 0.2), flexion=(5.0, 0.05))
         return scene
-    implicit = tcloth.Simulator(hanging(), "backward_euler", dt=1 / 60, newton_tol=1e-8,
+    implicit = tcloth.Simulator(hanging(), "backward_euler", dt=1 / 30, newton_tol=1e-8,
                                 cg_tol=1e-10)
-    implicit.step(600)
-    explicit = tcloth.Simulator(hanging(), "symplectic_euler", dt=2e-4)
-    explicit.step(50_000)
+    implicit.step(90)
+    explicit = tcloth.Simulator(hanging(), "symplectic_euler", dt=5e-4)
+    explicit.step(6000)
     # both are at rest: the residual kinetic energy bounds how far each is from equilibrium
     for sim in (implicit, explicit):
         assert sim.energy()["kinetic"] < 1e-12
