@@ -22,13 +22,13 @@ semi-definite by clamping the transverse term k (1 - l0/|x_ij|) at zero for comp
 springs (definiteness fix). ``newton_iterations=1, line_search=False`` is Baraff &
 Witkin's single linearised solve.
 """
-import numpy as np
 import taichi as ti
 
 from .. import runtime
 from ..colliders import signed_distance
 from ..forces import eval_attraction, eval_wind
 from ..runtime import serial
+from . import linalg
 from .base import Integrator
 
 
@@ -53,8 +53,9 @@ class BackwardEuler(Integrator):
     def __init__(self, model, **options):
         super().__init__(model, **options)
         n, real = model.particle_count, runtime.real()
-        (self.x_hat, self.x0, self.grad, self.dx, self.f_lag, self.r, self.z, self.p, self.ap,
-         self.x_try) = (ti.Vector.field(3, real, shape=n) for _ in range(10))
+        (self.x_hat, self.x0, self.grad, self.dx, self.f_lag, self.rhs,
+         self.x_try) = (ti.Vector.field(3, real, shape=n) for _ in range(7))
+        self.work = linalg.Work(n)
         self.precond = ti.Matrix.field(3, 3, real, shape=n)
         self.d0 = ti.Vector.field(3, real, shape=max(model.spring_count, 1))
         c = max(model.collider_count, 1)
@@ -84,21 +85,21 @@ class BackwardEuler(Integrator):
         for it in range(1, opt["newton_iterations"] + 1):
             iters, residual = self._solve(model, x, h, t1)
             cg_total += iters
-            slope = self._dot(self.grad, self.dx)
+            slope = linalg.dot(self.grad, self.dx)
             alpha = 1.0
             if opt["line_search"]:
                 while True:
-                    self._axpy_into(self.x_try, x, alpha, self.dx)
+                    linalg.axpy_into(self.x_try, x, alpha, self.dx)
                     trial = self._energy(model, self.x_try, h, t1)
                     if trial <= energy + 1e-4 * alpha * slope or alpha < 1e-4:
                         break
                     alpha *= 0.5
                 x.copy_from(self.x_try)
             else:
-                self._axpy_into(x, x, 1.0, self.dx)
-            step = alpha * self._max_norm(self.dx) / h
+                linalg.axpy_into(x, x, 1.0, self.dx)
+            step = alpha * linalg.max_norm(self.dx) / h
             energy = self._energy_and_gradient(model, x, h, t1)
-            if step < opt["newton_tol"] * (1.0 + self._max_norm(state_in.v)):
+            if step < opt["newton_tol"] * (1.0 + linalg.max_norm(state_in.v)):
                 break
         self._finish(state_in.x, x, 1.0 / h, state_out.v)
         state_out.t = t1
@@ -106,29 +107,11 @@ class BackwardEuler(Integrator):
 
     def _solve(self, model, x, h, t):
         """Preconditioned CG on H dx = -grad (filtered: pinned entries stay 0)."""
-        opt = self.options
         self._precondition(model, x, h, t)
-        self.dx.fill(0)
-        self._negate_filtered(model.inv_mass, self.grad, self.r)
-        b_norm = np.sqrt(self._dot(self.r, self.r))
-        if b_norm == 0.0:
-            return 0, 0.0
-        rz = self._apply_precond(model.inv_mass, self.r, self.z, self.p, True)
-        rel, k = 1.0, 0
-        for k in range(1, opt["cg_max_iterations"] + 1):
-            self._hessian_product(model, x, self.p, h, t, self.ap)
-            pap = self._dot(self.p, self.ap)
-            if pap <= 0.0:
-                break
-            alpha = rz / pap
-            rr = self._cg_update(model.inv_mass, alpha, self.p, self.ap, self.dx, self.r)
-            rel = np.sqrt(rr) / b_norm
-            if rel < opt["cg_tol"]:
-                break
-            rz_new = self._apply_precond(model.inv_mass, self.r, self.z, self.p, False)
-            self._cg_direction(rz_new / rz, self.z, self.p)
-            rz = rz_new
-        return k, rel
+        linalg.scale_into(self.rhs, -1.0, self.grad)
+        return linalg.pcg(lambda p, out: self._hessian_product(model, x, p, h, t, out),
+                          self.precond, model.inv_mass, self.rhs, self.dx, self.work,
+                          self.options["cg_tol"], self.options["cg_max_iterations"])
 
     # -- energy, gradient, Hessian products (Python wrappers) ------------------------------
     def _energy(self, model, x, h, t):
@@ -161,8 +144,8 @@ class BackwardEuler(Integrator):
 
     def hessian_product(self, model, x, p, h, t=0.0):
         """H p at positions x (fields); for tests and tools. Returns (N,3) NumPy."""
-        self._hessian_product(model, x, p, h, t, self.ap)
-        return self.ap.to_numpy()
+        self._hessian_product(model, x, p, h, t, self.work.ap)
+        return self.work.ap.to_numpy()
 
     # -- kernels: set-up and finish ------------------------------------------------------
     @ti.kernel
@@ -401,66 +384,3 @@ class BackwardEuler(Integrator):
         self._diagonal(x, model.mass, model.inv_mass, model.params, model.spring_pairs,
                        model.spring_ks, model.spring_kd, model.spring_rest, model.spring_count,
                        model.collider_records, model.collider_ranges, h, t)
-
-    # -- kernels: vector algebra ---------------------------------------------------------
-    @ti.kernel
-    def _dot(self, a: ti.template(), b: ti.template()) -> ti.f64:
-        total = ti.cast(0.0, ti.f64)
-        ti.loop_config(serialize=ti.static(serial(a)))
-        for p in range(a.shape[0]):
-            total += ti.cast(a[p].dot(b[p]), ti.f64)
-        return total
-
-    @ti.kernel
-    def _max_norm(self, a: ti.template()) -> ti.f64:
-        best = ti.cast(0.0, ti.f64)
-        ti.loop_config(serialize=ti.static(serial(a)))
-        for p in range(a.shape[0]):
-            ti.atomic_max(best, ti.cast(a[p].norm(), ti.f64))
-        return best
-
-    @ti.kernel
-    def _axpy_into(self, out: ti.template(), x: ti.template(), alpha: float, d: ti.template()):
-        ti.loop_config(serialize=ti.static(serial(out)))
-        for p in range(out.shape[0]):
-            out[p] = x[p] + alpha * d[p]
-
-    @ti.kernel
-    def _negate_filtered(self, inv_mass: ti.template(), g: ti.template(), r: ti.template()):
-        """r = -g, zero on pinned particles (their motion is prescribed)."""
-        ti.loop_config(serialize=ti.static(serial(r)))
-        for p in range(r.shape[0]):
-            r[p] = -g[p] if inv_mass[p] > 0.0 else ti.Vector.zero(float, 3)
-
-    @ti.kernel
-    def _apply_precond(self, inv_mass: ti.template(), r: ti.template(), z: ti.template(),
-                       p_dir: ti.template(), first: ti.template()) -> ti.f64:
-        """z = P^-1 r (filtered); on the first iteration also p = z. Returns r . z."""
-        rz = ti.cast(0.0, ti.f64)
-        ti.loop_config(serialize=ti.static(serial(r)))
-        for p in range(r.shape[0]):
-            zp = self.precond[p] @ r[p] if inv_mass[p] > 0.0 else ti.Vector.zero(float, 3)
-            z[p] = zp
-            if ti.static(first):
-                p_dir[p] = zp
-            rz += ti.cast(r[p].dot(zp), ti.f64)
-        return rz
-
-    @ti.kernel
-    def _cg_update(self, inv_mass: ti.template(), alpha: float, p_dir: ti.template(),
-                   ap: ti.template(), x: ti.template(), r: ti.template()) -> ti.f64:
-        """x += alpha p; r -= alpha A p on free particles (filtered). Returns r . r."""
-        rr = ti.cast(0.0, ti.f64)
-        ti.loop_config(serialize=ti.static(serial(r)))
-        for p in range(r.shape[0]):
-            if inv_mass[p] > 0.0:
-                x[p] += alpha * p_dir[p]
-                r[p] -= alpha * ap[p]
-                rr += ti.cast(r[p].dot(r[p]), ti.f64)
-        return rr
-
-    @ti.kernel
-    def _cg_direction(self, beta: float, z: ti.template(), p_dir: ti.template()):
-        ti.loop_config(serialize=ti.static(serial(z)))
-        for p in range(z.shape[0]):
-            p_dir[p] = z[p] + beta * p_dir[p]
