@@ -132,11 +132,11 @@ def test_static_equilibrium_matches_a_long_explicit_run(f64, integrator):
         scene.add_cloth(resolution=(6, 6), size=(0.5, 0.5), mass=0.1, plane="xy",
                         structural=(300.0, 0.5), shear=(60.0, 0.2), flexion=(5.0, 0.05))
         return scene
-    # projective iterates keep converging from step to step once the cloth is at rest
-    options, steps = (({"newton_tol": 1e-8, "cg_tol": 1e-10}, 90) if integrator == "backward_euler"
-                      else ({"iterations": 10, "cg_tol": 1e-10}, 240))
+    # both start each step from x0 + h v0: a cloth at rest in equilibrium is a fixed point
+    options = ({"newton_tol": 1e-8, "cg_tol": 1e-10} if integrator == "backward_euler"
+               else {"iterations": 10, "cg_tol": 1e-4})
     implicit = tcloth.Simulator(hanging(), integrator, dt=1 / 30, **options)
-    implicit.step(steps)
+    implicit.step(60)
     explicit = tcloth.Simulator(hanging(), "symplectic_euler", dt=5e-4)
     explicit.step(6000)
     # both are at rest: the residual kinetic energy bounds how far each is from equilibrium
