@@ -20,9 +20,9 @@ def cloth(k, kd=1.0, n=8, pinned=None):
 def test_stiff_cloth_explodes_explicitly_but_is_stable_and_dissipative_implicitly(f64, k):
     with pytest.raises(InstabilityError):
         tcloth.Simulator(cloth(k), "symplectic_euler", dt=1 / 60).step(200)
-    sim = tcloth.Simulator(cloth(k), "backward_euler", dt=1 / 60)
+    sim = tcloth.Simulator(cloth(k, n=6), "backward_euler", dt=1 / 60)
     energy = [sim.energy()["total"]]
-    for _ in range(25):
+    for _ in range(20):
         sim.step()
         energy.append(sim.energy()["total"])
     assert np.all(np.diff(energy) <= 1e-9 * abs(energy[0]))
@@ -30,7 +30,7 @@ def test_stiff_cloth_explodes_explicitly_but_is_stable_and_dissipative_implicitl
     assert sim.max_strain() < 0.05
     # projective with 10 iterations: unconverged for such stiffness (residual strain holds
     # spring energy), but stable: no blow-up, small strain, energy decaying
-    pd = tcloth.Simulator(cloth(k), "projective", dt=1 / 60)
+    pd = tcloth.Simulator(cloth(k, n=6), "projective", dt=1 / 60)
     pd.step(15)
     e15 = pd.energy()["total"]
     pd.step(15)
@@ -102,7 +102,7 @@ def test_projective_converges_to_the_backward_euler_step(f64):
     gaps = []
     for iterations in (10, 100, 1000):
         pd = tcloth.Simulator(scene(), "projective", dt=1 / 60, iterations=iterations,
-                              cg_tol=1e-12, cg_max_iterations=2000)
+                              cg_tol=1e-9, cg_max_iterations=2000)
         pd.step()
         gaps.append(np.abs(pd.positions() - be.positions()).max())
     # local/global converges linearly: about 10x closer per 10x iterations here
