@@ -16,7 +16,7 @@ from .video import record, write_png
 
 __version__ = "0.1.0"
 
-__all__ = ["init", "Scene", "Cloth", "Rope", "Simulator", "SceneError", "InstabilityError",
+__all__ = ["cli", "init", "Scene", "Cloth", "Rope", "Simulator", "SceneError", "InstabilityError",
            "StaleSimulatorError", "Camera", "Renderer", "render", "record", "write_png",
            "export_mesh", "write_obj", "write_ply",
            "__version__"]

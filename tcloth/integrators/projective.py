@@ -63,9 +63,11 @@ class Projective(Integrator):
         x = state_out.x
         x.copy_from(self.x_start)
         cg_total = 0
-        matvec = lambda p, out: self._matvec(model.mass, model.params, model.spring_pairs,  # noqa: E731
-                                             model.spring_ks, model.spring_kd,
-                                             model.spring_count, h, p, out)
+
+        def matvec(p, out):
+            self._matvec(model.mass, model.params, model.spring_pairs, model.spring_ks,
+                         model.spring_kd, model.spring_count, h, p, out)
+
         for _ in range(self.options["iterations"]):
             if model.spring_count:
                 self._local(x, model.spring_pairs, model.spring_rest, model.spring_count)
