@@ -75,8 +75,7 @@ class Model:
         strain_limit: dict or None; limit_index: ids of the limited springs.
         collider_records: shape (collider_count,) rows of tcloth.colliders.RECORD numbers,
             sorted by kind; collider_ranges: static ((first, count) per kind).
-        gravity: (3,) m/s^2 (NumPy); air_drag: N s/m.
-        params: field (g_x, g_y, g_z, air_drag) read by the kernels.
+        params: field (g_x, g_y, g_z, air_drag): m/s^2 and N s/m, read by the kernels.
         grid_ints, grid_reals: per GridBlock (offset, nx, ny) and
             (dx, dy, k_s x 3 families, k_d x 3 families) for the stencil kernel.
     """
@@ -87,13 +86,11 @@ class Model:
         self.particle_count = n = scene.num_particles
         if n == 0:
             raise SceneError("scene has no particles (got num_particles = 0)")
-        self.gravity = scene.gravity.copy()
-        self.air_drag = scene.air_drag
         npr = runtime.numpy_real()
         real = runtime.real()
         # kernel parameters live in fields: vector kernel arguments cost ~40 us a launch
         self.params = ti.field(real, shape=4)
-        self.params.from_numpy(np.array([*self.gravity, self.air_drag], dtype=npr))
+        self.params.from_numpy(np.array([*scene.gravity, scene.air_drag], dtype=npr))
 
         self.mass = ti.field(real, shape=n)
         self.inv_mass = ti.field(real, shape=n)

@@ -79,7 +79,6 @@ class BackwardEuler(Integrator):
                 eval_attraction(state_in.x, model.mass, *model.attraction, self.f_lag)
         x = state_out.x
         x.copy_from(self.x_hat)
-        self._pin(x)
         cg_total, residual, it = 0, 0.0, 0
         energy = self._energy_and_gradient(model, x, h, t1)
         for it in range(1, opt["newton_iterations"] + 1):
@@ -184,11 +183,6 @@ class BackwardEuler(Integrator):
         if model.collider_count:
             self._begin_contacts(x, model.inv_mass, model.collider_records,
                                  model.collider_ranges, t0)
-
-    @ti.kernel
-    def _pin(self, x: ti.template()):
-        for p in range(x.shape[0]):
-            x[p] = self.x_hat[p]
 
     @ti.kernel
     def _finish(self, x0: ti.template(), x: ti.template(), inv_h: float, v_out: ti.template()):
@@ -345,18 +339,25 @@ class BackwardEuler(Integrator):
             out[i] += y
             out[j] -= y
 
+    @ti.func
+    def _contact_blocks(self, x, inv_mass, records, ranges: ti.template(), p, h, t):
+        """Sum of the contact Hessian blocks of particle p (zero when pinned)."""
+        block = ti.Matrix.zero(float, 3, 3)
+        if inv_mass[p] > 0.0:
+            for kind in ti.static(range(3)):
+                if ti.static(ranges[kind][1] > 0):
+                    for c in range(ranges[kind][0], ranges[kind][0] + ranges[kind][1]):
+                        block += self._contact_block(kind, records[c], x[p], p, c,
+                                                     1.0 / inv_mass[p], h, t)
+        return block
+
     @ti.kernel
     def _contact_hessian(self, x: ti.template(), inv_mass: ti.template(),
                          records: ti.template(), ranges: ti.template(), p_in: ti.template(),
                          h: float, t: float, out: ti.template()):
         ti.loop_config(serialize=ti.static(serial(x)))
         for p in range(x.shape[0]):
-            if inv_mass[p] > 0.0:
-                for kind in ti.static(range(3)):
-                    if ti.static(ranges[kind][1] > 0):
-                        for c in range(ranges[kind][0], ranges[kind][0] + ranges[kind][1]):
-                            out[p] += self._contact_block(kind, records[c], x[p], p, c,
-                                                          1.0 / inv_mass[p], h, t) @ p_in[p]
+            out[p] += self._contact_blocks(x, inv_mass, records, ranges, p, h, t) @ p_in[p]
 
     @ti.kernel
     def _diagonal(self, x: ti.template(), mass: ti.template(), inv_mass: ti.template(),
@@ -372,12 +373,7 @@ class BackwardEuler(Integrator):
             self.precond[i] += block
             self.precond[j] += block
         for p in range(x.shape[0]):
-            if inv_mass[p] > 0.0:
-                for kind in ti.static(range(3)):
-                    if ti.static(ranges[kind][1] > 0):
-                        for c in range(ranges[kind][0], ranges[kind][0] + ranges[kind][1]):
-                            self.precond[p] += self._contact_block(
-                                kind, records[c], x[p], p, c, 1.0 / inv_mass[p], h, t)
+            self.precond[p] += self._contact_blocks(x, inv_mass, records, ranges, p, h, t)
             self.precond[p] = self.precond[p].inverse()
 
     def _precondition(self, model, x, h, t):
