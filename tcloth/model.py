@@ -131,6 +131,7 @@ class Model:
         self._build_wind_and_limits(scene, order, real, npr)
         rows, self.collider_ranges = colliders.pack(scene.colliders)
         self.collider_count = len(rows)
+        self._adjacency = None
         self.collider_records = ti.Vector.field(colliders.RECORD, real,
                                                 shape=max(self.collider_count, 1))
         if self.collider_count:
@@ -163,6 +164,28 @@ class Model:
             self.limit_dx = ti.Vector.field(3, real, shape=self.particle_count)
             self.limit_hits = ti.field(ti.i32, shape=self.particle_count)
             self.limit_x0 = ti.Vector.field(3, real, shape=self.particle_count)
+
+    def adjacency(self):
+        """The springs at each particle, for per-particle gathers (built on first use).
+
+        Returns (start, adj): the entries of particle p are adj[start[p]:start[p + 1]],
+        each (spring row, other particle id); every spring appears at both its ends.
+        """
+        if self._adjacency is None:
+            pairs = self.spring_pairs.to_numpy()[:self.spring_count].astype(np.int64)
+            ends = np.concatenate([pairs[:, 0], pairs[:, 1]])
+            rows = np.tile(np.arange(self.spring_count), 2)
+            others = np.concatenate([pairs[:, 1], pairs[:, 0]])
+            order = np.argsort(ends, kind="stable")
+            start = np.zeros(self.particle_count + 1, dtype=np.int32)
+            np.cumsum(np.bincount(ends, minlength=self.particle_count), out=start[1:])
+            adj = ti.Vector.field(2, ti.i32, shape=max(len(ends), 1))
+            if len(ends):
+                adj.from_numpy(np.stack([rows[order], others[order]], axis=1).astype(np.int32))
+            first = ti.field(ti.i32, shape=self.particle_count + 1)
+            first.from_numpy(start)
+            self._adjacency = (first, adj)
+        return self._adjacency
 
     def state(self):
         """A new State with the scene's initial positions and velocities."""

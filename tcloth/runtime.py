@@ -17,6 +17,11 @@ _ARCHS = {
 }
 _PRECISIONS = {"f32": ti.f32, "f64": ti.f64}
 
+# Measured on the 2-core development VM (tools/bench_threads.py): a parallel loop costs
+# about 0.1 ms to start and two threads gain at most 1.4x even at a million items, so one
+# thread is faster below about 10^5 items, for memory-bound and arithmetic-heavy loops alike.
+SERIAL_BELOW = 131072
+
 
 class _Runtime:
     generation = 0
@@ -24,20 +29,28 @@ class _Runtime:
     real = ti.f32
     precision = "f32"
     arch_name = "cpu"
+    serial_below = SERIAL_BELOW
 
 
-def init(arch="cpu", precision="f32", **kwargs):
+def init(arch="cpu", precision="f32", serial_below=None, **kwargs):
     """(Re-)initialise Taichi for tcloth.
 
     Args:
         arch: "auto" | "cpu" | "gpu" | "cuda" | "vulkan" | "metal".
         precision: "f32" (default, fast) or "f64" (accuracy studies).
+        serial_below: on CPUs, loops over fewer items run on one thread (default
+            SERIAL_BELOW; see ``serial``). 0 makes every loop parallel.
         **kwargs: passed on to ``ti.init`` (e.g. ``kernel_profiler=True``).
     """
     if arch not in _ARCHS:
         raise SceneError(f"arch must be one of {sorted(_ARCHS)} (got {arch!r})")
     if precision not in _PRECISIONS:
         raise SceneError(f"precision must be 'f32' or 'f64' (got {precision!r})")
+    if serial_below is not None:
+        if isinstance(serial_below, bool) or not isinstance(serial_below, int) \
+                or serial_below < 0:
+            raise SceneError(f"serial_below must be an integer >= 0 (got {serial_below!r})")
+        _Runtime.serial_below = serial_below
     real = _PRECISIONS[precision]
     ti_arch = _ARCHS[arch]()
     kwargs.setdefault("log_level", ti.WARN)
@@ -87,14 +100,12 @@ def accumulator():
     return ti.f64 if _Runtime.arch_name in ("x64", "arm64", "cuda") else _Runtime.real
 
 
-SERIAL_BELOW = 2048
-
-
 def serial(field):
-    """True where a loop over ``field`` should run on one CPU thread: below SERIAL_BELOW
-    items the thread pool's start-up (about 0.1 ms per parallel loop) costs more than the
-    work. Evaluated at compile time (``ti.static``); never on GPUs."""
-    return _Runtime.arch_name in ("x64", "arm64") and field.shape[0] < SERIAL_BELOW
+    """True where a loop over ``field`` should run on one CPU thread: below
+    ``init(serial_below=...)`` items (default SERIAL_BELOW) the thread pool's start-up and
+    hand-offs cost more than the second thread gains. Evaluated at compile time
+    (``ti.static``), so it is fixed when a simulator's kernels compile; never on GPUs."""
+    return _Runtime.arch_name in ("x64", "arm64") and field.shape[0] < _Runtime.serial_below
 
 
 def check_generation(gen, what="simulator"):

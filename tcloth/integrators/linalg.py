@@ -1,19 +1,11 @@
-"""Vector kernels and a filtered, block-Jacobi preconditioned conjugate-gradient solver
+"""Vector kernels and a filtered, Jacobi-preconditioned conjugate-gradient solver
 shared by the implicit integrators. Vectors are Taichi fields of vec3 over particles;
-particles with inverse mass 0 (pinned) are filtered out: their entries stay 0."""
+particles with inverse mass 0 (pinned) are filtered out: their entries are left as they are."""
 import numpy as np
 import taichi as ti
 
 from .. import runtime
 from ..runtime import serial
-
-
-class Work:
-    """CG work vectors (r, z, p, Ap) for n particles."""
-
-    def __init__(self, n):
-        self.r, self.z, self.p, self.ap = (ti.Vector.field(3, runtime.real(), shape=n)
-                                           for _ in range(4))
 
 
 @ti.kernel
@@ -50,81 +42,144 @@ def scale_into(out: ti.template(), alpha: float, d: ti.template()):
         out[p] = alpha * d[p]
 
 
-@ti.kernel
-def _residual(inv_mass: ti.template(), b: ti.template(), ax: ti.template(), r: ti.template()):
-    """r = b - A x on free particles, 0 on pinned ones."""
-    ti.loop_config(serialize=ti.static(serial(r)))
-    for p in range(r.shape[0]):
-        r[p] = ti.Vector.zero(float, 3)
-        if inv_mass[p] > 0.0:
-            r[p] = b[p] - ax[p]
+def _is_matrix(field):
+    return isinstance(field, ti.MatrixField) and field.m == 3
 
 
-@ti.kernel
-def _apply_precond(precond: ti.template(), inv_mass: ti.template(), r: ti.template(),
-                   z: ti.template(), p_dir: ti.template(), first: ti.template()) -> ti.f64:
-    """z = P^-1 r (filtered); on the first iteration also p = z. Returns r . z."""
-    rz = ti.cast(0.0, ti.f64)
-    ti.loop_config(serialize=ti.static(serial(r)))
-    for p in range(r.shape[0]):
-        zp = precond[p] @ r[p] if inv_mass[p] > 0.0 else ti.Vector.zero(float, 3)
-        z[p] = zp
-        if ti.static(first):
-            p_dir[p] = zp
-        rz += ti.cast(r[p].dot(zp), ti.f64)
-    return rz
+def _is_symmetric(field):
+    return isinstance(field, ti.MatrixField) and field.n == 6 and field.m == 1
 
 
-@ti.kernel
-def _cg_update(inv_mass: ti.template(), alpha: float, p_dir: ti.template(),
-               ap: ti.template(), x: ti.template(), r: ti.template()) -> ti.f64:
-    """x += alpha p; r -= alpha A p on free particles. Returns r . r."""
-    rr = ti.cast(0.0, ti.f64)
-    ti.loop_config(serialize=ti.static(serial(r)))
-    for p in range(r.shape[0]):
-        if inv_mass[p] > 0.0:
-            x[p] += alpha * p_dir[p]
-            r[p] -= alpha * ap[p]
-            rr += ti.cast(r[p].dot(r[p]), ti.f64)
-    return rr
+@ti.func
+def symmetric6(a):
+    """A symmetric 3x3 matrix stored as (xx, yy, zz, xy, xz, yz)."""
+    return ti.Vector([a[0, 0], a[1, 1], a[2, 2], a[0, 1], a[0, 2], a[1, 2]])
 
 
-@ti.kernel
-def _cg_direction(beta: float, z: ti.template(), p_dir: ti.template()):
-    ti.loop_config(serialize=ti.static(serial(z)))
-    for p in range(z.shape[0]):
-        p_dir[p] = z[p] + beta * p_dir[p]
 
 
-def pcg(matvec, precond, inv_mass, b, x, work, tol, max_iterations, warm_start=False):
-    """Solve A x = b for the free particles by preconditioned conjugate gradients.
-
-    matvec(p, out): out = A p. precond: field of 3x3 blocks, the inverse block diagonal.
-    warm_start: start from x as given (else from 0). Stops when the residual has dropped
-    to tol times the starting one (|b| from 0; with a warm start |b| can dwarf the part of
-    the solution still missing). Returns (iterations, relative residual).
-    """
-    if warm_start:
-        matvec(x, work.ap)
+@ti.func
+def _apply(field: ti.template(), p, v):
+    """field[p] v: a 3x3 block, a symmetric block (``symmetric6``) or a scalar times v."""
+    out = v
+    if ti.static(_is_matrix(field)):
+        out = field[p] @ v
+    elif ti.static(_is_symmetric(field)):
+        a = field[p]
+        out = ti.Vector([a[0] * v[0] + a[3] * v[1] + a[4] * v[2],
+                         a[3] * v[0] + a[1] * v[1] + a[5] * v[2],
+                         a[4] * v[0] + a[5] * v[1] + a[2] * v[2]])
     else:
-        x.fill(0)
-        work.ap.fill(0)
-    _residual(inv_mass, b, work.ap, work.r)
-    r0 = np.sqrt(dot(work.r, work.r))
-    if r0 == 0.0:
-        return 0, 0.0
-    rz = _apply_precond(precond, inv_mass, work.r, work.z, work.p, True)
-    k, rel = 0, 1.0
-    while k < max_iterations:
-        k += 1
-        matvec(work.p, work.ap)
-        pap = dot(work.p, work.ap)
-        if pap <= 0.0:
-            break
-        rel = np.sqrt(_cg_update(inv_mass, rz / pap, work.p, work.ap, x, work.r)) / r0
-        if rel < tol:
-            break
-        rz_new = _apply_precond(precond, inv_mass, work.r, work.z, work.p, False)
-        _cg_direction(rz_new / rz, work.z, work.p)
-        rz = rz_new
-    return k, rel
+        out = field[p] * v
+    return out
+
+
+@ti.data_oriented
+class PCG:
+    """Filtered, Jacobi-preconditioned conjugate gradients on A x = b, A given per particle:
+
+        (A v)_p = D_p v_p + sum over the adjacency entries k = (s, q) of p of W_k (v_p - v_q)
+
+    with diag D (per particle) and weights W (per adjacency entry: both ends of a spring
+    carry the same coupling, stored twice so that the gather reads them in order) 3x3
+    blocks, symmetric blocks (``symmetric6``) or scalars, gathered per particle (no atomics), and ``precond`` the inverse
+    diagonal of A (blocks or scalars). Particles with inverse mass 0 are filtered out:
+    their entries of x stay as they are. The operands are this object's fields ``b`` and
+    ``x``, and every kernel reads the fields the solver was built with, so that a CG
+    iteration is one kernel launch without field arguments (each costs Python time)."""
+
+    def __init__(self, n, diag, weights, adj_start, adj, precond, inv_mass):
+        real = runtime.real()
+        self.diag, self.weights, self.adj_start, self.adj = diag, weights, adj_start, adj
+        self.precond, self.inv_mass = precond, inv_mass
+        self.x, self.b, self.r, self.z, self.p, self.ap = (
+            ti.Vector.field(3, real, shape=n) for _ in range(6))
+        self.scalars = ti.field(ti.f64, shape=3)     # r.z, p.Ap, the next r.z
+
+    @ti.func
+    def _product(self, v: ti.template(), p):
+        """(A v)_p."""
+        vp = v[p]
+        acc = _apply(self.diag, p, vp)
+        for k in range(self.adj_start[p], self.adj_start[p + 1]):
+            acc += _apply(self.weights, k, vp - v[self.adj[k][1]])
+        return acc
+
+    @ti.kernel
+    def apply(self, v: ti.template(), out: ti.template()):
+        """out = A v (for tests and tools)."""
+        for p in range(out.shape[0]):
+            out[p] = self._product(v, p)
+
+    @ti.kernel
+    def _start(self, warm: ti.template()) -> ti.f64:
+        """r = b - A x (x = 0 unless warm), z = p = P^-1 r on free particles, 0 on pinned
+        ones; scalars[0] = r.z. Returns r.r."""
+        self.scalars[0] = 0.0
+        rr = ti.cast(0.0, ti.f64)
+        ti.loop_config(serialize=ti.static(serial(self.x)))
+        for p in range(self.x.shape[0]):
+            rp = ti.Vector.zero(float, 3)
+            zp = ti.Vector.zero(float, 3)
+            if ti.static(not warm):
+                self.x[p] = ti.Vector.zero(float, 3)
+            if self.inv_mass[p] > 0.0:
+                rp = self.b[p]
+                if ti.static(warm):
+                    rp -= self._product(self.x, p)
+                zp = _apply(self.precond, p, rp)
+            self.r[p] = rp
+            self.z[p] = zp
+            self.p[p] = zp
+            self.scalars[0] += ti.cast(rp.dot(zp), ti.f64)
+            rr += ti.cast(rp.dot(rp), ti.f64)
+        return rr
+
+    @ti.kernel
+    def _iterate(self) -> ti.f64:
+        """One CG iteration: Ap; alpha = r.z / p.Ap; x += alpha p; r -= alpha Ap;
+        z = P^-1 r; p = z + beta p. Returns r.r, or -1 when p.Ap <= 0 (A not positive
+        definite along p: x and r are left unchanged)."""
+        self.scalars[1] = 0.0
+        self.scalars[2] = 0.0
+        ti.loop_config(serialize=ti.static(serial(self.x)))
+        for p in range(self.x.shape[0]):
+            ap = self._product(self.p, p)
+            self.ap[p] = ap
+            if self.inv_mass[p] > 0.0:
+                self.scalars[1] += ti.cast(self.p[p].dot(ap), ti.f64)
+        rr = ti.cast(0.0, ti.f64)
+        ti.loop_config(serialize=ti.static(serial(self.x)))
+        for p in range(self.x.shape[0]):
+            if self.inv_mass[p] > 0.0 and self.scalars[1] > 0.0:
+                alpha = ti.cast(self.scalars[0] / self.scalars[1], float)
+                self.x[p] += alpha * self.p[p]
+                self.r[p] -= alpha * self.ap[p]
+                self.z[p] = _apply(self.precond, p, self.r[p])
+                self.scalars[2] += ti.cast(self.r[p].dot(self.z[p]), ti.f64)
+                rr += ti.cast(self.r[p].dot(self.r[p]), ti.f64)
+        ti.loop_config(serialize=ti.static(serial(self.x)))
+        for p in range(self.x.shape[0]):
+            if self.scalars[0] > 0.0:
+                beta = ti.cast(self.scalars[2] / self.scalars[0], float)
+                self.p[p] = self.z[p] + beta * self.p[p]
+        if self.scalars[1] <= 0.0:
+            rr = -1.0
+        self.scalars[0] = self.scalars[2]
+        return rr
+
+    def solve(self, tol, max_iterations, warm_start=False):
+        """Iterate from x (warm_start) or 0 until the residual has dropped to tol times the
+        starting one (|b| from 0; with a warm start |b| can dwarf the part of the solution
+        still missing) or max_iterations. Returns (iterations, relative residual)."""
+        r0 = np.sqrt(self._start(warm_start))
+        if r0 == 0.0:
+            return 0, 0.0
+        k, rel = 0, 1.0
+        while k < max_iterations and rel >= tol:
+            k += 1
+            rr = self._iterate()
+            if rr < 0.0:
+                break
+            rel = np.sqrt(rr) / r0
+        return k, rel
