@@ -23,7 +23,7 @@ def spring_force(xi, xj, vi, vj, ks, kd, rest):
     d = x_ij / |x_ij| (lecture 4). Coincident ends give no force (direction undefined)."""
     d = xi - xj
     length = d.norm()
-    n = d / ti.max(length, 1e-30)
+    n = d * (1.0 / ti.max(length, 1e-30))
     return -(ks * (length - rest) + kd * (vi - vj).dot(n)) * n
 
 
@@ -50,14 +50,22 @@ def eval_springs(x: ti.template(), v: ti.template(), pairs: ti.template(), ks: t
 
 
 @ti.func
-def _stencil_sum(x, v, offset, nx, ny, i, j, xp, vp, ks, kd, dx, dy, stencil: ti.template()):
+def _stencil_sum(x, v, offset, nx, ny, i, j, xp, vp, ks, kd, rest_i, rest_j, rest_diag,
+                 stencil: ti.template(), checked: ti.template()):
+    """Sum of the forces of one family's springs at particle (i, j); rest lengths of the
+    springs along i, along j and diagonal are given (computed once per launch). checked:
+    test that each neighbour exists (False for particles 2 or more cells from the edges)."""
     acc = ti.Vector.zero(float, 3)
     for k in ti.static(range(len(stencil))):
         di, dj = ti.static(stencil[k][0], stencil[k][1])
         ii, jj = i + di, j + dj
-        if 0 <= ii < nx and 0 <= jj < ny:
+        if ti.static(not checked) or (0 <= ii < nx and 0 <= jj < ny):
             q = offset + jj * nx + ii
-            rest = ti.sqrt((di * dx) ** 2 + (dj * dy) ** 2)
+            rest = rest_diag
+            if ti.static(dj == 0):
+                rest = rest_i
+            elif ti.static(di == 0):
+                rest = rest_j
             acc += spring_force(xp, x[q], vp, v[q], ks, kd, rest)
     return acc
 
@@ -65,25 +73,45 @@ def _stencil_sum(x, v, offset, nx, ny, i, j, xp, vp, ks, kd, dx, dy, stencil: ti
 @ti.kernel
 def eval_grid_springs(x: ti.template(), v: ti.template(), grid_ints: ti.template(),
                       grid_reals: ti.template(), k: ti.i32, families: ti.template(),
+                      mass: ti.template(), params: ti.template(), first: ti.template(),
                       f_out: ti.template()):
     """Provot springs of cloth grid k, gathered per particle (no atomics).
 
     grid_ints[k] = (offset, nx, ny); grid_reals[k] = (dx, dy, k_s structural, k_s shear,
     k_s flexion, k_d structural, k_d shear, k_d flexion).
     families: static tuple of booleans (structural, shear, flexion).
+    first: the grid holds every particle and comes first: f = gravity and drag (as in
+    ``init_forces``) + springs, saving a launch and a pass; else f += springs.
     """
     offset, nx, ny = grid_ints[k][0], grid_ints[k][1], grid_ints[k][2]
     g = grid_reals[k]
+    dx, dy = g[0], g[1]
+    # rest lengths per family along i, along j, diagonal: flexion springs span 2 cells
+    rest = ti.Matrix([[dx, dy, ti.sqrt(dx * dx + dy * dy)],
+                      [dx, dy, ti.sqrt(dx * dx + dy * dy)],
+                      [2.0 * dx, 2.0 * dy, 0.0]])
     ti.loop_config(serialize=ti.static(serial(f_out)))
     for j, i in ti.ndrange(ny, nx):
         p = offset + j * nx + i
         xp, vp = x[p], v[p]
         acc = ti.Vector.zero(float, 3)
-        for fam in ti.static(range(3)):
-            if ti.static(families[fam]):
-                acc += _stencil_sum(x, v, offset, nx, ny, i, j, xp, vp, g[2 + fam], g[5 + fam],
-                                    g[0], g[1], STENCILS[fam])
-        f_out[p] += acc
+        if 2 <= i < nx - 2 and 2 <= j < ny - 2:
+            for fam in ti.static(range(3)):
+                if ti.static(families[fam]):
+                    acc += _stencil_sum(x, v, offset, nx, ny, i, j, xp, vp, g[2 + fam],
+                                        g[5 + fam], rest[fam, 0], rest[fam, 1], rest[fam, 2],
+                                        STENCILS[fam], False)
+        else:
+            for fam in ti.static(range(3)):
+                if ti.static(families[fam]):
+                    acc += _stencil_sum(x, v, offset, nx, ny, i, j, xp, vp, g[2 + fam],
+                                        g[5 + fam], rest[fam, 0], rest[fam, 1], rest[fam, 2],
+                                        STENCILS[fam], True)
+        if ti.static(first):
+            gravity = ti.Vector([params[0], params[1], params[2]])
+            f_out[p] = mass[p] * gravity - params[3] * vp + acc
+        else:
+            f_out[p] += acc
 
 
 @ti.kernel
@@ -130,10 +158,14 @@ def eval_attraction(x: ti.template(), mass: ti.template(), G: float, softening: 
 
 def compute_forces(model, x, v, f_out, t=0.0):
     """Total force on every particle at positions x, velocities v and time t, into f_out."""
-    init_forces(v, model.mass, model.params, f_out)
-    for k, g in enumerate(model.grids):
-        if any(g.families):
-            eval_grid_springs(x, v, model.grid_ints, model.grid_reals, k, g.families, f_out)
+    grids = [(k, g) for k, g in enumerate(model.grids) if any(g.families)]
+    whole = bool(grids) and grids[0][1].offset == 0 and \
+        grids[0][1].nx * grids[0][1].ny == model.particle_count
+    if not whole:
+        init_forces(v, model.mass, model.params, f_out)
+    for k, g in grids:
+        eval_grid_springs(x, v, model.grid_ints, model.grid_reals, k, g.families, model.mass,
+                          model.params, whole and k == grids[0][0], f_out)
     if model.list_spring_count:
         eval_springs(x, v, model.spring_pairs, model.spring_ks, model.spring_kd,
                      model.spring_rest, model.list_spring_count, f_out)
