@@ -7,14 +7,14 @@ grid is one stencil launch per cloth, with families absent from the cloth compil
 import taichi as ti
 
 from .colliders import collide
-from .runtime import serial
+from .runtime import cpu, serial
 from .scene import wind_velocity
 
-# Grid stencil offsets (di, dj) of each Provot family: every spring a particle takes part in.
-STRUCTURAL = ((1, 0), (-1, 0), (0, 1), (0, -1))
-SHEAR = ((1, 1), (-1, -1), (1, -1), (-1, 1))
-FLEXION = ((2, 0), (-2, 0), (0, 2), (0, -2))
-STENCILS = (STRUCTURAL, SHEAR, FLEXION)
+# Grid springs by family: the two a particle (i, j) owns, to (i + di, j + dj); with the
+# two owned by (i - di, j - dj) these are the four springs of each family at a particle.
+OWNED = (((1, 0), (0, 1)),       # structural
+         ((1, 1), (-1, 1)),      # shear
+         ((2, 0), (0, 2)))       # flexion
 
 
 @ti.func
@@ -50,38 +50,77 @@ def eval_springs(x: ti.template(), v: ti.template(), pairs: ti.template(), ks: t
 
 
 @ti.func
-def _stencil_sum(x, v, offset, nx, ny, i, j, xp, vp, ks, kd, rest_i, rest_j, rest_diag,
-                 stencil: ti.template(), checked: ti.template()):
-    """Sum of the forces of one family's springs at particle (i, j); rest lengths of the
-    springs along i, along j and diagonal are given (computed once per launch). checked:
-    test that each neighbour exists (False for particles 2 or more cells from the edges)."""
+def _owned_springs(x, v, offset, nx, ny, i, j, g, rest, families: ti.template(),
+                   grid_forces):
+    """Forces of the springs particle (i, j) owns, on it, into grid_forces[p, slot]
+    (slot = 2 family + s); 0 where the other end is off the grid."""
+    if 1 <= i < nx - 2 and j < ny - 2:     # no owned spring can leave the grid
+        _owned_springs_checked(x, v, offset, nx, ny, i, j, g, rest, families, grid_forces,
+                               False)
+    else:
+        _owned_springs_checked(x, v, offset, nx, ny, i, j, g, rest, families, grid_forces,
+                               True)
+
+
+@ti.func
+def _owned_springs_checked(x, v, offset, nx, ny, i, j, g, rest, families: ti.template(),
+                           grid_forces, checked: ti.template()):
+    """``_owned_springs``; checked: test that each spring's other end exists."""
+    p = offset + j * nx + i
+    xp, vp = x[p], v[p]
+    for fam in ti.static(range(3)):
+        if ti.static(families[fam]):
+            for s in ti.static(range(2)):
+                di, dj = ti.static(OWNED[fam][s][0], OWNED[fam][s][1])
+                ii, jj = i + di, j + dj
+                force = ti.Vector.zero(float, 3)
+                if ti.static(not checked) or (0 <= ii < nx and 0 <= jj < ny):
+                    q = offset + jj * nx + ii
+                    length = rest[fam, 2]
+                    if ti.static(dj == 0):
+                        length = rest[fam, 0]
+                    elif ti.static(di == 0):
+                        length = rest[fam, 1]
+                    force = spring_force(xp, x[q], vp, v[q], g[2 + fam], g[5 + fam], length)
+                grid_forces[p, 2 * fam + s] = force
+
+
+@ti.func
+def _gather_grid(v, offset, nx, ny, i, j, families: ti.template(), mass, params,
+                 first: ti.template(), grid_forces, f_out):
+    """Particle (i, j): its own springs' forces minus those its neighbours own with it."""
+    p = offset + j * nx + i
     acc = ti.Vector.zero(float, 3)
-    for k in ti.static(range(len(stencil))):
-        di, dj = ti.static(stencil[k][0], stencil[k][1])
-        ii, jj = i + di, j + dj
-        if ti.static(not checked) or (0 <= ii < nx and 0 <= jj < ny):
-            q = offset + jj * nx + ii
-            rest = rest_diag
-            if ti.static(dj == 0):
-                rest = rest_i
-            elif ti.static(di == 0):
-                rest = rest_j
-            acc += spring_force(xp, x[q], vp, v[q], ks, kd, rest)
-    return acc
+    for fam in ti.static(range(3)):
+        if ti.static(families[fam]):
+            for s in ti.static(range(2)):
+                di, dj = ti.static(OWNED[fam][s][0], OWNED[fam][s][1])
+                acc += grid_forces[p, 2 * fam + s]
+                ii, jj = i - di, j - dj
+                if 0 <= ii < nx and 0 <= jj < ny:
+                    acc -= grid_forces[offset + jj * nx + ii, 2 * fam + s]
+    if ti.static(first):
+        gravity = ti.Vector([params[0], params[1], params[2]])
+        f_out[p] = mass[p] * gravity - params[3] * v[p] + acc
+    else:
+        f_out[p] += acc
 
 
 @ti.kernel
 def eval_grid_springs(x: ti.template(), v: ti.template(), grid_ints: ti.template(),
                       grid_reals: ti.template(), k: ti.i32, families: ti.template(),
                       mass: ti.template(), params: ti.template(), first: ti.template(),
-                      f_out: ti.template()):
-    """Provot springs of cloth grid k, gathered per particle (no atomics).
+                      grid_forces: ti.template(), f_out: ti.template()):
+    """Provot springs of cloth grid k, each evaluated once and gathered per particle (no
+    atomics): every particle computes the springs it owns (``OWNED``) into grid_forces,
+    then adds those and subtracts the ones its neighbours own with it.
 
     grid_ints[k] = (offset, nx, ny); grid_reals[k] = (dx, dy, k_s structural, k_s shear,
     k_s flexion, k_d structural, k_d shear, k_d flexion).
     families: static tuple of booleans (structural, shear, flexion).
     first: the grid holds every particle and comes first: f = gravity and drag (as in
     ``init_forces``) + springs, saving a launch and a pass; else f += springs.
+    grid_forces: (particles, 6) vec3 scratch.
     """
     offset, nx, ny = grid_ints[k][0], grid_ints[k][1], grid_ints[k][2]
     g = grid_reals[k]
@@ -90,28 +129,24 @@ def eval_grid_springs(x: ti.template(), v: ti.template(), grid_ints: ti.template
     rest = ti.Matrix([[dx, dy, ti.sqrt(dx * dx + dy * dy)],
                       [dx, dy, ti.sqrt(dx * dx + dy * dy)],
                       [2.0 * dx, 2.0 * dy, 0.0]])
-    ti.loop_config(serialize=ti.static(serial(f_out)))
-    for j, i in ti.ndrange(ny, nx):
-        p = offset + j * nx + i
-        xp, vp = x[p], v[p]
-        acc = ti.Vector.zero(float, 3)
-        if 2 <= i < nx - 2 and 2 <= j < ny - 2:
-            for fam in ti.static(range(3)):
-                if ti.static(families[fam]):
-                    acc += _stencil_sum(x, v, offset, nx, ny, i, j, xp, vp, g[2 + fam],
-                                        g[5 + fam], rest[fam, 0], rest[fam, 1], rest[fam, 2],
-                                        STENCILS[fam], False)
-        else:
-            for fam in ti.static(range(3)):
-                if ti.static(families[fam]):
-                    acc += _stencil_sum(x, v, offset, nx, ny, i, j, xp, vp, g[2 + fam],
-                                        g[5 + fam], rest[fam, 0], rest[fam, 1], rest[fam, 2],
-                                        STENCILS[fam], True)
-        if ti.static(first):
-            gravity = ti.Vector([params[0], params[1], params[2]])
-            f_out[p] = mass[p] * gravity - params[3] * vp + acc
-        else:
-            f_out[p] += acc
+    # on CPUs rows in parallel and the particles of a row in order (no index division per
+    # particle); elsewhere every particle in parallel
+    if ti.static(cpu()):
+        ti.loop_config(serialize=ti.static(serial(f_out)))
+        for j in range(ny):
+            for i in range(nx):
+                _owned_springs(x, v, offset, nx, ny, i, j, g, rest, families, grid_forces)
+        ti.loop_config(serialize=ti.static(serial(f_out)))
+        for j in range(ny):
+            for i in range(nx):
+                _gather_grid(v, offset, nx, ny, i, j, families, mass, params, first,
+                             grid_forces, f_out)
+    else:
+        for j, i in ti.ndrange(ny, nx):
+            _owned_springs(x, v, offset, nx, ny, i, j, g, rest, families, grid_forces)
+        for j, i in ti.ndrange(ny, nx):
+            _gather_grid(v, offset, nx, ny, i, j, families, mass, params, first,
+                         grid_forces, f_out)
 
 
 @ti.kernel
@@ -165,7 +200,7 @@ def compute_forces(model, x, v, f_out, t=0.0):
         init_forces(v, model.mass, model.params, f_out)
     for k, g in grids:
         eval_grid_springs(x, v, model.grid_ints, model.grid_reals, k, g.families, model.mass,
-                          model.params, whole and k == grids[0][0], f_out)
+                          model.params, whole and k == grids[0][0], model.grid_forces, f_out)
     if model.list_spring_count:
         eval_springs(x, v, model.spring_pairs, model.spring_ks, model.spring_kd,
                      model.spring_rest, model.list_spring_count, f_out)

@@ -77,7 +77,8 @@ class Model:
             sorted by kind; collider_ranges: static ((first, count) per kind).
         params: field (g_x, g_y, g_z, air_drag): m/s^2 and N s/m, read by the kernels.
         grid_ints, grid_reals: per GridBlock (offset, nx, ny) and
-            (dx, dy, k_s x 3 families, k_d x 3 families) for the stencil kernel.
+            (dx, dy, k_s x 3 families, k_d x 3 families) for the stencil kernel;
+            grid_forces its scratch, (particle_count, 6) vec3.
     """
 
     def __init__(self, scene, grid_stencil=True):
@@ -115,6 +116,8 @@ class Model:
             self.grid_ints[k] = (g.offset, g.nx, g.ny)
             self.grid_reals[k] = [g.dx, g.dy] + [0.0 if p is None else p[c]
                                                  for c in (0, 1) for p in fams]
+        # scratch of the grid stencil: the forces of the 6 springs each particle owns
+        self.grid_forces = ti.Vector.field(3, real, shape=(n if self.grids else 1, 6))
         order = np.argsort(in_grid, kind="stable")
         self.spring_count = ns = scene.num_springs
         self.list_spring_count = int((~in_grid).sum())

@@ -100,12 +100,17 @@ def accumulator():
     return ti.f64 if _Runtime.arch_name in ("x64", "arm64", "cuda") else _Runtime.real
 
 
+def cpu():
+    """True on CPU backends."""
+    return _Runtime.arch_name in ("x64", "arm64")
+
+
 def serial(field):
     """True where a loop over ``field`` should run on one CPU thread: below
     ``init(serial_below=...)`` items (default SERIAL_BELOW) the thread pool's start-up and
     hand-offs cost more than the second thread gains. Evaluated at compile time
     (``ti.static``), so it is fixed when a simulator's kernels compile; never on GPUs."""
-    return _Runtime.arch_name in ("x64", "arm64") and field.shape[0] < _Runtime.serial_below
+    return cpu() and field.shape[0] < _Runtime.serial_below
 
 
 def check_generation(gen, what="simulator"):

@@ -78,7 +78,8 @@ class BackwardEuler(Integrator):
     def simulate(self, model, state_in, state_out, dt):
         h, t1 = dt, state_in.t + dt
         opt = self.options
-        self._begin(model, state_in.x, state_in.v, h, state_in.t)
+        x = state_out.x
+        self._begin(model, state_in.x, state_in.v, h, state_in.t, x)
         if self._lagged:
             self.f_lag.fill(0)
             if model.wind is not None:
@@ -86,9 +87,8 @@ class BackwardEuler(Integrator):
                           state_in.t, self.f_lag)
             if model.attraction is not None:
                 eval_attraction(state_in.x, model.mass, *model.attraction, self.f_lag)
-        x = state_out.x
-        x.copy_from(self.x_hat)
         cg_total, residual, it = 0, 0.0, 0
+        v_scale = 1.0 + linalg.max_norm(state_in.v)
         energy = self._energy_and_gradient(model, x, h, t1)
         for it in range(1, opt["newton_iterations"] + 1):
             iters, residual = self._solve(model, x, h, t1)
@@ -102,13 +102,11 @@ class BackwardEuler(Integrator):
                     if trial <= energy + 1e-4 * alpha * slope or alpha < 1e-4:
                         break
                     alpha *= 0.5
-                x.copy_from(self.x_try)
-            else:
-                linalg.axpy_into(x, x, 1.0, self.dx)
+            linalg.axpy_into(x, x, alpha, self.dx)           # = x_try, bit for bit
             step = alpha * linalg.max_norm(self.dx) / h
-            energy = self._energy_and_gradient(model, x, h, t1)
-            if step < opt["newton_tol"] * (1.0 + linalg.max_norm(state_in.v)):
+            if step < opt["newton_tol"] * v_scale or it == opt["newton_iterations"]:
                 break
+            energy = self._energy_and_gradient(model, x, h, t1)
         self._finish(state_in.x, x, 1.0 / h, state_out.v)
         state_out.t = t1
         self.stats = {"newton_iterations": it, "cg_iterations": cg_total, "residual": residual}
@@ -153,11 +151,14 @@ class BackwardEuler(Integrator):
 
     # -- kernels: set-up and finish ------------------------------------------------------
     @ti.kernel
-    def _begin_particles(self, x: ti.template(), v: ti.template(), h: float):
+    def _begin_particles(self, x: ti.template(), v: ti.template(), h: float,
+                         x_start: ti.template()):
+        """x0, the inertial prediction x_hat = x0 + h v0, and the Newton start x_hat."""
         ti.loop_config(serialize=ti.static(serial(x)))
         for p in range(x.shape[0]):
             self.x0[p] = x[p]
             self.x_hat[p] = x[p] + h * v[p]
+            x_start[p] = self.x_hat[p]
 
     @ti.kernel
     def _begin_springs(self, x: ti.template(), pairs: ti.template(), count: ti.i32):
@@ -184,8 +185,8 @@ class BackwardEuler(Integrator):
                         self.fn0[p, c] = fn
                         self.n0[p, c] = n
 
-    def _begin(self, model, x, v, h, t0):
-        self._begin_particles(x, v, h)
+    def _begin(self, model, x, v, h, t0, x_start):
+        self._begin_particles(x, v, h, x_start)
         if model.spring_count:
             self._begin_springs(x, model.spring_pairs, model.spring_count)
         if model.collider_count:
