@@ -1,50 +1,136 @@
-"""Implicit solvers on a hanging cloth at one step per frame (dt = 1/60): ms per step and
-iteration counts, medians over the measured steps. Prints greppable lines
+"""Implicit solvers at one step per frame (dt = 1/60) on the Warp cloth benchmark's cloth
+(0.1 m spacing, 0.1 kg per particle, two corners fixed) with every spring family at
+k_s = --k and k_d = 10: ms per step and iteration counts (medians over --steps steps),
+then total energy and CG iterations over --energy-steps steps. Prints greppable lines
 
     implicit_bench.<solver>.<n>x<n>.<metric>: value
 
-Usage: python tools/bench_implicit.py [--sizes 32,64] [--steps 5] [--k 1e4] [--arch cpu]
+and writes <out>/implicit_bench.csv, <out>/implicit_energy.csv and <out>/implicit_energy.png
+(energy and CG iterations per step, one line per solver; needs matplotlib).
+
+Usage: python tools/bench_implicit.py [--sizes 32,64,128 ('' skips)] [--steps 7] [--k 1e4]
+                                      [--energy-steps 120] [--out docs] [--arch cpu]
 """
 import argparse
+import csv
+import os
 import time
 
 import numpy as np
 
 import tcloth
 
-SOLVERS = {"projective_10it": ("projective", {"iterations": 10}),
-           "backward_euler_1solve": ("backward_euler", {"newton_iterations": 1,
-                                                        "line_search": False, "cg_tol": 1e-3}),
-           "backward_euler_newton": ("backward_euler", {})}
+SOLVERS = {
+    "projective_10it": ("projective", {"iterations": 10}),
+    "projective_10it_10cg": ("projective", {"iterations": 10, "cg_max_iterations": 10}),
+    "backward_euler_1solve": ("backward_euler", {"newton_iterations": 1, "line_search": False,
+                                                 "cg_tol": 1e-3}),
+    "backward_euler_newton": ("backward_euler", {}),
+}
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sizes", default="32,64")
-    ap.add_argument("--steps", type=int, default=5)
-    ap.add_argument("--k", type=float, default=1e4)
-    ap.add_argument("--arch", default="cpu")
-    args = ap.parse_args(argv)
-    tcloth.init(arch=args.arch)
-    for n in (int(s) for s in args.sizes.split(",")):
+def warp_cloth(n, k):
+    """The cloth of warp.examples.benchmarks.benchmark_cloth (n x n, corners of row 0
+    fixed) with all three spring families at stiffness k."""
+    scene = tcloth.Scene()
+    scene.add_cloth(resolution=(n, n), size=(0.1 * (n - 1),) * 2,
+                    center=(0.05 * (n - 1), 0.0, 0.05 * (n - 1)), mass=0.1 * n * n,
+                    structural=(k, 10.0), shear=(k, 10.0), flexion=(k, 10.0))
+    return scene
+
+
+def speed(sizes, steps, k, out):
+    rows = []
+    for n in sizes:
         for label, (name, options) in SOLVERS.items():
-            scene = tcloth.Scene()
-            scene.add_cloth(resolution=(n, n), size=(1.0, 1.0), structural=(args.k, 1.0),
-                            shear=(args.k / 10, 0.5), flexion=(args.k / 100, 0.1))
-            sim = tcloth.Simulator(scene, name, dt=1 / 60, **options)
-            sim.step(1)
+            sim = tcloth.Simulator(warp_cloth(n, k), name, dt=1 / 60, **options)
+            sim.step(2)                      # compiles both state orders
             times, stats = [], []
-            for _ in range(args.steps):
+            for _ in range(steps):
                 t0 = time.perf_counter()
                 sim.step(1)
                 times.append(time.perf_counter() - t0)
                 stats.append(sim.integrator.stats)
-            key = f"implicit_bench.{label}.{n}x{n}"
-            print(f"{key}.ms_per_step: {1e3 * np.median(times):.1f}")
+            row = {"solver": label, "n": n, "ms_per_step": 1e3 * np.median(times)}
             for stat in stats[0]:
                 if stat != "residual":
-                    print(f"{key}.{stat}: {np.median([s[stat] for s in stats]):.0f}")
-            print(f"{key}.max_strain: {sim.max_strain():.4f}", flush=True)
+                    row[stat] = np.median([s[stat] for s in stats])
+            row["max_strain"] = sim.max_strain()
+            rows.append(row)
+            key = f"implicit_bench.{label}.{n}x{n}"
+            for metric, value in row.items():
+                if metric not in ("solver", "n"):
+                    print(f"{key}.{metric}: {value:.4g}", flush=True)
+    _write_csv(os.path.join(out, "implicit_bench.csv"), rows)
+
+
+def energy_history(n, steps, k, out):
+    histories = {}
+    for label, (name, options) in SOLVERS.items():
+        sim = tcloth.Simulator(warp_cloth(n, k), name, dt=1 / 60, **options)
+        energy, cg = [sim.energy()["total"]], [0]
+        for _ in range(steps):
+            sim.step(1)
+            energy.append(sim.energy()["total"])
+            cg.append(sim.integrator.stats["cg_iterations"])
+        histories[label] = (np.array(energy), np.array(cg))
+        rises = int(np.sum(np.diff(energy) > 1e-6 * abs(energy[0] - min(energy))))
+        print(f"implicit_bench.{label}.{n}x{n}.energy_final: {energy[-1]:.6g}")
+        print(f"implicit_bench.{label}.{n}x{n}.energy_rises: {rises}")
+        print(f"implicit_bench.{label}.{n}x{n}.cg_per_step_median: {np.median(cg[1:]):.4g}",
+              flush=True)
+    rows = [{"step": s, "time": s / 60, **{f"{label}.energy": h[0][s] for label, h in
+                                            histories.items()},
+             **{f"{label}.cg": h[1][s] for label, h in histories.items()}}
+            for s in range(steps + 1)]
+    _write_csv(os.path.join(out, "implicit_energy.csv"), rows)
+    _plot(histories, n, k, os.path.join(out, "img", "implicit_energy.png"))
+
+
+def _write_csv(path, rows):
+    fields = list(dict.fromkeys(key for row in rows for key in row))
+    with open(path, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=fields)
+        writer.writeheader()
+        writer.writerows(rows)
+    print(f"# wrote {path}")
+
+
+def _plot(histories, n, k, path):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, (ax_e, ax_cg) = plt.subplots(1, 2, figsize=(11, 4))
+    for label, (energy, cg) in histories.items():
+        t = np.arange(len(energy)) / 60
+        ax_e.plot(t, energy, label=label)
+        ax_cg.plot(t[1:], cg[1:], label=label)
+    ax_e.set(xlabel="time (s)", ylabel="total energy (J)",
+             title=f"{n}x{n} cloth, k_s = {k:g}, dt = 1/60")
+    ax_cg.set(xlabel="time (s)", ylabel="CG iterations per step", yscale="log")
+    ax_e.legend(fontsize=8)
+    fig.tight_layout()
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    fig.savefig(path, dpi=100)
+    print(f"# wrote {path}")
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", default="32,64,128")
+    ap.add_argument("--steps", type=int, default=7)
+    ap.add_argument("--k", type=float, default=1e4)
+    ap.add_argument("--energy-steps", type=int, default=120)
+    ap.add_argument("--energy-size", type=int, default=128)
+    ap.add_argument("--out", default="docs")
+    ap.add_argument("--arch", default="cpu")
+    args = ap.parse_args(argv)
+    tcloth.init(arch=args.arch)
+    os.makedirs(args.out, exist_ok=True)
+    if args.sizes:
+        speed([int(s) for s in args.sizes.split(",")], args.steps, args.k, args.out)
+    if args.energy_steps:
+        energy_history(args.energy_size, args.energy_steps, args.k, args.out)
 
 
 if __name__ == "__main__":
