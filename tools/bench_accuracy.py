@@ -14,13 +14,13 @@ Prints greppable lines ``accuracy.<scene>.<integrator>.<metric>: value``; writes
 Usage: python tools/bench_accuracy.py [--time 0.5] [--out docs]
 """
 import argparse
-import csv
 import os
 import time
 
 import numpy as np
 
 import tcloth
+from benchcsv import write_csv
 
 # label -> (integrator, options); backward Euler also with its Newton and CG tolerances
 # tightened, so that its own time-discretisation error shows (the defaults stop Newton at
@@ -147,12 +147,7 @@ def main(argv=None):
         rows, results = study(name, SCENES[name], args.time)
         all_rows += rows
         plot(name, results, os.path.join(args.out, "img", f"accuracy_{name}.png"))
-    path = os.path.join(args.out, "accuracy.csv")
-    with open(path, "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(all_rows[0]))
-        writer.writeheader()
-        writer.writerows(all_rows)
-    print(f"# wrote {path}")
+    write_csv(os.path.join(args.out, "accuracy.csv"), all_rows)
 
 
 if __name__ == "__main__":

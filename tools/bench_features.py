@@ -12,13 +12,13 @@ writes <out>/features.csv.
 Usage: python tools/bench_features.py [--n 64] [--steps 100] [--rounds 5] [--out docs]
 """
 import argparse
-import csv
 import os
 import time
 
 import numpy as np
 
 import tcloth
+from benchcsv import write_csv
 
 
 def scene(n, feature):
@@ -71,13 +71,7 @@ def main(argv=None):
         key = f"features.{args.n}x{args.n}.{feature}"
         print(f"{key}.ms_per_step: {ms:.4g}")
         print(f"{key}.over_bare: {ms / (1e3 * bare):.3g}", flush=True)
-    os.makedirs(args.out, exist_ok=True)
-    path = os.path.join(args.out, "features.csv")
-    with open(path, "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
-    print(f"# wrote {path}")
+    write_csv(os.path.join(args.out, "features.csv"), rows)
 
 
 if __name__ == "__main__":

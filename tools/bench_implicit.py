@@ -12,13 +12,13 @@ Usage: python tools/bench_implicit.py [--sizes 32,64,128 ('' skips)] [--steps 7]
                                       [--energy-steps 120] [--out docs] [--arch cpu]
 """
 import argparse
-import csv
 import os
 import time
 
 import numpy as np
 
 import tcloth
+from benchcsv import write_csv
 
 SOLVERS = {
     "projective_10it": ("projective", {"iterations": 10}),
@@ -61,7 +61,7 @@ def speed(sizes, steps, k, out):
             for metric, value in row.items():
                 if metric not in ("solver", "n"):
                     print(f"{key}.{metric}: {value:.4g}", flush=True)
-    _write_csv(os.path.join(out, "implicit_bench.csv"), rows)
+    write_csv(os.path.join(out, "implicit_bench.csv"), rows)
 
 
 def energy_history(n, steps, k, out):
@@ -83,17 +83,8 @@ def energy_history(n, steps, k, out):
                                             histories.items()},
              **{f"{label}.cg": h[1][s] for label, h in histories.items()}}
             for s in range(steps + 1)]
-    _write_csv(os.path.join(out, "implicit_energy.csv"), rows)
+    write_csv(os.path.join(out, "implicit_energy.csv"), rows)
     _plot(histories, n, k, os.path.join(out, "img", "implicit_energy.png"))
-
-
-def _write_csv(path, rows):
-    fields = list(dict.fromkeys(key for row in rows for key in row))
-    with open(path, "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=fields)
-        writer.writeheader()
-        writer.writerows(rows)
-    print(f"# wrote {path}")
 
 
 def _plot(histories, n, k, path):

@@ -26,7 +26,6 @@ Usage: python tools/bench_peers.py [--sizes 32,64,128] [--frames 60] [--numpy-fr
 """
 import argparse
 import ast
-import csv
 import importlib.util
 import os
 import re
@@ -37,6 +36,7 @@ import time
 import numpy as np
 
 import tcloth
+from benchcsv import write_csv
 
 FPS, SUBSTEPS = 60.0, 16
 K, KD, SPACING, MASS = 1000.0, 10.0, 0.1, 0.1
@@ -201,19 +201,11 @@ def main(argv=None):
     os.makedirs(args.out, exist_ok=True)
     if args.sizes:
         rows = [run_size(int(s), args.frames, args.numpy_frames) for s in args.sizes.split(",")]
-        _write(os.path.join(args.out, "peers.csv"), rows)
+        write_csv(os.path.join(args.out, "peers.csv"), rows)
     if args.newton:
         width, height = (int(s) for s in args.newton_size.split("x"))
         rows = newton_peer(args.newton.split(","), width, height, args.newton_seconds)
-        _write(os.path.join(args.out, "peers_newton.csv"), rows)
-
-
-def _write(path, rows):
-    with open(path, "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
-    print(f"# wrote {path}")
+        write_csv(os.path.join(args.out, "peers_newton.csv"), rows)
 
 
 if __name__ == "__main__":

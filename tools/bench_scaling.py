@@ -11,13 +11,13 @@ Usage: python tools/bench_scaling.py [--sizes 32,64,128,256,512,1024] [--steps 5
                                      [--arch cpu] [--out docs]
 """
 import argparse
-import csv
 import os
 import time
 
 import numpy as np
 
 import tcloth
+from benchcsv import write_csv
 
 
 def rss_bytes():
@@ -74,12 +74,7 @@ def main(argv=None):
             print(f"scaling.{precision}.per_particle_cost_max_over_64x64: "
                   f"{worst / base['ns_per_particle']:.2f}")
     os.makedirs(os.path.join(args.out, "img"), exist_ok=True)
-    path = os.path.join(args.out, f"scaling_{args.arch}.csv")
-    with open(path, "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
-    print(f"# wrote {path}")
+    write_csv(os.path.join(args.out, f"scaling_{args.arch}.csv"), rows)
     _plot(rows, os.path.join(args.out, "img", f"scaling_{args.arch}.png"))
 
 

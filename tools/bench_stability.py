@@ -19,12 +19,12 @@ Prints greppable lines ``stability.<metric>: value``; writes <out>/stability.csv
 Usage: python tools/bench_stability.py [--kd 0] [--seconds 1] [--out docs]
 """
 import argparse
-import csv
 import os
 
 import numpy as np
 
 import tcloth
+from benchcsv import write_csv
 
 INTEGRATORS = ["forward_euler", "symplectic_euler", "verlet", "rk4", "backward_euler",
                "projective"]
@@ -150,19 +150,11 @@ def main(argv=None):
                   f"{row[integrator]:.3g}", flush=True)
         gains.append(row)
     os.makedirs(os.path.join(args.out, "img"), exist_ok=True)
-    _write(os.path.join(args.out, "stability_kd0_energy_gain.csv"), gains)
-    _write(os.path.join(args.out, "stability.csv"), rows)
-    _write(os.path.join(args.out, "stability_limits.csv"), limits)
-    _write(os.path.join(args.out, "stability_damping.csv"), sweep)
+    write_csv(os.path.join(args.out, "stability_kd0_energy_gain.csv"), gains)
+    write_csv(os.path.join(args.out, "stability.csv"), rows)
+    write_csv(os.path.join(args.out, "stability_limits.csv"), limits)
+    write_csv(os.path.join(args.out, "stability_damping.csv"), sweep)
     _plot(rows, limits, sweep, ks, dts, args)
-
-
-def _write(path, rows):
-    with open(path, "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
-    print(f"# wrote {path}")
 
 
 def _plot(rows, limits, sweep, ks, dts, args):
