@@ -159,10 +159,10 @@ def test_parallel_loops_give_the_serial_results():
         # order of parallel sums cannot change an iteration count
         for integrator, dt, options in (
                 ("symplectic_euler", 1e-3, {}),
-                ("backward_euler", 1 / 60, {"cg_tol": 1e-12, "newton_tol": 1e-12}),
-                ("projective", 1 / 60, {"cg_tol": 1e-12, "cg_max_iterations": 1000})):
+                ("backward_euler", 1 / 60, {"cg_tol": 1e-10, "newton_tol": 1e-10}),
+                ("projective", 1 / 60, {"cg_tol": 1e-10, "cg_max_iterations": 1000})):
             sim = tcloth.Simulator(scene, integrator, dt=dt, **options)
-            sim.step(10)
+            sim.step(4)
             out.append(sim.positions())
         return out
     try:

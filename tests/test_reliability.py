@@ -176,7 +176,7 @@ def valid_scenes(draw):
 FUZZ = {"valid": 0, "invalid": 0}
 
 
-@settings(max_examples=8, deadline=None, suppress_health_check=list(HealthCheck))
+@settings(max_examples=6, deadline=None, suppress_health_check=list(HealthCheck))
 @given(scene=valid_scenes(), integrator=st.sampled_from(
     ["forward_euler", "symplectic_euler", "verlet", "rk4"]), dt=st.floats(1e-5, 1e-2))
 def test_random_valid_scenes_only_ever_raise_instability(scene, integrator, dt):
@@ -252,7 +252,7 @@ def test_fuzz_case_counts_recorded():
     if not any(FUZZ.values()):
         pytest.skip("the fuzz tests were not selected")
     print(f"fuzz cases: valid scenes {FUZZ['valid']}, invalid inputs {FUZZ['invalid']}")
-    assert FUZZ["invalid"] in (0, 400) and FUZZ["valid"] in (0, 8)
+    assert FUZZ["invalid"] in (0, 400) and FUZZ["valid"] in (0, 6)
 
 
 def rss_mib():
