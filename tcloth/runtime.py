@@ -18,7 +18,7 @@ _ARCHS = {
 _PRECISIONS = {"f32": ti.f32, "f64": ti.f64}
 
 # Measured on the 2-core development VM (tools/bench_threads.py): a parallel loop costs
-# about 0.1 ms to start and two threads gain at most 1.4x even at a million items, so one
+# about 0.2 ms to start and two threads gain at most 1.4x even at a million items, so one
 # thread is faster below about 10^5 items, for memory-bound and arithmetic-heavy loops alike.
 SERIAL_BELOW = 131072
 

@@ -56,8 +56,6 @@ def symmetric6(a):
     return ti.Vector([a[0, 0], a[1, 1], a[2, 2], a[0, 1], a[0, 2], a[1, 2]])
 
 
-
-
 @ti.func
 def _apply(field: ti.template(), p, v):
     """field[p] v: a 3x3 block, a symmetric block (``symmetric6``) or a scalar times v."""
@@ -78,15 +76,16 @@ def _apply(field: ti.template(), p, v):
 class PCG:
     """Filtered, Jacobi-preconditioned conjugate gradients on A x = b, A given per particle:
 
-        (A v)_p = D_p v_p + sum over the adjacency entries k = (s, q) of p of W_k (v_p - v_q)
+        (A v)_p = D_p v_p + sum over p's adjacency entries k = (s, q) of W_k (v_p - v_q)
 
     with diag D (per particle) and weights W (per adjacency entry: both ends of a spring
     carry the same coupling, stored twice so that the gather reads them in order) 3x3
-    blocks, symmetric blocks (``symmetric6``) or scalars, gathered per particle (no atomics), and ``precond`` the inverse
-    diagonal of A (blocks or scalars). Particles with inverse mass 0 are filtered out:
-    their entries of x stay as they are. The operands are this object's fields ``b`` and
-    ``x``, and every kernel reads the fields the solver was built with, so that a CG
-    iteration is one kernel launch without field arguments (each costs Python time)."""
+    blocks, symmetric blocks (``symmetric6``) or scalars, gathered per particle (no
+    atomics), and ``precond`` the inverse diagonal of A (blocks or scalars). Particles
+    with inverse mass 0 are filtered out: their entries of x stay as they are. The operands
+    are this object's fields ``b`` and ``x``, and every kernel reads the fields the solver
+    was built with, so that a CG iteration is one kernel launch without field arguments
+    (each costs Python time)."""
 
     def __init__(self, n, diag, weights, adj_start, adj, precond, inv_mass):
         real = runtime.real()
