@@ -193,14 +193,13 @@ def eval_attraction(x: ti.template(), mass: ti.template(), G: float, softening: 
 
 def compute_forces(model, x, v, f_out, t=0.0):
     """Total force on every particle at positions x, velocities v and time t, into f_out."""
-    grids = [(k, g) for k, g in enumerate(model.grids) if any(g.families)]
-    whole = bool(grids) and grids[0][1].offset == 0 and \
-        grids[0][1].nx * grids[0][1].ny == model.particle_count
-    if not whole:
+    if not model.grid_sets_forces:
         init_forces(v, model.mass, model.params, f_out)
-    for k, g in grids:
-        eval_grid_springs(x, v, model.grid_ints, model.grid_reals, k, g.families, model.mass,
-                          model.params, whole and k == grids[0][0], model.grid_forces, f_out)
+    for k in model.spring_grids:
+        eval_grid_springs(x, v, model.grid_ints, model.grid_reals, k, model.grids[k].families,
+                          model.mass, model.params,
+                          model.grid_sets_forces and k == model.spring_grids[0],
+                          model.grid_forces, f_out)
     if model.list_spring_count:
         eval_springs(x, v, model.spring_pairs, model.spring_ks, model.spring_kd,
                      model.spring_rest, model.list_spring_count, f_out)

@@ -78,7 +78,9 @@ class Model:
         params: field (g_x, g_y, g_z, air_drag): m/s^2 and N s/m, read by the kernels.
         grid_ints, grid_reals: per GridBlock (offset, nx, ny) and
             (dx, dy, k_s x 3 families, k_d x 3 families) for the stencil kernel;
-            grid_forces its scratch, (particle_count, 6) vec3.
+            grid_forces its scratch, (particle_count, 6) vec3; spring_grids: indices of
+            the grids with springs; grid_sets_forces: the first of them holds every
+            particle and sets gravity and drag with its springs.
     """
 
     def __init__(self, scene, grid_stencil=True):
@@ -118,6 +120,12 @@ class Model:
                                                  for c in (0, 1) for p in fams]
         # scratch of the grid stencil: the forces of the 6 springs each particle owns
         self.grid_forces = ti.Vector.field(3, real, shape=(n if self.grids else 1, 6))
+        # the grids with springs; when the first holds every particle, its stencil kernel
+        # also writes gravity and drag (one launch and one pass fewer)
+        self.spring_grids = [k for k, g in enumerate(self.grids) if any(g.families)]
+        first = self.grids[self.spring_grids[0]] if self.spring_grids else None
+        self.grid_sets_forces = first is not None and first.offset == 0 and \
+            first.nx * first.ny == n
         order = np.argsort(in_grid, kind="stable")
         self.spring_count = ns = scene.num_springs
         self.list_spring_count = int((~in_grid).sum())
