@@ -152,6 +152,17 @@ class Simulator:
             field.from_numpy(arr.astype(npr))
         self.state.forces_valid = False
 
+    def reset(self, dt=None):
+        """Back to the scene's initial positions and velocities at t = 0, optionally with a
+        new time step dt (s, > 0): the same compiled simulator runs again (studies over dt
+        need no recompilation)."""
+        self._check()
+        if dt is not None:
+            self.dt = as_scalar("dt", dt, minimum=0.0, strict=True)
+        self.set_state(self.scene.positions, self.scene.velocities)
+        self.num_steps = 0
+        self.state.t = 0.0
+
     def save(self, path):
         """Write scene, settings and state to ``path`` (.npz), atomically."""
         self._check()

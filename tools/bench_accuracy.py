@@ -58,10 +58,8 @@ SCENES = {"swinging_k300": swinging(300.0), "swinging_k3000": swinging(3000.0),
           "cloth_on_sphere": on_sphere}
 
 
-def run(sim, scene, dt, steps):
-    sim.dt = dt
-    sim.set_state(scene.positions, scene.velocities)
-    sim.num_steps, sim.state.t = 0, 0.0
+def run(sim, dt, steps):
+    sim.reset(dt)
     t0 = time.perf_counter()
     try:
         sim.step(steps)
@@ -90,7 +88,7 @@ def study(name, build, final_time):
         sim.step(2)                              # compiles both state orders
         points = []
         for steps in STEPS:
-            x, wall = run(sim, scene, final_time / steps, steps)
+            x, wall = run(sim, final_time / steps, steps)
             err = None if x is None else float(np.sqrt(np.mean(np.sum((x - x_ref) ** 2, 1))))
             points.append((final_time / steps, err, wall))
             rows.append({"scene": name, "integrator": integrator, "dt": final_time / steps,

@@ -65,12 +65,9 @@ class Runner:
     def stable(self, integrator, k, kd, dt):
         key = (integrator, k, kd)
         if key not in self.sims:
-            sc = scene(k, kd)
-            self.sims[key] = (tcloth.Simulator(sc, integrator, dt=dt), sc)
-        sim, sc = self.sims[key]
-        sim.dt = dt
-        sim.set_state(sc.positions, sc.velocities)
-        sim.num_steps, sim.state.t = 0, 0.0
+            self.sims[key] = tcloth.Simulator(scene(k, kd), integrator, dt=dt)
+        sim = self.sims[key]
+        sim.reset(dt)
         e0 = sim.energy()["total"]
         allowed = 0.01 * MASS * 9.81 * SIZE
         try:
