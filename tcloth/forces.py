@@ -86,9 +86,9 @@ def _owned_springs_checked(x, v, offset, nx, ny, i, j, g, rest, families: ti.tem
 
 
 @ti.func
-def _gather_grid(v, offset, nx, ny, i, j, families: ti.template(), mass, params,
-                 first: ti.template(), grid_forces, f_out):
-    """Particle (i, j): its own springs' forces minus those its neighbours own with it."""
+def grid_spring_sum(offset, nx, ny, i, j, families: ti.template(), grid_forces):
+    """The spring force on particle (i, j) of a grid after ``owned_grid_springs``: its own
+    springs' forces minus those its neighbours own with it."""
     p = offset + j * nx + i
     acc = ti.Vector.zero(float, 3)
     for fam in ti.static(range(3)):
@@ -99,6 +99,36 @@ def _gather_grid(v, offset, nx, ny, i, j, families: ti.template(), mass, params,
                 ii, jj = i - di, j - dj
                 if 0 <= ii < nx and 0 <= jj < ny:
                     acc -= grid_forces[offset + jj * nx + ii, 2 * fam + s]
+    return acc
+
+
+@ti.func
+def owned_grid_springs(x, v, offset, nx, ny, g, families: ti.template(), grid_forces):
+    """A loop over the grid: the forces of the springs each particle owns (``OWNED``)
+    into grid_forces[p, 2 family + s]. g: the grid's grid_reals row.
+
+    On CPUs rows in parallel and the particles of a row in order (no index division per
+    particle); elsewhere every particle in parallel."""
+    dx, dy = g[0], g[1]
+    # rest lengths per family along i, along j, diagonal: flexion springs span 2 cells
+    rest = ti.Matrix([[dx, dy, ti.sqrt(dx * dx + dy * dy)],
+                      [dx, dy, ti.sqrt(dx * dx + dy * dy)],
+                      [2.0 * dx, 2.0 * dy, 0.0]])
+    if ti.static(cpu()):
+        ti.loop_config(serialize=ti.static(serial(grid_forces)))
+        for j in range(ny):
+            for i in range(nx):
+                _owned_springs(x, v, offset, nx, ny, i, j, g, rest, families, grid_forces)
+    else:
+        for j, i in ti.ndrange(ny, nx):
+            _owned_springs(x, v, offset, nx, ny, i, j, g, rest, families, grid_forces)
+
+
+@ti.func
+def _gather_grid(v, offset, nx, ny, i, j, families: ti.template(), mass, params,
+                 first: ti.template(), grid_forces, f_out):
+    p = offset + j * nx + i
+    acc = grid_spring_sum(offset, nx, ny, i, j, families, grid_forces)
     if ti.static(first):
         gravity = ti.Vector([params[0], params[1], params[2]])
         f_out[p] = mass[p] * gravity - params[3] * v[p] + acc
@@ -123,27 +153,14 @@ def eval_grid_springs(x: ti.template(), v: ti.template(), grid_ints: ti.template
     grid_forces: (particles, 6) vec3 scratch.
     """
     offset, nx, ny = grid_ints[k][0], grid_ints[k][1], grid_ints[k][2]
-    g = grid_reals[k]
-    dx, dy = g[0], g[1]
-    # rest lengths per family along i, along j, diagonal: flexion springs span 2 cells
-    rest = ti.Matrix([[dx, dy, ti.sqrt(dx * dx + dy * dy)],
-                      [dx, dy, ti.sqrt(dx * dx + dy * dy)],
-                      [2.0 * dx, 2.0 * dy, 0.0]])
-    # on CPUs rows in parallel and the particles of a row in order (no index division per
-    # particle); elsewhere every particle in parallel
+    owned_grid_springs(x, v, offset, nx, ny, grid_reals[k], families, grid_forces)
     if ti.static(cpu()):
-        ti.loop_config(serialize=ti.static(serial(f_out)))
-        for j in range(ny):
-            for i in range(nx):
-                _owned_springs(x, v, offset, nx, ny, i, j, g, rest, families, grid_forces)
         ti.loop_config(serialize=ti.static(serial(f_out)))
         for j in range(ny):
             for i in range(nx):
                 _gather_grid(v, offset, nx, ny, i, j, families, mass, params, first,
                              grid_forces, f_out)
     else:
-        for j, i in ti.ndrange(ny, nx):
-            _owned_springs(x, v, offset, nx, ny, i, j, g, rest, families, grid_forces)
         for j, i in ti.ndrange(ny, nx):
             _gather_grid(v, offset, nx, ny, i, j, families, mass, params, first,
                          grid_forces, f_out)
@@ -191,8 +208,9 @@ def eval_attraction(x: ti.template(), mass: ti.template(), G: float, softening: 
         f_out[i] += G * mass[i] * acc
 
 
-def compute_forces(model, x, v, f_out, t=0.0):
-    """Total force on every particle at positions x, velocities v and time t, into f_out."""
+def compute_forces(model, x, v, f_out, t=0.0, contacts=True):
+    """Total force on every particle at positions x, velocities v and time t, into f_out;
+    contacts=False leaves out the colliders' penalty forces."""
     if not model.grid_sets_forces:
         init_forces(v, model.mass, model.params, f_out)
     for k in model.spring_grids:
@@ -203,6 +221,14 @@ def compute_forces(model, x, v, f_out, t=0.0):
     if model.list_spring_count:
         eval_springs(x, v, model.spring_pairs, model.spring_ks, model.spring_kd,
                      model.spring_rest, model.list_spring_count, f_out)
+    add_field_forces(model, x, v, f_out, t)
+    if contacts and model.collider_count:
+        collide(x, v, model.mass, model.inv_mass, model.collider_records, model.collider_ranges,
+                t, f_out)
+
+
+def add_field_forces(model, x, v, f_out, t):
+    """f_out += wind and attraction, where the scene has them."""
     if model.wind is not None:
         if model.wind["callable"] is not None:
             model.wind_array[:3] = wind_velocity(model.wind, t)
@@ -210,6 +236,3 @@ def compute_forces(model, x, v, f_out, t=0.0):
         eval_wind(x, v, model.triangles, model.wind_params, t, f_out)
     if model.attraction is not None:
         eval_attraction(x, model.mass, model.attraction[0], model.attraction[1], f_out)
-    if model.collider_count:
-        collide(x, v, model.mass, model.inv_mass, model.collider_records, model.collider_ranges,
-                t, f_out)

@@ -110,7 +110,12 @@ def serial(field):
     ``init(serial_below=...)`` items (default SERIAL_BELOW) the thread pool's start-up and
     hand-offs cost more than the second thread gains. Evaluated at compile time
     (``ti.static``), so it is fixed when a simulator's kernels compile; never on GPUs."""
-    return cpu() and field.shape[0] < _Runtime.serial_below
+    return serial_count(field.shape[0])
+
+
+def serial_count(items):
+    """``serial`` for a loop over ``items`` items."""
+    return cpu() and items < _Runtime.serial_below
 
 
 def check_generation(gen, what="simulator"):
