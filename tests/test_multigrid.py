@@ -1,0 +1,115 @@
+"""The projective solver's grid multigrid, against dense NumPy linear algebra: Galerkin
+coarse operators, V-cycle convergence to the exact solution, pinned nodes."""
+import numpy as np
+import pytest
+
+from tcloth.integrators import multigrid as mg
+from tcloth.integrators.projective import grid_stencil
+
+PROVOT = grid_stencil((True, True, True))
+
+
+def random_grid_matrix(ny, nx, pinned, seed=0):
+    """A random spring network on the Provot stencil with masses: the dense matrix
+    (built spring by spring, pinned rows and columns 0) and its stencil weights."""
+    rng = np.random.default_rng(seed)
+    n = ny * nx
+    dense = np.diag(rng.uniform(20.0, 80.0, n))
+    for j in range(ny):
+        for i in range(nx):
+            for di, dj in PROVOT[1::2]:            # one end of each spring
+                if 0 <= j + dj < ny and 0 <= i + di < nx:
+                    a, b, w = j * nx + i, (j + dj) * nx + i + di, rng.uniform(100.0, 1000.0)
+                    dense[[a, b], [a, b]] += w
+                    dense[a, b] -= w
+                    dense[b, a] -= w
+    free = np.ones(n, dtype=bool)
+    free[[j * nx + i for j, i in pinned]] = False
+    dense[~free, :] = 0.0
+    dense[:, ~free] = 0.0
+    weights = np.zeros((ny, nx, len(PROVOT)))
+    for j in range(ny):
+        for i in range(nx):
+            for k, (di, dj) in enumerate(PROVOT):
+                if 0 <= j + dj < ny and 0 <= i + di < nx:
+                    weights[j, i, k] = dense[j * nx + i, (j + dj) * nx + i + di]
+    return dense, weights, free
+
+
+def hat_prolongation(n_fine):
+    """Bilinear interpolation from coarse nodes at fine positions 2c: hat functions."""
+    c = np.arange(n_fine // 2 + 1)
+    return np.maximum(0.0, 1.0 - np.abs(np.arange(n_fine)[:, None] - 2 * c[None, :]) / 2.0)
+
+
+@pytest.mark.parametrize("ny, nx", [(13, 18), (9, 8)])
+def test_coarse_operators_are_the_galerkin_products(ny, nx):
+    dense, weights, _ = random_grid_matrix(ny, nx, pinned=[(0, 0), (0, nx - 1)])
+    py, px = hat_prolongation(ny), hat_prolongation(nx)
+    assert np.array_equal(py, mg.prolongation_1d(ny))
+    p = np.kron(py, px)
+    coarse = mg.galerkin(weights, PROVOT, py, px)
+    assert np.allclose(mg.dense_matrix(coarse, mg.COARSE_STENCIL), p.T @ dense @ p,
+                       rtol=0, atol=1e-10 * np.abs(dense).max())
+    assert np.allclose(mg.dense_matrix(weights, PROVOT), dense)
+
+
+@pytest.mark.parametrize("ny, nx", [(24, 19), (40, 40)])
+def test_vcycles_converge_to_the_dense_solution(f64, ny, nx):
+    pinned = [(0, 0), (0, nx - 1), (ny // 2, nx // 2)]
+    dense, weights, free = random_grid_matrix(ny, nx, pinned, seed=ny)
+    solver = mg.GridMultigrid(nx, ny, PROVOT)
+    assert solver.levels >= 3
+    solver.set_matrix(weights)
+    rng = np.random.default_rng(1)
+    rhs = rng.normal(size=(ny * nx, 3)) * free[:, None]
+    exact = np.zeros_like(rhs)
+    exact[free] = np.linalg.solve(dense[np.ix_(free, free)], rhs[free])
+    e = np.zeros_like(rhs)
+    errors = []
+    for _ in range(8):
+        residual = rhs - dense @ e
+        e += solver.vcycle(residual.reshape(ny, nx, 3)).reshape(-1, 3)
+        errors.append(np.abs(e - exact).max() / np.abs(exact).max())
+        assert np.all(e[~free] == 0.0)
+    rates = np.array(errors[1:]) / errors[:-1]
+    assert errors[0] < 0.1 and rates.max() < 0.3, errors
+    assert errors[-1] < 1e-5
+
+
+def test_a_grid_of_at_most_64_nodes_is_solved_exactly(f64):
+    dense, weights, free = random_grid_matrix(8, 7, pinned=[(3, 3)])
+    solver = mg.GridMultigrid(7, 8, PROVOT)
+    assert solver.levels == 1
+    solver.set_matrix(weights)
+    rhs = np.random.default_rng(2).normal(size=(56, 3)) * free[:, None]
+    e = solver.vcycle(rhs.reshape(8, 7, 3)).reshape(-1, 3)
+    assert np.allclose(dense @ e, rhs, atol=1e-12)
+
+
+def test_two_level_cycle_is_smoothing_coarse_correction_smoothing(f64):
+    """On a grid whose coarse level is the coarsest (35 nodes), in dense NumPy:
+    e1 = omega D^-1 r, e2 = e1 + P A_c^-1 P^T (r - A e1), B r = e2 + omega D^-1 (r - A e2);
+    B is symmetric."""
+    ny, nx = 13, 9
+    dense, weights, free = random_grid_matrix(ny, nx, pinned=[(0, 0), (12, 4)], seed=3)
+    solver = mg.GridMultigrid(nx, ny, PROVOT)
+    assert solver.shapes == [(13, 9), (7, 5)]
+    solver.set_matrix(weights)
+    p = np.kron(hat_prolongation(ny), hat_prolongation(nx)) * free[:, None]
+    coarse = p.T @ dense @ p
+    smoother = solver.omega[0] * np.where(free, 1.0 / np.where(free, np.diag(dense), 1.0), 0.0)
+
+    def cycle(r):
+        e = smoother[:, None] * r
+        e = e + p @ np.linalg.solve(coarse, p.T @ (r - dense @ e))
+        return e + smoother[:, None] * (r - dense @ e)
+    rng = np.random.default_rng(4)
+    rhs, other = rng.normal(size=(2, ny * nx, 3)) * free[:, None]
+    for r in (rhs, other):
+        expected = cycle(r)
+        got = solver.vcycle(r.reshape(ny, nx, 3)).reshape(-1, 3)
+        assert np.allclose(got, expected, rtol=1e-10, atol=1e-12 * np.abs(expected).max())
+    assert np.isclose(np.sum(rhs * solver.vcycle(other.reshape(ny, nx, 3)).reshape(-1, 3)),
+                      np.sum(other * solver.vcycle(rhs.reshape(ny, nx, 3)).reshape(-1, 3)),
+                      rtol=1e-10)
