@@ -43,3 +43,17 @@ def energy_gradient(sim, x0, term, entries=None, h=1e-6):
         grad[p, c] = (e[0] - e[1]) / (2 * h)
     sim.set_state(positions=x0)
     return grad
+
+
+def numpy_forces(scene, x, v):
+    """Independent reference: gravity, drag and the lecture's spring + axial damping force."""
+    sp = scene.springs
+    f = scene.masses[:, None] * scene.gravity - scene.air_drag * v
+    for (i, j), ks, kd, l0 in zip(sp["pairs"], sp["stiffness"], sp["damping"], sp["rest_length"]):
+        d = x[i] - x[j]
+        length = np.linalg.norm(d)
+        n = d / length
+        fi = -ks * (length - l0) * n - kd * np.dot(v[i] - v[j], n) * n
+        f[i] += fi
+        f[j] -= fi
+    return f

@@ -3,21 +3,7 @@ import numpy as np
 import pytest
 
 import tcloth
-from conftest import energy_gradient, random_network
-
-
-def numpy_forces(scene, x, v):
-    """Independent reference: gravity, drag and the lecture's spring + axial damping force."""
-    sp = scene.springs
-    f = scene.masses[:, None] * scene.gravity - scene.air_drag * v
-    for (i, j), ks, kd, l0 in zip(sp["pairs"], sp["stiffness"], sp["damping"], sp["rest_length"]):
-        d = x[i] - x[j]
-        length = np.linalg.norm(d)
-        n = d / length
-        fi = -ks * (length - l0) * n - kd * np.dot(v[i] - v[j], n) * n
-        f[i] += fi
-        f[j] -= fi
-    return f
+from conftest import energy_gradient, numpy_forces, random_network
 
 
 def test_spring_force_is_minus_energy_gradient(f64):

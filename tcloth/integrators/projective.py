@@ -4,30 +4,56 @@ O'Brien & Kavan 2013, "Fast Simulation of Mass-Spring Systems".
 A backward Euler step minimises 1/(2h^2) |x - y|_M^2 + sum_s k_s/2 |x_i - x_j - d_s|^2
 over positions x and spring directions d_s with |d_s| = l0_s, alternating
   local:  d_s = l0_s (x_i - x_j) / |x_i - x_j|            (every spring in parallel)
-  global: (M/h^2 + c/h + L) x = M/h^2 y + c/h x0 + J d     (one constant matrix)
-with y = x0 + h v0 + h^2 M^-1 f_ext: gravity, wind and attraction enter explicitly at the
-start of the step, air drag c implicitly. L = sum_s k_s A_s A_s^T is constant, so its
-Jacobi preconditioner is built once per scene; each global solve is warm-started CG with
-matrix products gathered per particle (no atomics).
-Spring damping k_d enters as the constant Laplacian term k_d/h A_s A_s^T (damping of the
-relative velocity of the two ends in all directions, a simplification of the axial
-damping of the other integrators, which keeps the matrix constant). It acts like a viscous
-medium: on a damped swinging cloth it is 30 times further from the true motion than
-backward Euler, whereas with k_d = 0 the two agree (docs/benchmarks.md). Prefer air drag
-or backward_euler where spring damping matters.
-Colliders act after the solve, as in position-based schemes: a particle deeper than the
-collider's thickness is put back on the offset surface, its inward normal velocity removed,
-and its tangential velocity reduced by mu times that normal velocity change (Coulomb),
-relative to the collider's motion. Pinned particles follow x0 + h v0.
+  global: A x = M/h^2 y + J d,  A = M/h^2 + sum_s k_s A_s A_s^T   (one constant matrix)
+with y = x0 + h v0 + h^2 M^-1 f_ext. Subtracting A x_k from both sides, the global step is
+x_{k+1} = x_k + A^-1 g(x_k) with g the step's force residual
+
+    g(x) = M/h^2 (x0 + h v0 - x) + f(x, (x - x0) / h),
+
+f the springs' forces -k_s (|x_ij| - l0) d (the local step and J d - sum k_s A_s A_s^T x
+together are exactly these), gravity and the other forces: Liu's iteration is a
+quasi-Newton method with the constant matrix A in place of the Hessian. That is how it
+runs here: the forces come from ``compute_forces`` at each iterate (gravity, air drag,
+springs with their axial damping k_d (v_ij . d) d, wind and attraction; colliders are
+left out), and A carries their constant parts, M/h^2 + c/h + sum_s (k_s + k_d/h)
+A_s A_s^T (k_d/h A_s A_s^T bounds the axial damping's Jacobian: d d^T <= I). The fixed
+point is the backward Euler step with axial spring damping, so damped motion is as
+accurate as backward Euler's (Liu's paper damps only through the medium).
+
+The global solve, A is constant per scene and dt:
+  - a scene that is one cloth grid and nothing else: one geometric multigrid V-cycle per
+    iteration (``multigrid.py``; the coarse levels are Galerkin products of A, built once
+    per scene and dt), in one kernel launch with the force residual and the update;
+  - any other scene: conjugate gradients with A's Jacobi preconditioner, each solve to
+    cg_tol relative to |g|.
+Colliders act after the iterations, as in position-based schemes: a particle deeper than
+the collider's thickness is put back on the offset surface, its inward normal velocity
+removed, and its tangential velocity reduced by mu times that normal velocity change
+(Coulomb), relative to the collider's motion. Pinned particles follow x0 + h v0.
 """
+import numpy as np
 import taichi as ti
 
 from .. import runtime
 from ..colliders import signed_distance
-from ..forces import eval_attraction, eval_wind
+from ..errors import SceneError
+from ..forces import (OWNED, add_field_forces, compute_forces, grid_spring_sum,
+                      owned_grid_springs)
 from ..runtime import serial
 from . import linalg
 from .base import Integrator
+from .multigrid import GridMultigrid
+
+
+def grid_stencil(families):
+    """The offsets (di, dj) a Provot grid's matrix couples: itself and both ends of each
+    owned spring of the families present."""
+    stencil = [(0, 0)]
+    for fam, present in enumerate(families):
+        if present:
+            for di, dj in OWNED[fam]:
+                stencil += [(di, dj), (-di, -dj)]
+    return tuple(stencil)
 
 
 @ti.data_oriented
@@ -35,117 +61,201 @@ class Projective(Integrator):
     """Liu et al. 2013 local/global solver. Options (defaults):
 
     iterations (10): local/global iterations per step.
-    cg_tol (1e-3), cg_max_iterations (200): each global solve, warm-started from the
-        previous iterate, stops at cg_tol times its starting residual. cg_max_iterations=10
-        is about 4x cheaper and as accurate on the benchmark cloth, but leaves light stiff
-        cloth jittering on colliders (docs/implicit.md).
-    After each step ``stats`` holds iterations and cg_iterations (total).
+    linear_solver ("auto"): "multigrid" (one V-cycle per global solve; only for a scene
+        that is a single cloth grid, its default), "cg" (conjugate gradients, the default
+        for every other scene).
+    cg_tol (1e-3), cg_max_iterations (200): each CG global solve stops at cg_tol times
+        |g| or after cg_max_iterations.
+    After each step ``stats`` holds iterations, cg_iterations (total, 0 with multigrid)
+    and residual: |g| at the last iteration relative to |g| at the first (how far the
+    iterations got).
     """
     name = "projective"
-    defaults = {"iterations": 10, "cg_tol": 1e-3, "cg_max_iterations": 200}
+    defaults = {"iterations": 10, "linear_solver": "auto", "cg_tol": 1e-3,
+                "cg_max_iterations": 200}
 
     def __init__(self, model, **options):
         super().__init__(model, **options)
+        solver = self.options["linear_solver"]
+        grid = self._single_grid(model)
+        if solver not in ("auto", "multigrid", "cg"):
+            raise SceneError("linear_solver must be 'auto', 'multigrid' or 'cg' "
+                             f"(got {solver!r})")
+        if solver == "multigrid" and grid is None:
+            raise SceneError("linear_solver='multigrid' needs a scene that is one cloth grid "
+                             "and nothing else (no other particles or springs)")
+        self.grid = grid if solver in ("auto", "multigrid") else None
         # the model's fields, read by the kernels without being passed (Python launch time)
         self.mass, self.inv_mass, self.params = model.mass, model.inv_mass, model.params
-        self.rest, self.ks, self.kd = model.spring_rest, model.spring_ks, model.spring_kd
         n, real = model.particle_count, runtime.real()
-        self.y, self.x0, self.f_ext, self.b0 = (ti.Vector.field(3, real, shape=n)
-                                                for _ in range(4))
-        self.adj_start, self.adj = model.adjacency()
-        # per adjacency entry: the matrix weight k_s + k_d/h and k_s l0 of its spring
-        self.weight, self.k_rest = (ti.field(real, shape=self.adj.shape[0]) for _ in range(2))
-        self.diag, self.precond = (ti.field(real, shape=n) for _ in range(2))
-        self.solver = linalg.PCG(n, self.diag, self.weight, self.adj_start, self.adj,
-                                 self.precond, model.inv_mass)
+        self.x0, self.x_hat, self.f = (ti.Vector.field(3, real, shape=n) for _ in range(3))
+        self.residual_sq = ti.field(ti.f64, shape=())
+        self.field_forces = model.wind is not None or model.attraction is not None
+        if self.grid is not None:
+            self.grid_reals, self.grid_forces = model.grid_reals, model.grid_forces
+            self.mg = GridMultigrid(self.grid.nx, self.grid.ny,
+                                    grid_stencil(self.grid.families))
+        else:
+            self.kd = model.spring_kd
+            self.adj_start, self.adj = model.adjacency()
+            self.weight = ti.field(real, shape=self.adj.shape[0])
+            self.diag, self.precond = (ti.field(real, shape=n) for _ in range(2))
+            self.solver = linalg.PCG(n, self.diag, self.weight, self.adj_start, self.adj,
+                                     self.precond, model.inv_mass)
         self.stats = {}
         self._h = None
 
+    @staticmethod
+    def _single_grid(model):
+        """The model's cloth grid when it is the whole scene, else None."""
+        if len(model.grids) == 1 and model.list_spring_count == 0:
+            g = model.grids[0]
+            if g.offset == 0 and g.nx * g.ny == model.particle_count:
+                return g
+        return None
+
     def simulate(self, model, state_in, state_out, dt):
-        h = dt
+        h, t1 = dt, state_in.t + dt
         if self._h != h:
-            self._build_matrix(h)
+            self._build_matrix(model, h)
             self._h = h
-        self.f_ext.fill(0)
-        if model.wind is not None:
-            eval_wind(state_in.x, state_in.v, model.triangles, model.wind_params, state_in.t,
-                      self.f_ext)
-        if model.attraction is not None:
-            eval_attraction(state_in.x, model.mass, *model.attraction, self.f_ext)
-        self._predict(state_in.x, state_in.v, h)
-        cg_total = 0
+        x, v = state_out.x, state_out.v
+        self._begin(state_in.x, state_in.v, h, x, v)
+        cg_total, first, last = 0, None, None
         for _ in range(self.options["iterations"]):
-            self._local_global_rhs()
-            iters, _ = self.solver.solve(self.options["cg_tol"],
-                                         self.options["cg_max_iterations"], warm_start=True)
-            cg_total += iters
-        self._finish(1.0 / h, state_out.x, state_out.v)
+            if self.grid is not None:
+                if self.field_forces:
+                    self.f.fill(0)
+                    add_field_forces(model, x, v, self.f, t1)
+                last = self._grid_iteration(x, v, h)
+            else:
+                compute_forces(model, x, v, self.f, t1, contacts=False)
+                last = self._residual(x, h)
+                if last > 0.0:
+                    iters, _ = self.solver.solve(self.options["cg_tol"],
+                                                 self.options["cg_max_iterations"])
+                    cg_total += iters
+                    self._update(x, v, h)
+            first = last if first is None else first
         if model.collider_count:
-            self._collide(state_out.x, state_out.v, model.inv_mass, model.collider_records,
-                          model.collider_ranges, state_in.t + h, h)
-        state_out.t = state_in.t + h
-        self.stats = {"iterations": self.options["iterations"], "cg_iterations": cg_total}
+            self._collide(x, v, model.inv_mass, model.collider_records,
+                          model.collider_ranges, t1, h)
+        state_out.t = t1
+        self.stats = {"iterations": self.options["iterations"], "cg_iterations": cg_total,
+                      "residual": float(np.sqrt(last / first)) if first else 0.0}
+
+    # -- the constant matrix --------------------------------------------------------------
+    def _build_matrix(self, model, h):
+        if self.grid is not None:
+            self.mg.set_matrix(self._grid_weights(model, h))
+        else:
+            self._build_adjacency_matrix(h, model.spring_ks)
+
+    def _grid_weights(self, model, h):
+        """A as stencil weights (ny, nx, len(stencil)) on the grid, pinned particles'
+        rows and columns 0."""
+        g = self.grid
+        stencil = self.mg.stencil
+        slot = {offset: k for k, offset in enumerate(stencil)}
+        slot_of = np.full(25, -1, dtype=np.int64)     # (di + 2) * 5 + dj + 2 -> slot
+        for (di, dj), k in slot.items():
+            slot_of[(di + 2) * 5 + dj + 2] = k
+        ns = model.spring_count
+        pairs = model.spring_pairs.to_numpy()[:ns].astype(np.int64)
+        w = model.spring_ks.to_numpy()[:ns] + model.spring_kd.to_numpy()[:ns] / h
+        ja, ia = np.divmod(pairs[:, 0], g.nx)
+        jb, ib = np.divmod(pairs[:, 1], g.nx)
+        weights = np.zeros((g.ny, g.nx, len(stencil)))
+        diag = (model.mass.to_numpy() / h ** 2 + model.params[3] / h).reshape(g.ny, g.nx)
+        for (j, i), (dj, di) in (((ja, ia), (jb - ja, ib - ia)), ((jb, ib), (ja - jb, ia - ib))):
+            k = slot_of[(di + 2) * 5 + dj + 2]
+            np.add.at(weights, (j, i, k), -w)
+            np.add.at(diag, (j, i), w)
+        free = (model.inv_mass.to_numpy() > 0).reshape(g.ny, g.nx)
+        padded = np.pad(free, 2)
+        for k, (di, dj) in enumerate(stencil):
+            weights[..., k] *= free & padded[2 + dj:2 + dj + g.ny, 2 + di:2 + di + g.nx]
+        weights[..., slot[(0, 0)]] = np.where(free, diag, 0.0)
+        return weights
 
     @ti.kernel
-    def _predict(self, x: ti.template(), v: ti.template(), h: float):
-        """y = x0 + h v0 + h^2 (g + f_ext / m) (pinned: x0 + h v0) and the constant part of
-        the global right-hand side, b0 = M/h^2 y + c/h x0 + k_d/h L x0. The iterations
-        start from x0 + h v0, so that a cloth at rest in equilibrium is a fixed point
-        whatever the iteration count."""
-        gravity = ti.Vector([self.params[0], self.params[1], self.params[2]])
-        ti.loop_config(serialize=ti.static(serial(x)))
-        for p in range(x.shape[0]):
-            self.x0[p] = x[p]
-            self.solver.x[p] = x[p] + h * v[p]
-            self.y[p] = x[p] + h * v[p]
-            if self.inv_mass[p] > 0.0:
-                self.y[p] += h * h * (gravity + self.inv_mass[p] * self.f_ext[p])
-        ti.loop_config(serialize=ti.static(serial(x)))
-        for p in range(x.shape[0]):
-            b = self.mass[p] / (h * h) * self.y[p] + self.params[3] / h * self.x0[p]
-            for k in range(self.adj_start[p], self.adj_start[p + 1]):
-                s, q = self.adj[k][0], self.adj[k][1]
-                b += self.kd[s] / h * (self.x0[p] - self.x0[q])
-            self.b0[p] = b
-
-    @ti.kernel
-    def _local_global_rhs(self):
-        """Local step and global right-hand side in one gather: each spring's d_s, the
-        nearest vector of rest length l0 (x_i - x_j) / |x_i - x_j|, seen from both ends,
-        b = b0 + J d."""
-        x = ti.static(self.solver.x)
-        ti.loop_config(serialize=ti.static(serial(x)))
-        for p in range(x.shape[0]):
-            b = self.b0[p]
-            xp = x[p]
-            for k in range(self.adj_start[p], self.adj_start[p + 1]):
-                e = xp - x[self.adj[k][1]]
-                b += self.k_rest[k] / ti.max(e.norm(), 1e-30) * e
-            self.solver.b[p] = b
-
-    @ti.kernel
-    def _build_matrix(self, h: float):
-        """The constant global matrix M/h^2 + c/h + sum_s (k_s + k_d/h) A_s A_s^T as
-        per-particle diagonal and per-entry weights, and its inverse diagonal (Jacobi),
-        built once per scene and dt."""
+    def _build_adjacency_matrix(self, h: float, ks: ti.template()):
+        """A as per-particle diagonal and per-entry weights, and its inverse diagonal."""
         ti.loop_config(serialize=ti.static(serial(self.diag)))
         for p in range(self.diag.shape[0]):
             self.diag[p] = self.mass[p] / (h * h) + self.params[3] / h
             total = self.diag[p]
             for k in range(self.adj_start[p], self.adj_start[p + 1]):
                 s = self.adj[k][0]
-                self.weight[k] = self.ks[s] + self.kd[s] / h
-                self.k_rest[k] = self.ks[s] * self.rest[s]
+                self.weight[k] = ks[s] + self.kd[s] / h
                 total += self.weight[k]
             self.precond[p] = 1.0 / total
 
+    # -- the iterations -------------------------------------------------------------------
     @ti.kernel
-    def _finish(self, inv_h: float, x: ti.template(), v: ti.template()):
-        """The step's positions and velocities (x - x0) / h."""
+    def _begin(self, x_in: ti.template(), v_in: ti.template(), h: float, x: ti.template(),
+               v: ti.template()):
+        """x0, the inertial prediction x0 + h v0, and the first iterate: the prediction
+        (a cloth at rest in equilibrium is then a fixed point whatever the iterations)."""
         ti.loop_config(serialize=ti.static(serial(x)))
         for p in range(x.shape[0]):
-            x[p] = self.solver.x[p]
-            v[p] = (x[p] - self.x0[p]) * inv_h
+            self.x0[p] = x_in[p]
+            self.x_hat[p] = x_in[p] + h * v_in[p]
+            x[p] = self.x_hat[p]
+            v[p] = v_in[p]
+
+    @ti.func
+    def _force_residual(self, x, p, h):
+        """g_p = m/h^2 (x0 + h v0 - x) + f (0 on pinned particles)."""
+        g = ti.Vector.zero(float, 3)
+        if self.inv_mass[p] > 0.0:
+            g = self.mass[p] / (h * h) * (self.x_hat[p] - x[p]) + self.f[p]
+        return g
+
+    @ti.kernel
+    def _grid_iteration(self, x: ti.template(), v: ti.template(), h: float) -> ti.f64:
+        """One iteration on the grid, one launch: the spring stencil (``forces.py``),
+        gravity, drag and the field forces in self.f into the force residual g, a V-cycle,
+        the update x += B g, v = (x - x0) / h. Returns |g|^2."""
+        ny, nx = ti.static(self.mg.shapes[0])
+        families = ti.static(self.grid.families)
+        owned_grid_springs(x, v, 0, nx, ny, self.grid_reals[0], families, self.grid_forces)
+        gravity = ti.Vector([self.params[0], self.params[1], self.params[2]])
+        self.residual_sq[None] = 0.0
+        ti.loop_config(serialize=ti.static(self.mg.serial))
+        for j, i in ti.ndrange(ny, nx):
+            p = j * nx + i
+            self.f[p] = (self.mass[p] * gravity - self.params[3] * v[p]
+                         + grid_spring_sum(0, nx, ny, i, j, families, self.grid_forces)
+                         + (self.f[p] if ti.static(self.field_forces) else 0.0))
+            g = self._force_residual(x, p, h)
+            self.mg.set_rhs(j, i, g)
+            self.residual_sq[None] += ti.cast(g.dot(g), ti.f64)
+        self.mg.cycle()
+        ti.loop_config(serialize=ti.static(self.mg.serial))
+        for j, i in ti.ndrange(ny, nx):
+            p = j * nx + i
+            x[p] += self.mg.result(j, i)
+            v[p] = (x[p] - self.x0[p]) / h
+        return self.residual_sq[None]
+
+    @ti.kernel
+    def _residual(self, x: ti.template(), h: float) -> ti.f64:
+        """The force residual into the CG right-hand side. Returns |g|^2."""
+        total = ti.cast(0.0, ti.f64)
+        ti.loop_config(serialize=ti.static(serial(x)))
+        for p in range(x.shape[0]):
+            g = self._force_residual(x, p, h)
+            self.solver.b[p] = g
+            total += ti.cast(g.dot(g), ti.f64)
+        return total
+
+    @ti.kernel
+    def _update(self, x: ti.template(), v: ti.template(), h: float):
+        ti.loop_config(serialize=ti.static(serial(x)))
+        for p in range(x.shape[0]):
+            x[p] += self.solver.x[p]
+            v[p] = (x[p] - self.x0[p]) / h
 
     @ti.kernel
     def _collide(self, x: ti.template(), v: ti.template(), inv_mass: ti.template(),
