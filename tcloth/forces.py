@@ -208,9 +208,10 @@ def eval_attraction(x: ti.template(), mass: ti.template(), G: float, softening: 
         f_out[i] += G * mass[i] * acc
 
 
-def compute_forces(model, x, v, f_out, t=0.0, contacts=True):
+def compute_forces(model, x, v, f_out, t=0.0, contacts=True, field=True):
     """Total force on every particle at positions x, velocities v and time t, into f_out;
-    contacts=False leaves out the colliders' penalty forces."""
+    contacts=False leaves out the colliders' penalty forces, field=False wind and
+    attraction."""
     if not model.grid_sets_forces:
         init_forces(v, model.mass, model.params, f_out)
     for k in model.spring_grids:
@@ -221,7 +222,8 @@ def compute_forces(model, x, v, f_out, t=0.0, contacts=True):
     if model.list_spring_count:
         eval_springs(x, v, model.spring_pairs, model.spring_ks, model.spring_kd,
                      model.spring_rest, model.list_spring_count, f_out)
-    add_field_forces(model, x, v, f_out, t)
+    if field:
+        add_field_forces(model, x, v, f_out, t)
     if contacts and model.collider_count:
         collide(x, v, model.mass, model.inv_mass, model.collider_records, model.collider_ranges,
                 t, f_out)

@@ -6,18 +6,18 @@ particle with the ends of its springs: on a Provot grid, a stencil of 13 points 
 weights, with pinned particles filtered out (their rows and columns are 0, so they never
 move). Coarser levels halve the grid in both directions (nodes 2I of the finer level)
 with bilinear prolongation P (an even-sized grid gets a coarse node one past its end)
-and Galerkin operators A_c = P^T A P, which stay within a 5 x 5 stencil; they are found
-once per matrix by probing: P^T A P applied to 25 comb vectors, each hitting every
-coarse node's stencil at one offset. The coarsest level (64 nodes or fewer) is solved
-exactly with its dense inverse.
+and Galerkin operators A_c = P^T A P, which stay within a 5 x 5 stencil (21 points for
+Provot cloth); they are found once per matrix by probing: P^T A P applied to 25 comb
+vectors, each hitting every coarse node's stencil at one offset. The coarsest level
+(64 nodes or fewer) is solved exactly with its dense inverse.
 
-One V-cycle (weighted Jacobi smoothing, one sweep before and one after, weights 4/3 over
-a Gershgorin bound on the spectrum of D^-1 A) is a symmetric positive-definite
+One V-cycle (one weighted Jacobi sweep before and one after each coarse correction,
+weight 4/3 over the largest eigenvalue of D^-1 A) is a symmetric positive-definite
 approximation B of A^-1 with the spectrum of B A in (0, 1]. Vectors are vec3 (the matrix
 is the same for x, y and z) in fields padded by two nodes of zeros on every side, so
 that stencils need no bounds tests. The cycle's loops are ``ti.func`` bodies meant to be
-called from a kernel, so that a whole cycle is one launch; ``precondition`` is such a
-kernel for tests and tools.
+called from a kernel, so that a whole cycle is one launch; ``vcycle`` runs one from
+NumPy for tests and tools.
 """
 import numpy as np
 import taichi as ti
@@ -25,7 +25,6 @@ import taichi as ti
 from .. import runtime
 
 PAD = 2
-COARSE_STENCIL = tuple((di, dj) for dj in range(-2, 3) for di in range(-2, 3))
 COARSEST_NODES = 64
 
 
@@ -55,10 +54,22 @@ def apply_stencil(weights, stencil, v):
     return out
 
 
+def coarse_stencil(stencil):
+    """The offsets P^T A P can couple when A couples ``stencil``: coarse nodes I, K meet
+    where fine nodes 2I + u, 2K + w (|u|, |w| <= 1 per axis) are a stencil offset apart,
+    so 2 (K - I) = s + (u - w). Within 5 x 5 while the stencil reaches at most 2; the
+    Provot stencil and its coarse ones give 21 (no corners: no offset reaches 2 on both
+    axes)."""
+    offsets = {(di, dj) for si, sj in stencil for di in range(-2, 3) for dj in range(-2, 3)
+               if abs(2 * di - si) <= 2 and abs(2 * dj - sj) <= 2}
+    return tuple(sorted(offsets, key=lambda o: (o[1], o[0])))
+
+
 def galerkin(weights, stencil, py, px):
-    """P^T A P as (nyc, nxc, 25) weights over COARSE_STENCIL, P = py (x) px."""
+    """P^T A P, P = py (x) px, as (nyc, nxc, k) weights over coarse_stencil(stencil):
+    probed with 25 combs of coarse nodes 5 apart, each node's stencil met once per comb."""
     nyc, nxc = py.shape[1], px.shape[1]
-    out = np.zeros((nyc, nxc, len(COARSE_STENCIL)))
+    full = np.zeros((nyc, nxc, 5, 5))
     jj, ii = np.meshgrid(np.arange(nyc), np.arange(nxc), indexing="ij")
     for cj in range(5):
         for ci in range(5):
@@ -68,11 +79,13 @@ def galerkin(weights, stencil, py, px):
             # the comb node within two of (J, I) is at (cj - J) mod 5 - 2 ... + 2
             dj = (cj - jj + 2) % 5 - 2
             di = (ci - ii + 2) % 5 - 2
-            out[jj, ii, (dj + 2) * 5 + di + 2] = column
-    inside = np.ones((nyc, nxc, len(COARSE_STENCIL)), dtype=bool)
-    for k, (di, dj) in enumerate(COARSE_STENCIL):
-        inside[..., k] = ((0 <= jj + dj) & (jj + dj < nyc) & (0 <= ii + di) & (ii + di < nxc))
-    return np.where(inside, out, 0.0)
+            full[jj, ii, dj + 2, di + 2] = column
+    offsets = coarse_stencil(stencil)
+    out = np.zeros((nyc, nxc, len(offsets)))
+    for k, (di, dj) in enumerate(offsets):
+        inside = (0 <= jj + dj) & (jj + dj < nyc) & (0 <= ii + di) & (ii + di < nxc)
+        out[..., k] = np.where(inside, full[..., dj + 2, di + 2], 0.0)
+    return out
 
 
 def dense_matrix(weights, stencil):
@@ -114,7 +127,9 @@ class GridMultigrid:
         while self.shapes[-1][0] * self.shapes[-1][1] > COARSEST_NODES:
             cy, cx = self.shapes[-1]
             self.shapes.append((coarse_size(cy), coarse_size(cx)))
-        self.stencils = [self.stencil] + [COARSE_STENCIL] * (len(self.shapes) - 1)
+        self.stencils = [self.stencil]
+        for _ in self.shapes[1:]:
+            self.stencils.append(coarse_stencil(self.stencils[-1]))
         self.serial = runtime.serial_count(nx * ny)
 
         def padded():

@@ -8,14 +8,14 @@ over positions x and spring directions d_s with |d_s| = l0_s, alternating
 with y = x0 + h v0 + h^2 M^-1 f_ext. Subtracting A x_k from both sides, the global step is
 x_{k+1} = x_k + A^-1 g(x_k) with g the step's force residual
 
-    g(x) = M/h^2 (x0 + h v0 - x) + f(x, (x - x0) / h),
+    g(x) = M/h^2 (y - x) + f(x, (x - x0) / h),
 
 f the springs' forces -k_s (|x_ij| - l0) d (the local step and J d - sum k_s A_s A_s^T x
-together are exactly these), gravity and the other forces: Liu's iteration is a
-quasi-Newton method with the constant matrix A in place of the Hessian. That is how it
-runs here: the forces come from ``compute_forces`` at each iterate (gravity, air drag,
-springs with their axial damping k_d (v_ij . d) d, wind and attraction; colliders are
-left out), and A carries their constant parts, M/h^2 + c/h + sum_s (k_s + k_d/h)
+together are exactly these) and the others: Liu's iteration is a quasi-Newton method
+with the constant matrix A in place of the Hessian. That is how it runs here: f is the
+ordinary force evaluation at each iterate (gravity, air drag, springs with their axial
+damping k_d (v_ij . d) d), wind and attraction enter y at the start of the step as in
+the paper, and A carries the constant parts, M/h^2 + c/h + sum_s (k_s + k_d/h)
 A_s A_s^T (k_d/h A_s A_s^T bounds the axial damping's Jacobian: d d^T <= I). The fixed
 point is the backward Euler step with axial spring damping, so damped motion is as
 accurate as backward Euler's (Liu's paper damps only through the medium).
@@ -88,7 +88,7 @@ class Projective(Integrator):
         # the model's fields, read by the kernels without being passed (Python launch time)
         self.mass, self.inv_mass, self.params = model.mass, model.inv_mass, model.params
         n, real = model.particle_count, runtime.real()
-        self.x0, self.x_hat, self.f = (ti.Vector.field(3, real, shape=n) for _ in range(3))
+        self.x0, self.y, self.f = (ti.Vector.field(3, real, shape=n) for _ in range(3))
         self.residual_sq = ti.field(ti.f64, shape=())
         self.field_forces = model.wind is not None or model.attraction is not None
         if self.grid is not None:
@@ -96,7 +96,7 @@ class Projective(Integrator):
             self.mg = GridMultigrid(self.grid.nx, self.grid.ny,
                                     grid_stencil(self.grid.families))
         else:
-            self.kd = model.spring_kd
+            self.ks, self.kd = model.spring_ks, model.spring_kd
             self.adj_start, self.adj = model.adjacency()
             self.weight = ti.field(real, shape=self.adj.shape[0])
             self.diag, self.precond = (ti.field(real, shape=n) for _ in range(2))
@@ -120,16 +120,16 @@ class Projective(Integrator):
             self._build_matrix(model, h)
             self._h = h
         x, v = state_out.x, state_out.v
+        self.f.fill(0)
+        if self.field_forces:
+            add_field_forces(model, state_in.x, state_in.v, self.f, state_in.t)
         self._begin(state_in.x, state_in.v, h, x, v)
         cg_total, first, last = 0, None, None
         for _ in range(self.options["iterations"]):
             if self.grid is not None:
-                if self.field_forces:
-                    self.f.fill(0)
-                    add_field_forces(model, x, v, self.f, t1)
                 last = self._grid_iteration(x, v, h)
             else:
-                compute_forces(model, x, v, self.f, t1, contacts=False)
+                compute_forces(model, x, v, self.f, t1, contacts=False, field=False)
                 last = self._residual(x, h)
                 if last > 0.0:
                     iters, _ = self.solver.solve(self.options["cg_tol"],
@@ -149,7 +149,7 @@ class Projective(Integrator):
         if self.grid is not None:
             self.mg.set_matrix(self._grid_weights(model, h))
         else:
-            self._build_adjacency_matrix(h, model.spring_ks)
+            self._build_adjacency_matrix(h)
 
     def _grid_weights(self, model, h):
         """A as stencil weights (ny, nx, len(stencil)) on the grid, pinned particles'
@@ -179,7 +179,7 @@ class Projective(Integrator):
         return weights
 
     @ti.kernel
-    def _build_adjacency_matrix(self, h: float, ks: ti.template()):
+    def _build_adjacency_matrix(self, h: float):
         """A as per-particle diagonal and per-entry weights, and its inverse diagonal."""
         ti.loop_config(serialize=ti.static(serial(self.diag)))
         for p in range(self.diag.shape[0]):
@@ -187,7 +187,7 @@ class Projective(Integrator):
             total = self.diag[p]
             for k in range(self.adj_start[p], self.adj_start[p + 1]):
                 s = self.adj[k][0]
-                self.weight[k] = ks[s] + self.kd[s] / h
+                self.weight[k] = self.ks[s] + self.kd[s] / h
                 total += self.weight[k]
             self.precond[p] = 1.0 / total
 
@@ -195,28 +195,30 @@ class Projective(Integrator):
     @ti.kernel
     def _begin(self, x_in: ti.template(), v_in: ti.template(), h: float, x: ti.template(),
                v: ti.template()):
-        """x0, the inertial prediction x0 + h v0, and the first iterate: the prediction
-        (a cloth at rest in equilibrium is then a fixed point whatever the iterations)."""
+        """x0; Liu's y = x0 + h v0 + h^2 M^-1 f with f the wind and attraction in self.f
+        (evaluated at the start of the step; pinned: x0 + h v0); the first iterate
+        x0 + h v0 (a cloth at rest in equilibrium is then a fixed point whatever the
+        iterations)."""
         ti.loop_config(serialize=ti.static(serial(x)))
         for p in range(x.shape[0]):
             self.x0[p] = x_in[p]
-            self.x_hat[p] = x_in[p] + h * v_in[p]
-            x[p] = self.x_hat[p]
+            x[p] = x_in[p] + h * v_in[p]
             v[p] = v_in[p]
+            self.y[p] = x[p] + h * h * self.inv_mass[p] * self.f[p]
 
     @ti.func
-    def _force_residual(self, x, p, h):
-        """g_p = m/h^2 (x0 + h v0 - x) + f (0 on pinned particles)."""
+    def _force_residual(self, x, p, f, h):
+        """g_p = m/h^2 (y - x) + f (0 on pinned particles)."""
         g = ti.Vector.zero(float, 3)
         if self.inv_mass[p] > 0.0:
-            g = self.mass[p] / (h * h) * (self.x_hat[p] - x[p]) + self.f[p]
+            g = self.mass[p] / (h * h) * (self.y[p] - x[p]) + f
         return g
 
     @ti.kernel
     def _grid_iteration(self, x: ti.template(), v: ti.template(), h: float) -> ti.f64:
         """One iteration on the grid, one launch: the spring stencil (``forces.py``),
-        gravity, drag and the field forces in self.f into the force residual g, a V-cycle,
-        the update x += B g, v = (x - x0) / h. Returns |g|^2."""
+        gravity and drag into the force residual g, a V-cycle, the update x += B g,
+        v = (x - x0) / h. Returns |g|^2."""
         ny, nx = ti.static(self.mg.shapes[0])
         families = ti.static(self.grid.families)
         owned_grid_springs(x, v, 0, nx, ny, self.grid_reals[0], families, self.grid_forces)
@@ -225,10 +227,9 @@ class Projective(Integrator):
         ti.loop_config(serialize=ti.static(self.mg.serial))
         for j, i in ti.ndrange(ny, nx):
             p = j * nx + i
-            self.f[p] = (self.mass[p] * gravity - self.params[3] * v[p]
-                         + grid_spring_sum(0, nx, ny, i, j, families, self.grid_forces)
-                         + (self.f[p] if ti.static(self.field_forces) else 0.0))
-            g = self._force_residual(x, p, h)
+            f = (self.mass[p] * gravity - self.params[3] * v[p]
+                 + grid_spring_sum(0, nx, ny, i, j, families, self.grid_forces))
+            g = self._force_residual(x, p, f, h)
             self.mg.set_rhs(j, i, g)
             self.residual_sq[None] += ti.cast(g.dot(g), ti.f64)
         self.mg.cycle()
@@ -245,7 +246,7 @@ class Projective(Integrator):
         total = ti.cast(0.0, ti.f64)
         ti.loop_config(serialize=ti.static(serial(x)))
         for p in range(x.shape[0]):
-            g = self._force_residual(x, p, h)
+            g = self._force_residual(x, p, self.f[p], h)
             self.solver.b[p] = g
             total += ti.cast(g.dot(g), ti.f64)
         return total
