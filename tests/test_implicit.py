@@ -30,8 +30,8 @@ def test_stiff_cloth_explodes_explicitly_but_is_stable_and_dissipative_implicitl
     assert sim.max_strain() < 0.05
     # projective with 10 iterations: unconverged for such stiffness (residual strain holds
     # spring energy), but stable: no blow-up, small strain, energy decaying; on 6 x 6 with
-    # exact global solves, on 16 x 16 with multigrid
-    for n in (6, 16):
+    # exact global solves, at the highest stiffness also on 16 x 16 with multigrid
+    for n in (6, 16) if k > 1e5 else (6,):
         pd = tcloth.Simulator(cloth(k, n=n), "projective", dt=1 / 60)
         pd.step(15)
         e15 = pd.energy()["total"]
@@ -111,24 +111,30 @@ def one_step(scene, x0, v0, integrator, **options):
     return sim
 
 
-@pytest.mark.parametrize("n", [5, 16])       # one exact solve per iteration; multigrid
-def test_projective_converges_to_the_backward_euler_step(f64, n):
-    scene, x0, v0 = swinging(n, kd=0.0)
+def test_projective_converges_to_the_backward_euler_step(f64):
+    """On a 16 x 16 cloth (three multigrid levels); the 5 x 5 damped case below has exact
+    global solves."""
+    scene, x0, v0 = swinging(16, kd=0.0)
     be = one_step(scene, x0, v0, "backward_euler", newton_tol=1e-12, cg_tol=1e-13,
                   newton_iterations=60)
     moved = np.abs(be.positions() - x0).max()
-    runs = {it: one_step(scene, x0, v0, "projective", iterations=it) for it in (10, 100, 1000)}
-    gaps = [np.abs(pd.positions() - be.positions()).max() for pd in runs.values()]
-    # local/global converges linearly, slower on the larger cloth
+    pd = tcloth.Simulator(scene(), "projective", dt=1 / 60)
+    runs = {}
+    for iterations in (10, 100, 1000):          # one simulator (one compile), re-run
+        pd.integrator.options["iterations"] = iterations
+        pd.set_state(positions=x0, velocities=v0)
+        pd.step()
+        runs[iterations] = (pd.positions(), pd.integrator.stats["residual"])
+    gaps = [np.abs(x - be.positions()).max() for x, _ in runs.values()]
+    # local/global converges linearly
     assert gaps[0] > 3 * gaps[1] > 9 * gaps[2]
     assert gaps[2] < 1e-2 * moved
-    assert runs[1000].integrator.stats["residual"] < 1e-2
-    if n > 8:
-        # one V-cycle per global solve lands where exact solves do, within 10 % of the
-        # ten iterations' distance from the converged step
-        exact = one_step(scene, x0, v0, "projective", linear_solver="cg", cg_tol=1e-10,
-                         cg_max_iterations=2000)
-        assert np.abs(runs[10].positions() - exact.positions()).max() < 0.1 * gaps[0]
+    assert runs[1000][1] < 1e-2
+    # one V-cycle per global solve lands where exact solves do, within 10 % of the ten
+    # iterations' distance from the converged step
+    exact = one_step(scene, x0, v0, "projective", linear_solver="cg", cg_tol=1e-10,
+                     cg_max_iterations=2000)
+    assert np.abs(runs[10][0] - exact.positions()).max() < 0.1 * gaps[0]
 
 
 def test_projective_converges_to_backward_euler_with_axial_spring_damping(f64):
@@ -151,8 +157,9 @@ def test_projective_converges_to_backward_euler_with_axial_spring_damping(f64):
 
 def test_projective_grid_kernel_matches_the_general_path(f64):
     """On a grid of at most 64 particles the multigrid cycle is an exact solve, so the
-    fused grid iteration (stencil springs, gravity, drag, wind, attraction) and the
-    general one (compute_forces, CG to 1e-12) must take the same steps."""
+    fused grid iteration (stencil springs, gravity, drag) and the general one
+    (compute_forces, CG to 1e-12) must take the same steps, wind and attraction (in y)
+    included."""
     def scene():
         s = tcloth.Scene(air_drag=0.02)
         s.add_cloth(resolution=(8, 7), size=(0.7, 0.6), structural=(800.0, 0.5),
@@ -195,7 +202,7 @@ def test_projective_keeps_particles_out_of_colliders(f64, n):
     ground = -0.2 if n == 8 else -0.4     # below the sphere: nothing wedged between them
     scene.add_plane((0, ground, 0), (0, 1, 0), friction=0.5, thickness=0.01)
     sim = tcloth.Simulator(scene, "projective", dt=1 / 60)
-    for _ in range(60):
+    for _ in range(60 if n == 8 else 30):
         sim.step()
         x = sim.positions()
         assert np.all(x[:, 1] >= ground + 0.01 - 1e-9)

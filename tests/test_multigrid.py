@@ -49,9 +49,11 @@ def test_coarse_operators_are_the_galerkin_products(ny, nx):
     assert np.array_equal(py, mg.prolongation_1d(ny))
     p = np.kron(py, px)
     coarse = mg.galerkin(weights, PROVOT, py, px)
-    assert np.allclose(mg.dense_matrix(coarse, mg.COARSE_STENCIL), p.T @ dense @ p,
+    assert np.allclose(mg.dense_matrix(coarse, mg.coarse_stencil(PROVOT)), p.T @ dense @ p,
                        rtol=0, atol=1e-10 * np.abs(dense).max())
     assert np.allclose(mg.dense_matrix(weights, PROVOT), dense)
+    assert len(mg.coarse_stencil(PROVOT)) == 21
+    assert mg.coarse_stencil(mg.coarse_stencil(PROVOT)) == mg.coarse_stencil(PROVOT)
 
 
 @pytest.mark.parametrize("ny, nx", [(24, 19), (40, 40)])
