@@ -189,26 +189,22 @@ def test_projective_linear_solver_is_checked():
     tcloth.Simulator(scene, "projective", linear_solver="auto").step()
 
 
-@pytest.mark.parametrize("n", [8, 16])       # exact global solves; multigrid
-def test_projective_keeps_particles_out_of_colliders(f64, n):
-    """A light stiff cloth dropped onto a sphere above the ground: never inside either
-    (projection); the small one comes to rest. (The large one need not: with a stiffness
-    to mass ratio this high, 3600 times m/h^2, ten local/global iterations leave it
-    stretched and moving, whichever global solver.)"""
+def test_projective_keeps_particles_out_of_colliders(f64):
+    """A light stiff cloth dropped onto a sphere resting on the ground: never inside
+    either (projection after the iterations, the same for both global solvers), and it
+    comes to rest."""
     scene = tcloth.Scene()
-    scene.add_cloth(resolution=(n, n), size=(1, 1), center=(0, 0.3, 0), pinned=[],
+    scene.add_cloth(resolution=(8, 8), size=(1, 1), center=(0, 0.3, 0), pinned=[],
                     structural=(1e4, 0.5), shear=(1e3, 0.1), flexion=(100.0, 0.01))
     scene.add_sphere((0, 0, 0), 0.2, friction=0.5, thickness=0.01)
-    ground = -0.2 if n == 8 else -0.4     # below the sphere: nothing wedged between them
-    scene.add_plane((0, ground, 0), (0, 1, 0), friction=0.5, thickness=0.01)
+    scene.add_plane((0, -0.2, 0), (0, 1, 0), friction=0.5, thickness=0.01)
     sim = tcloth.Simulator(scene, "projective", dt=1 / 60)
-    for _ in range(60 if n == 8 else 30):
+    for _ in range(60):
         sim.step()
         x = sim.positions()
-        assert np.all(x[:, 1] >= ground + 0.01 - 1e-9)
+        assert np.all(x[:, 1] >= -0.2 + 0.01 - 1e-9)
         assert np.all(np.linalg.norm(x, axis=1) >= 0.2 + 0.01 - 1e-9)
-    if n == 8:
-        assert sim.energy()["kinetic"] < 1e-3
+    assert sim.energy()["kinetic"] < 1e-3
 
 
 @pytest.mark.parametrize("integrator", ["backward_euler", "projective"])
