@@ -27,14 +27,19 @@ def spring_force(xi, xj, vi, vj, ks, kd, rest):
     return -(ks * (length - rest) + kd * (vi - vj).dot(n)) * n
 
 
+@ti.func
+def body_force(mass, params, v, p):
+    """m g - c v on particle p: gravity and viscous air drag; params = (g_x, g_y, g_z, c)."""
+    return mass[p] * ti.Vector([params[0], params[1], params[2]]) - params[3] * v[p]
+
+
 @ti.kernel
 def init_forces(v: ti.template(), mass: ti.template(), params: ti.template(),
                 f_out: ti.template()):
-    """f = m g - c v: gravity and viscous air drag; params = (g_x, g_y, g_z, c)."""
-    gravity = ti.Vector([params[0], params[1], params[2]])
+    """f = ``body_force`` for every particle."""
     ti.loop_config(serialize=ti.static(serial(f_out)))
     for p in range(f_out.shape[0]):
-        f_out[p] = mass[p] * gravity - params[3] * v[p]
+        f_out[p] = body_force(mass, params, v, p)
 
 
 @ti.kernel
@@ -130,8 +135,7 @@ def _gather_grid(v, offset, nx, ny, i, j, families: ti.template(), mass, params,
     p = offset + j * nx + i
     acc = grid_spring_sum(offset, nx, ny, i, j, families, grid_forces)
     if ti.static(first):
-        gravity = ti.Vector([params[0], params[1], params[2]])
-        f_out[p] = mass[p] * gravity - params[3] * v[p] + acc
+        f_out[p] = body_force(mass, params, v, p) + acc
     else:
         f_out[p] += acc
 

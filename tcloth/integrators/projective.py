@@ -37,8 +37,8 @@ import taichi as ti
 from .. import runtime
 from ..colliders import signed_distance
 from ..errors import SceneError
-from ..forces import (OWNED, add_field_forces, compute_forces, grid_spring_sum,
-                      owned_grid_springs)
+from ..forces import (OWNED, add_field_forces, body_force, compute_forces,
+                      grid_spring_sum, owned_grid_springs)
 from ..runtime import serial
 from . import linalg
 from .base import Integrator
@@ -89,7 +89,6 @@ class Projective(Integrator):
         self.mass, self.inv_mass, self.params = model.mass, model.inv_mass, model.params
         n, real = model.particle_count, runtime.real()
         self.x0, self.y, self.f = (ti.Vector.field(3, real, shape=n) for _ in range(3))
-        self.residual_sq = ti.field(ti.f64, shape=())
         self.field_forces = model.wind is not None or model.attraction is not None
         if self.grid is not None:
             self.grid_reals, self.grid_forces = model.grid_reals, model.grid_forces
@@ -165,17 +164,15 @@ class Projective(Integrator):
         w = model.spring_ks.to_numpy()[:ns] + model.spring_kd.to_numpy()[:ns] / h
         ja, ia = np.divmod(pairs[:, 0], g.nx)
         jb, ib = np.divmod(pairs[:, 1], g.nx)
+        free = model.inv_mass.to_numpy() > 0
+        coupled = w * (free[pairs[:, 0]] & free[pairs[:, 1]])    # 0 towards a pinned end
         weights = np.zeros((g.ny, g.nx, len(stencil)))
         diag = (model.mass.to_numpy() / h ** 2 + model.params[3] / h).reshape(g.ny, g.nx)
         for (j, i), (dj, di) in (((ja, ia), (jb - ja, ib - ia)), ((jb, ib), (ja - jb, ia - ib))):
-            k = slot_of[(di + 2) * 5 + dj + 2]
-            np.add.at(weights, (j, i, k), -w)
+            np.add.at(weights, (j, i, slot_of[(di + 2) * 5 + dj + 2]), -coupled)
             np.add.at(diag, (j, i), w)
-        free = (model.inv_mass.to_numpy() > 0).reshape(g.ny, g.nx)
-        padded = np.pad(free, 2)
-        for k, (di, dj) in enumerate(stencil):
-            weights[..., k] *= free & padded[2 + dj:2 + dj + g.ny, 2 + di:2 + di + g.nx]
-        weights[..., slot[(0, 0)]] = np.where(free, diag, 0.0)
+        weights[..., slot[(0, 0)]] = diag
+        weights[~free.reshape(g.ny, g.nx)] = 0.0
         return weights
 
     @ti.kernel
@@ -222,23 +219,22 @@ class Projective(Integrator):
         ny, nx = ti.static(self.mg.shapes[0])
         families = ti.static(self.grid.families)
         owned_grid_springs(x, v, 0, nx, ny, self.grid_reals[0], families, self.grid_forces)
-        gravity = ti.Vector([self.params[0], self.params[1], self.params[2]])
-        self.residual_sq[None] = 0.0
+        total = ti.cast(0.0, ti.f64)
         ti.loop_config(serialize=ti.static(self.mg.serial))
         for j, i in ti.ndrange(ny, nx):
             p = j * nx + i
-            f = (self.mass[p] * gravity - self.params[3] * v[p]
+            f = (body_force(self.mass, self.params, v, p)
                  + grid_spring_sum(0, nx, ny, i, j, families, self.grid_forces))
             g = self._force_residual(x, p, f, h)
             self.mg.set_rhs(j, i, g)
-            self.residual_sq[None] += ti.cast(g.dot(g), ti.f64)
+            total += ti.cast(g.dot(g), ti.f64)
         self.mg.cycle()
         ti.loop_config(serialize=ti.static(self.mg.serial))
         for j, i in ti.ndrange(ny, nx):
             p = j * nx + i
             x[p] += self.mg.result(j, i)
             v[p] = (x[p] - self.x0[p]) / h
-        return self.residual_sq[None]
+        return total
 
     @ti.kernel
     def _residual(self, x: ti.template(), h: float) -> ti.f64:
