@@ -81,12 +81,8 @@ def _owned_springs_checked(x, v, offset, nx, ny, i, j, g, rest, families: ti.tem
                 force = ti.Vector.zero(float, 3)
                 if ti.static(not checked) or (0 <= ii < nx and 0 <= jj < ny):
                     q = offset + jj * nx + ii
-                    length = rest[fam, 2]
-                    if ti.static(dj == 0):
-                        length = rest[fam, 0]
-                    elif ti.static(di == 0):
-                        length = rest[fam, 1]
-                    force = spring_force(xp, x[q], vp, v[q], g[2 + fam], g[5 + fam], length)
+                    force = spring_force(xp, x[q], vp, v[q], g[2 + fam], g[5 + fam],
+                                         rest_length(rest, di, dj))
                 grid_forces[p, 2 * fam + s] = force
 
 
@@ -108,17 +104,32 @@ def grid_spring_sum(offset, nx, ny, i, j, families: ti.template(), grid_forces):
 
 
 @ti.func
+def grid_rest_lengths(g):
+    """The grid's cell sides and diagonal from its grid_reals row g (``rest_length``)."""
+    dx, dy = g[0], g[1]
+    return ti.Vector([dx, dy, ti.sqrt(dx * dx + dy * dy)])
+
+
+@ti.func
+def rest_length(rest, di: ti.template(), dj: ti.template()):
+    """The rest length of the grid spring to offset (di, dj) from ``grid_rest_lengths``:
+    a cell diagonal (shear), or one or two cell sides (structural, flexion)."""
+    length = rest[2]
+    if ti.static(dj == 0):
+        length = ti.static(abs(di)) * rest[0]
+    elif ti.static(di == 0):
+        length = ti.static(abs(dj)) * rest[1]
+    return length
+
+
+@ti.func
 def owned_grid_springs(x, v, offset, nx, ny, g, families: ti.template(), grid_forces):
     """A loop over the grid: the forces of the springs each particle owns (``OWNED``)
     into grid_forces[p, 2 family + s]. g: the grid's grid_reals row.
 
     On CPUs rows in parallel and the particles of a row in order (no index division per
     particle); elsewhere every particle in parallel."""
-    dx, dy = g[0], g[1]
-    # rest lengths per family along i, along j, diagonal: flexion springs span 2 cells
-    rest = ti.Matrix([[dx, dy, ti.sqrt(dx * dx + dy * dy)],
-                      [dx, dy, ti.sqrt(dx * dx + dy * dy)],
-                      [2.0 * dx, 2.0 * dy, 0.0]])
+    rest = grid_rest_lengths(g)
     if ti.static(cpu()):
         ti.loop_config(serialize=ti.static(serial(grid_forces)))
         for j in range(ny):

@@ -13,11 +13,16 @@ D: dissipation, with directions frozen at the start of the step: spring damping
    the start of the step, which gives exactly the explicit friction law at the end velocity.
 f_lag: wind and attraction, evaluated at the start of the step (explicit).
 
-grad E = 0 is backward Euler. Newton's method: the Hessian-vector products of all terms are
-Taichi kernels (matrix free); each Newton step solves H dx = -grad E by conjugate gradients
-with a block-Jacobi (3 x 3 per particle) preconditioner, filtered so that pinned particles
-do not move (Baraff & Witkin's filtered CG); a backtracking line search on E makes every
-iteration decrease E, so a step never gains energy. Spring Hessians are made positive
+grad E = 0 is backward Euler. Newton's method: each Newton step solves H dx = -grad E by
+conjugate gradients, filtered so that pinned particles do not move (Baraff & Witkin's
+filtered CG); a backtracking line search on E makes every iteration decrease E, so a step
+never gains energy. H is assembled as symmetric 3 x 3 blocks in Taichi kernels:
+  - a scene that is one cloth grid and nothing else: as block stencil weights on the
+    grid, with a geometric multigrid V-cycle (Galerkin coarse levels rebuilt at every
+    Newton iteration, block Gauss-Seidel smoothing; ``multigrid.py``) as the CG
+    preconditioner: a few CG iterations per solve however the cloth folds;
+  - any other scene: blocks per spring end, gathered per particle, with a block-Jacobi
+    (3 x 3 per particle) preconditioner. Spring Hessians are made positive
 semi-definite by clamping the transverse term k (1 - l0/|x_ij|) at zero for compressed
 springs (definiteness fix). ``newton_iterations=1, line_search=False`` is Baraff &
 Witkin's single linearised solve.
@@ -26,9 +31,9 @@ import taichi as ti
 
 from .. import runtime
 from ..colliders import signed_distance
-from ..forces import eval_attraction, eval_wind
+from ..forces import eval_attraction, eval_wind, grid_rest_lengths, rest_length, OWNED
 from ..runtime import serial
-from . import linalg
+from . import linalg, multigrid
 from .base import Integrator
 
 
@@ -45,28 +50,39 @@ class BackwardEuler(Integrator):
         half the CG iterations; docs/implicit.md).
     cg_max_iterations (500).
     line_search (True): backtracking on E (Armijo); False takes full Newton steps.
+    linear_solver ("auto"): the CG preconditioner, "multigrid" (only for a scene that is a
+        single cloth grid, its default) or "cg" (block Jacobi, the default for every
+        other scene).
 
     After each step ``stats`` holds newton_iterations, cg_iterations (total) and
     residual (the last CG relative residual).
     """
     name = "backward_euler"
     defaults = {"newton_iterations": 8, "newton_tol": 1e-4, "cg_tol": 1e-2,
-                "cg_max_iterations": 500, "line_search": True}
+                "cg_max_iterations": 500, "line_search": True, "linear_solver": "auto"}
 
     def __init__(self, model, **options):
         super().__init__(model, **options)
         n, real = model.particle_count, runtime.real()
         self.x_hat, self.x0, self.grad, self.f_lag, self.x_try = (
             ti.Vector.field(3, real, shape=n) for _ in range(5))
-        self.diag = ti.Vector.field(6, real, shape=n)
-        self.precond = ti.Matrix.field(3, 3, real, shape=n)
         springs = max(model.spring_count, 1)
         self.d0, self.g_spring = (ti.Vector.field(3, real, shape=springs) for _ in range(2))
         self.adj_start, self.adj = model.adjacency()
-        self.blocks = ti.Vector.field(6, real, shape=self.adj.shape[0])
-        self.solver = linalg.PCG(n, self.diag, self.blocks, self.adj_start, self.adj,
-                                 self.precond, model.inv_mass)
-        self.dx = self.solver.x
+        self.grid = multigrid.single_grid(model, self.options["linear_solver"])
+        if self.grid is not None:
+            self.grid_reals = model.grid_reals
+            self.mg = multigrid.BlockGridMultigrid(
+                self.grid.nx, self.grid.ny, multigrid.grid_stencil(self.grid.families))
+            self.solver = multigrid.GridPCG(self.mg)
+            self.dx = ti.Vector.field(3, real, shape=n)
+        else:
+            self.diag = ti.Vector.field(6, real, shape=n)
+            self.precond = ti.Matrix.field(3, 3, real, shape=n)
+            self.blocks = ti.Vector.field(6, real, shape=self.adj.shape[0])
+            self.solver = linalg.PCG(n, self.diag, self.blocks, self.adj_start, self.adj,
+                                     self.precond, model.inv_mass)
+            self.dx = self.solver.x
         c = max(model.collider_count, 1)
         self.fn0 = ti.field(real, shape=(n, c))
         self.n0 = ti.Vector.field(3, real, shape=(n, c))
@@ -114,8 +130,14 @@ class BackwardEuler(Integrator):
     def _solve(self, model, x, h, t):
         """Preconditioned CG on H dx = -grad (filtered: pinned entries stay 0)."""
         self._assemble(model, x, h, t)
-        linalg.scale_into(self.solver.b, -1.0, self.grad)
-        return self.solver.solve(self.options["cg_tol"], self.options["cg_max_iterations"])
+        if self.grid is None:
+            linalg.scale_into(self.solver.b, -1.0, self.grad)
+        else:
+            self._grid_rhs(model.inv_mass)
+        result = self.solver.solve(self.options["cg_tol"], self.options["cg_max_iterations"])
+        if self.grid is not None:
+            self._grid_solution()
+        return result
 
     # -- energy, gradient, Hessian products (Python wrappers) ------------------------------
     def _energy(self, model, x, h, t):
@@ -136,16 +158,25 @@ class BackwardEuler(Integrator):
         return float(self.acc[0])
 
     def _assemble(self, model, x, h, t):
-        """Hessian blocks at positions x: per spring, and per particle (inertia, drag and
-        contacts), and the inverse diagonal blocks (block-Jacobi preconditioner)."""
-        self._assemble_blocks(x, model.mass, model.inv_mass, model.params, model.spring_pairs,
-                              model.spring_ks, model.spring_kd, model.spring_rest,
-                              model.spring_count, model.collider_records,
-                              model.collider_ranges, h, t)
+        """Hessian blocks at positions x: on the grid with its multigrid levels, or per
+        spring end and per particle (inertia, drag and contacts) with the inverse diagonal
+        blocks (block-Jacobi preconditioner)."""
+        if self.grid is not None:
+            self._assemble_grid(x, model.mass, model.inv_mass, model.params,
+                                model.collider_records, model.collider_ranges, h, t)
+            self.mg.build()
+        else:
+            self._assemble_blocks(x, model.mass, model.inv_mass, model.params,
+                                  model.spring_pairs, model.spring_ks, model.spring_kd,
+                                  model.spring_rest, model.spring_count,
+                                  model.collider_records, model.collider_ranges, h, t)
 
     def hessian_product(self, model, x, p, h, t=0.0):
         """H p at positions x (fields); for tests and tools. Returns (N,3) NumPy."""
         self._assemble(model, x, h, t)
+        if self.grid is not None:
+            shape = self.mg.shapes[0] + (3,)
+            return self.mg.product(p.to_numpy().reshape(shape)).reshape(-1, 3)
         self.solver.apply(p, self.solver.ap)
         return self.solver.ap.to_numpy()
 
@@ -367,3 +398,63 @@ class BackwardEuler(Integrator):
                 self.blocks[k] = linalg.symmetric6(b)
                 block += b
             self.precond[p] = block.inverse()
+
+    @ti.kernel
+    def _assemble_grid(self, x: ti.template(), mass: ti.template(), inv_mass: ti.template(),
+                       params: ti.template(), records: ti.template(), ranges: ti.template(),
+                       h: float, t: float):
+        """The Hessian as the grid's block stencil weights: at the centre each particle's
+        inertia, drag, contact and spring blocks, at the other end of each spring it
+        stores (``multigrid.half_stencil``) minus its block; pinned particles' rows and
+        columns 0."""
+        ny, nx = ti.static(self.mg.shapes[0])
+        stencil, half = ti.static(self.mg.stencil, self.mg.halves[0])
+        g = self.grid_reals[0]
+        rest = grid_rest_lengths(g)
+        ti.loop_config(serialize=ti.static(self.mg.serial))
+        for j, i in ti.ndrange(ny, nx):
+            p = j * nx + i
+            free = ti.cast(inv_mass[p] > 0.0, float)
+            centre = ((mass[p] / (h * h) + params[3] / h) * ti.Matrix.identity(float, 3)
+                      + self._contact_blocks(x, inv_mass, records, ranges, p, h, t))
+            for k in ti.static(range(1, len(stencil))):
+                di, dj = ti.static(stencil[k])
+                fam = ti.static(_family(di, dj))
+                block = ti.Matrix.zero(float, 3, 3)
+                if 0 <= i + di < nx and 0 <= j + dj < ny:
+                    q = (j + dj) * nx + i + di
+                    d0 = self.x0[p] - self.x0[q]
+                    b = self._spring_block(x[p], x[q], g[2 + fam], g[5 + fam],
+                                           rest_length(rest, di, dj),
+                                           d0 / ti.max(d0.norm(), 1e-30), h)
+                    centre += b
+                    if inv_mass[q] > 0.0:
+                        block = -b
+                if ti.static((di, dj) in half):
+                    self.mg.set_block(j, i, ti.static(half.index((di, dj))),
+                                      free * linalg.symmetric6(block))
+            self.mg.set_block(j, i, 0, free * linalg.symmetric6(centre))
+
+    @ti.kernel
+    def _grid_rhs(self, inv_mass: ti.template()):
+        """-grad E into the multigrid CG's right-hand side (0 at pinned particles)."""
+        ny, nx = ti.static(self.mg.shapes[0])
+        ti.loop_config(serialize=ti.static(self.mg.serial))
+        for j, i in ti.ndrange(ny, nx):
+            p = j * nx + i
+            g = ti.Vector.zero(float, 3)
+            if inv_mass[p] > 0.0:
+                g = -self.grad[p]
+            self.mg.set_rhs(j, i, g)
+
+    @ti.kernel
+    def _grid_solution(self):
+        ny, nx = ti.static(self.mg.shapes[0])
+        ti.loop_config(serialize=ti.static(self.mg.serial))
+        for j, i in ti.ndrange(ny, nx):
+            self.dx[j * nx + i] = self.solver.x[j + multigrid.PAD, i + multigrid.PAD]
+
+
+def _family(di, dj):
+    """The spring family of grid offset (di, dj) (``OWNED``)."""
+    return next(f for f, owned in enumerate(OWNED) if (di, dj) in owned or (-di, -dj) in owned)

@@ -57,23 +57,55 @@ def symmetric6(a):
 
 
 @ti.func
+def unpack6(a):
+    """The 3x3 matrix of a ``symmetric6`` vector."""
+    return ti.Matrix([[a[0], a[3], a[4]], [a[3], a[1], a[5]], [a[4], a[5], a[2]]])
+
+
+@ti.func
+def symmetric6_times(a, v):
+    """A v for A given as ``symmetric6``."""
+    return ti.Vector([a[0] * v[0] + a[3] * v[1] + a[4] * v[2],
+                      a[3] * v[0] + a[1] * v[1] + a[5] * v[2],
+                      a[4] * v[0] + a[5] * v[1] + a[2] * v[2]])
+
+
+@ti.func
 def _apply(field: ti.template(), p, v):
     """field[p] v: a 3x3 block, a symmetric block (``symmetric6``) or a scalar times v."""
     out = v
     if ti.static(_is_matrix(field)):
         out = field[p] @ v
     elif ti.static(_is_symmetric(field)):
-        a = field[p]
-        out = ti.Vector([a[0] * v[0] + a[3] * v[1] + a[4] * v[2],
-                         a[3] * v[0] + a[1] * v[1] + a[5] * v[2],
-                         a[4] * v[0] + a[5] * v[1] + a[2] * v[2]])
+        out = symmetric6_times(field[p], v)
     else:
         out = field[p] * v
     return out
 
 
+class ConjugateGradients:
+    """The iteration loop of a conjugate-gradient solver whose kernels ``_start`` (set up
+    from x = 0, return r.r) and ``_iterate`` (one iteration, return r.r, or -1 when the
+    matrix is not positive definite along the search direction) are given by a subclass."""
+
+    def solve(self, tol, max_iterations):
+        """Iterate from x = 0 until the residual has dropped to tol times |b| or
+        max_iterations. Returns (iterations, relative residual)."""
+        r0 = np.sqrt(self._start())
+        if r0 == 0.0:
+            return 0, 0.0
+        k, rel = 0, 1.0
+        while k < max_iterations and rel >= tol:
+            k += 1
+            rr = self._iterate()
+            if rr < 0.0:
+                break
+            rel = np.sqrt(rr) / r0
+        return k, rel
+
+
 @ti.data_oriented
-class PCG:
+class PCG(ConjugateGradients):
     """Filtered, Jacobi-preconditioned conjugate gradients on A x = b, A given per particle:
 
         (A v)_p = D_p v_p + sum over p's adjacency entries k = (s, q) of W_k (v_p - v_q)
@@ -111,21 +143,18 @@ class PCG:
             out[p] = self._product(v, p)
 
     @ti.kernel
-    def _start(self, warm: ti.template()) -> ti.f64:
-        """r = b - A x (x = 0 unless warm), z = p = P^-1 r on free particles, 0 on pinned
-        ones; scalars[0] = r.z. Returns r.r."""
+    def _start(self) -> ti.f64:
+        """x = 0, r = b, z = p = P^-1 r on free particles, 0 on pinned ones;
+        scalars[0] = r.z. Returns r.r."""
         self.scalars[0] = 0.0
         rr = ti.cast(0.0, ti.f64)
         ti.loop_config(serialize=ti.static(serial(self.x)))
         for p in range(self.x.shape[0]):
             rp = ti.Vector.zero(float, 3)
             zp = ti.Vector.zero(float, 3)
-            if ti.static(not warm):
-                self.x[p] = ti.Vector.zero(float, 3)
+            self.x[p] = ti.Vector.zero(float, 3)
             if self.inv_mass[p] > 0.0:
                 rp = self.b[p]
-                if ti.static(warm):
-                    rp -= self._product(self.x, p)
                 zp = _apply(self.precond, p, rp)
             self.r[p] = rp
             self.z[p] = zp
@@ -166,19 +195,3 @@ class PCG:
             rr = -1.0
         self.scalars[0] = self.scalars[2]
         return rr
-
-    def solve(self, tol, max_iterations, warm_start=False):
-        """Iterate from x (warm_start) or 0 until the residual has dropped to tol times the
-        starting one (|b| from 0; with a warm start |b| can dwarf the part of the solution
-        still missing) or max_iterations. Returns (iterations, relative residual)."""
-        r0 = np.sqrt(self._start(warm_start))
-        if r0 == 0.0:
-            return 0, 0.0
-        k, rel = 0, 1.0
-        while k < max_iterations and rel >= tol:
-            k += 1
-            rr = self._iterate()
-            if rr < 0.0:
-                break
-            rel = np.sqrt(rr) / r0
-        return k, rel

@@ -36,24 +36,12 @@ import taichi as ti
 
 from .. import runtime
 from ..colliders import signed_distance
-from ..errors import SceneError
-from ..forces import (OWNED, add_field_forces, body_force, compute_forces,
+from ..forces import (add_field_forces, body_force, compute_forces,
                       grid_spring_sum, owned_grid_springs)
 from ..runtime import serial
 from . import linalg
 from .base import Integrator
-from .multigrid import GridMultigrid
-
-
-def grid_stencil(families):
-    """The offsets (di, dj) a Provot grid's matrix couples: itself and both ends of each
-    owned spring of the families present."""
-    stencil = [(0, 0)]
-    for fam, present in enumerate(families):
-        if present:
-            for di, dj in OWNED[fam]:
-                stencil += [(di, dj), (-di, -dj)]
-    return tuple(stencil)
+from .multigrid import GridMultigrid, grid_stencil, single_grid
 
 
 @ti.data_oriented
@@ -76,15 +64,7 @@ class Projective(Integrator):
 
     def __init__(self, model, **options):
         super().__init__(model, **options)
-        solver = self.options["linear_solver"]
-        grid = self._single_grid(model)
-        if solver not in ("auto", "multigrid", "cg"):
-            raise SceneError("linear_solver must be 'auto', 'multigrid' or 'cg' "
-                             f"(got {solver!r})")
-        if solver == "multigrid" and grid is None:
-            raise SceneError("linear_solver='multigrid' needs a scene that is one cloth grid "
-                             "and nothing else (no other particles or springs)")
-        self.grid = grid if solver in ("auto", "multigrid") else None
+        self.grid = single_grid(model, self.options["linear_solver"])
         # the model's fields, read by the kernels without being passed (Python launch time)
         self.mass, self.inv_mass, self.params = model.mass, model.inv_mass, model.params
         n, real = model.particle_count, runtime.real()
@@ -103,15 +83,6 @@ class Projective(Integrator):
                                      self.precond, model.inv_mass)
         self.stats = {}
         self._h = None
-
-    @staticmethod
-    def _single_grid(model):
-        """The model's cloth grid when it is the whole scene, else None."""
-        if len(model.grids) == 1 and model.list_spring_count == 0:
-            g = model.grids[0]
-            if g.offset == 0 and g.nx * g.ny == model.particle_count:
-                return g
-        return None
 
     def simulate(self, model, state_in, state_out, dt):
         h, t1 = dt, state_in.t + dt
