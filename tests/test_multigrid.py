@@ -167,15 +167,9 @@ def test_block_coarse_operators_are_the_galerkin_products(f64):
                        dense @ np.arange(ny * nx * 3.0))
 
 
-def test_block_vcycle_is_symmetric_with_the_spectrum_of_b_a_in_0_1(f64):
-    """Symmetric Gauss-Seidel smoothing around an exact coarse solve: B A = I - E^T Q E
-    (E the smoother's error propagation, Q an A-orthogonal projector), so B is symmetric
-    and the eigenvalues of B A lie in (0, 1], with no smoothing weight to estimate."""
-    ny, nx = 19, 17
-    dense, weights, free = random_block_grid_matrix(ny, nx, pinned=[(0, 0), (9, 8)], seed=5)
-    solver = mg.BlockGridMultigrid(nx, ny, PROVOT)
-    assert solver.levels == 3
-    solver.set_matrix(weights)
+def vcycle_matrix(solver, free):
+    """B on the free degrees of freedom, column by column; pinned entries stay 0."""
+    ny, nx = solver.shapes[0]
     dofs = np.flatnonzero(np.repeat(free, 3))
     b = np.zeros((len(dofs), len(dofs)))
     for c, d in enumerate(dofs):
@@ -184,10 +178,34 @@ def test_block_vcycle_is_symmetric_with_the_spectrum_of_b_a_in_0_1(f64):
         out = solver.vcycle(unit.reshape(ny, nx, 3)).ravel()
         assert np.all(out[~np.repeat(free, 3)] == 0.0)
         b[:, c] = out[dofs]
+    return b, dofs
+
+
+def test_block_vcycle_is_symmetric_with_the_spectrum_of_b_a_in_0_1(f64):
+    """Symmetric Gauss-Seidel smoothing around an exact coarse solve: B A = I - E^T Q E
+    (E the smoother's error propagation, Q an A-orthogonal projector), so B is symmetric
+    and the eigenvalues of B A lie in (0, 1], with no smoothing weight to estimate. With
+    the coarse levels of another matrix (``build(coarse=False)``, as backward Euler's
+    later Newton iterations do) B stays symmetric positive definite."""
+    ny, nx = 19, 17
+    pinned = [(0, 0), (9, 8)]
+    dense, weights, free = random_block_grid_matrix(ny, nx, pinned, seed=5)
+    solver = mg.BlockGridMultigrid(nx, ny, PROVOT)
+    assert solver.levels == 3
+    solver.set_matrix(weights)
+    b, dofs = vcycle_matrix(solver, free)
     assert np.allclose(b, b.T, atol=1e-12 * np.abs(b).max())
     eig = np.linalg.eigvals(b @ dense[np.ix_(dofs, dofs)])
     assert np.abs(eig.imag).max() < 1e-9
     assert eig.real.min() > 0.05 and eig.real.max() < 1.0 + 1e-9, (eig.real.min(), eig.real.max())
+    _, other, _ = random_block_grid_matrix(ny, nx, pinned, seed=8)
+    solver.w[0].from_numpy(np.pad(other[:, :, [PROVOT.index(o) for o in solver.halves[0]]],
+                                  ((mg.WPAD,) * 2,) * 2 + ((0, 0),) * 2))
+    solver.build(coarse=False)
+    stale, _ = vcycle_matrix(solver, free)
+    assert np.allclose(stale, stale.T, atol=1e-12 * np.abs(stale).max())
+    assert np.linalg.eigvalsh(0.5 * (stale + stale.T)).min() > 0.0
+    assert not np.allclose(stale, b)
 
 
 def test_multigrid_preconditioned_cg_solves_in_a_few_iterations(f64):

@@ -25,8 +25,12 @@ SOLVERS = {
     "projective_10it": ("projective", {"iterations": 10}),              # multigrid
     "projective_10it_cg": ("projective", {"iterations": 10, "linear_solver": "cg"}),
     "backward_euler_1solve": ("backward_euler", {"newton_iterations": 1, "line_search": False,
-                                                 "cg_tol": 1e-3}),
+                                                 "cg_tol": 1e-3}),           # multigrid
+    "backward_euler_1solve_jacobi": ("backward_euler", {"newton_iterations": 1,
+                                                        "line_search": False, "cg_tol": 1e-3,
+                                                        "linear_solver": "cg"}),
     "backward_euler_newton": ("backward_euler", {}),
+    "backward_euler_newton_jacobi": ("backward_euler", {"linear_solver": "cg"}),
 }
 
 
@@ -73,19 +77,23 @@ def energy_history(n, steps, k, out):
         sim = tcloth.Simulator(warp_cloth(n, k), name, dt=1 / 60, **options)
         sim.step(2)                      # compiles both state orders, untimed
         sim.reset()
-        energy, cg, ms = [sim.energy()["total"]], [0], [0.0]
+        energy, cg, ms, newton = [sim.energy()["total"]], [0], [0.0], [0]
         for _ in range(steps):
             t0 = time.perf_counter()
             sim.step(1)
             ms.append(1e3 * (time.perf_counter() - t0))
             energy.append(sim.energy()["total"])
             cg.append(sim.integrator.stats["cg_iterations"])
+            newton.append(sim.integrator.stats.get("newton_iterations", 0))
         histories[label] = (np.array(energy), np.array(cg), np.array(ms))
         final[label] = sim.positions()
         rises = int(np.sum(np.diff(energy) > 1e-6 * abs(energy[0] - min(energy))))
         print(f"implicit_bench.{label}.{n}x{n}.energy_final: {energy[-1]:.6g}")
         print(f"implicit_bench.{label}.{n}x{n}.energy_rises: {rises}")
         print(f"implicit_bench.{label}.{n}x{n}.cg_per_step_median: {np.median(cg[1:]):.4g}")
+        if name == "backward_euler":
+            print(f"implicit_bench.{label}.{n}x{n}.newton_per_step_median: "
+                  f"{np.median(newton[1:]):.4g}")
         for q in (10, 50, 90):
             print(f"implicit_bench.{label}.{n}x{n}.ms_per_step_p{q}: "
                   f"{np.percentile(ms[1:], q):.4g}", flush=True)

@@ -477,36 +477,52 @@ class BlockGridMultigrid(GridLevels):
                                   half.index((-di, -dj))])
         return np.stack(out, axis=2)
 
-    def build(self):
-        """Every level from the fine blocks."""
-        self._coarsen()
-        self._set_coarsest(dense_matrix(self.level_weights(self.levels - 1),
-                                        self.stencils[-1]))
+    def build(self, coarse=True):
+        """The levels from the fine blocks; coarse=False updates only the fine level's
+        smoother and keeps the coarse levels of an earlier matrix: the cycle stays a
+        symmetric positive definite preconditioner (its coarse correction need only be
+        positive definite), somewhat weaker."""
+        self._invert_diagonal(0)
+        if coarse:
+            self._coarsen()
+            self._set_coarsest(dense_matrix(self.level_weights(self.levels - 1),
+                                            self.stencils[-1]))
 
     @ti.kernel
     def _coarsen(self):
-        for level in ti.static(range(self.levels)):
+        """Each coarse level's blocks (Galerkin, from the next finer level) and inverse
+        diagonal."""
+        for level in ti.static(range(1, self.levels)):
             ny, nx = ti.static(self.shapes[level])
-            if ti.static(level > 0):
-                fine = ti.static(self.w[level - 1])
-                start, index, weight = ti.static(self.term_start[level - 1],
-                                                 self.term_index[level - 1],
-                                                 self.term_weight[level - 1])
-                ti.loop_config(serialize=ti.static(self.serial))
-                for J, I in ti.ndrange(ny, nx):
-                    for s in range(ti.static(len(self.halves[level]))):
-                        acc = ti.Vector.zero(float, 6)
-                        for t in range(start[s], start[s + 1]):
-                            dj, di, k = index[t][0], index[t][1], index[t][2]
-                            acc += weight[t] * fine[2 * J + WPAD + dj, 2 * I + WPAD + di, k]
-                        self.w[level][J + WPAD, I + WPAD, s] = acc
+            fine = ti.static(self.w[level - 1])
+            start, index, weight = ti.static(self.term_start[level - 1],
+                                             self.term_index[level - 1],
+                                             self.term_weight[level - 1])
             ti.loop_config(serialize=ti.static(self.serial))
-            for j, i in ti.ndrange(ny, nx):
-                d = linalg.unpack6(self.w[level][j + WPAD, i + WPAD, 0])
-                inv = ti.Matrix.zero(float, 3, 3)
-                if d.trace() > 0.0:
-                    inv = d.inverse()
-                self.inv_diag[level][j, i] = inv
+            for J, I in ti.ndrange(ny, nx):
+                for s in range(ti.static(len(self.halves[level]))):
+                    acc = ti.Vector.zero(float, 6)
+                    for t in range(start[s], start[s + 1]):
+                        dj, di, k = index[t][0], index[t][1], index[t][2]
+                        acc += weight[t] * fine[2 * J + WPAD + dj, 2 * I + WPAD + di, k]
+                    self.w[level][J + WPAD, I + WPAD, s] = acc
+            self._inverse_loop(level)
+
+    @ti.kernel
+    def _invert_diagonal(self, level: ti.template()):
+        self._inverse_loop(level)
+
+    @ti.func
+    def _inverse_loop(self, level: ti.template()):
+        """The inverses of the level's diagonal blocks (0 at inactive nodes)."""
+        ny, nx = ti.static(self.shapes[level])
+        ti.loop_config(serialize=ti.static(self.serial))
+        for j, i in ti.ndrange(ny, nx):
+            d = linalg.unpack6(self.w[level][j + WPAD, i + WPAD, 0])
+            inv = ti.Matrix.zero(float, 3, 3)
+            if d.trace() > 0.0:
+                inv = d.inverse()
+            self.inv_diag[level][j, i] = inv
 
     def _solution(self, level):
         return self.t[level] if level == self.levels - 1 else self.e[level]
