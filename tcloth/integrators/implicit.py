@@ -18,14 +18,14 @@ conjugate gradients, filtered so that pinned particles do not move (Baraff & Wit
 filtered CG); a backtracking line search on E makes every iteration decrease E, so a step
 never gains energy. H is assembled as symmetric 3 x 3 blocks in Taichi kernels:
   - a scene that is one cloth grid and nothing else: as block stencil weights on the
-    grid, with a geometric multigrid V-cycle (Galerkin coarse levels rebuilt at every
-    Newton iteration, block Gauss-Seidel smoothing; ``multigrid.py``) as the CG
+    grid, with a geometric multigrid V-cycle (Galerkin coarse levels built at each step's
+    first Newton iteration, block Gauss-Seidel smoothing; ``multigrid.py``) as the CG
     preconditioner: a few CG iterations per solve however the cloth folds;
   - any other scene: blocks per spring end, gathered per particle, with a block-Jacobi
-    (3 x 3 per particle) preconditioner. Spring Hessians are made positive
-semi-definite by clamping the transverse term k (1 - l0/|x_ij|) at zero for compressed
-springs (definiteness fix). ``newton_iterations=1, line_search=False`` is Baraff &
-Witkin's single linearised solve.
+    (3 x 3 per particle) preconditioner.
+Spring Hessians are made positive semi-definite by clamping the transverse term
+k (1 - l0/|x_ij|) at zero for compressed springs (definiteness fix).
+``newton_iterations=1, line_search=False`` is Baraff & Witkin's single linearised solve.
 """
 import taichi as ti
 
@@ -423,7 +423,8 @@ class BackwardEuler(Integrator):
             for k in ti.static(range(1, len(stencil))):
                 di, dj = ti.static(stencil[k])
                 fam = ti.static(_family(di, dj))
-                block = ti.Matrix.zero(float, 3, 3)
+                stored = ti.static((di, dj) in half)
+                coupling = ti.Matrix.zero(float, 3, 3)
                 if 0 <= i + di < nx and 0 <= j + dj < ny:
                     q = (j + dj) * nx + i + di
                     d0 = self.x0[p] - self.x0[q]
@@ -431,11 +432,12 @@ class BackwardEuler(Integrator):
                                            rest_length(rest, di, dj),
                                            d0 / ti.max(d0.norm(), 1e-30), h)
                     centre += b
-                    if inv_mass[q] > 0.0:
-                        block = -b
-                if ti.static((di, dj) in half):
+                    if ti.static(stored):
+                        if inv_mass[q] > 0.0:
+                            coupling = -b
+                if ti.static(stored):
                     self.mg.set_block(j, i, ti.static(half.index((di, dj))),
-                                      free * linalg.symmetric6(block))
+                                      free * linalg.symmetric6(coupling))
             self.mg.set_block(j, i, 0, free * linalg.symmetric6(centre))
 
     @ti.kernel

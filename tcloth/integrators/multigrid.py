@@ -16,7 +16,8 @@ Two matrices, two cycles, one hierarchy (``GridLevels``):
     one after each coarse correction (weight 4/3 over the largest eigenvalue of D^-1 A),
     the first folded into the restriction.
   - ``BlockGridMultigrid``: backward Euler's Newton Hessian (symmetric 3 x 3 blocks),
-    rebuilt in kernels at every Newton iteration. Block Gauss-Seidel sweeps in nine
+    built in kernels: the fine level at every Newton iteration, the coarse levels at each
+    step's first (``build``). Block Gauss-Seidel sweeps in nine
     colours, forwards before and backwards after each coarse correction: no weight to
     estimate, and convergent for any symmetric positive definite matrix.
 Either V-cycle is a symmetric positive definite approximation B of A^-1 with the
@@ -25,9 +26,9 @@ update that decreases the energy a linear solve would minimise.
 
 Vectors are vec3 fields padded by two nodes of zeros on every side, so that stencils need
 no bounds tests. The scalar cycle's loops are ``ti.func`` bodies called from the projective
-solver's kernel, so that a whole iteration is one launch; the block cycle is one kernel
-per level and direction (it compiles far faster). ``vcycle`` runs one from NumPy for tests
-and tools.
+solver's kernel, so that a whole iteration is one launch; the block cycle is small kernels,
+a few per level (they compile far faster). ``vcycle`` runs one from NumPy for tests and
+tools.
 """
 import numpy as np
 import taichi as ti
@@ -537,23 +538,26 @@ class BlockGridMultigrid(GridLevels):
         and each stored offset s both ways (node + s with this node's block, node - s with
         that node's). The fine level's stencil is unrolled; coarse levels loop over theirs
         (a quarter of the work or less per level, and a much shorter compile)."""
-        w = ti.static(self.w[level])
-        jw, iw = j + WPAD, i + WPAD
-        acc = linalg.symmetric6_times(w[jw, iw, 0], v[j + PAD, i + PAD])
+        acc = linalg.symmetric6_times(self.w[level][j + WPAD, i + WPAD, 0],
+                                      v[j + PAD, i + PAD])
         if ti.static(level == 0):
             for k in ti.static(range(1, len(self.halves[0]))):
                 di, dj = ti.static(self.halves[0][k])
-                acc += (linalg.symmetric6_times(w[jw, iw, k], v[j + PAD + dj, i + PAD + di])
-                        + linalg.symmetric6_times(w[jw - dj, iw - di, k],
-                                                  v[j + PAD - dj, i + PAD - di]))
+                acc += self._coupling(level, v, j, i, k, di, dj)
         else:
             offsets = ti.static(self.offsets[level])
             for k in range(1, offsets.shape[0]):
-                di, dj = offsets[k][0], offsets[k][1]
-                acc += (linalg.symmetric6_times(w[jw, iw, k], v[j + PAD + dj, i + PAD + di])
-                        + linalg.symmetric6_times(w[jw - dj, iw - di, k],
-                                                  v[j + PAD - dj, i + PAD - di]))
+                acc += self._coupling(level, v, j, i, k, offsets[k][0], offsets[k][1])
         return acc
+
+    @ti.func
+    def _coupling(self, level: ti.template(), v: ti.template(), j, i, k, di, dj):
+        """Stored offset k = (di, dj) of node (j, i) both ways: node + (di, dj) through this
+        node's block, node - (di, dj) through that node's."""
+        w = ti.static(self.w[level])
+        jw, iw = j + WPAD, i + WPAD
+        return (linalg.symmetric6_times(w[jw, iw, k], v[j + PAD + dj, i + PAD + di])
+                + linalg.symmetric6_times(w[jw - dj, iw - di, k], v[j + PAD - dj, i + PAD - di]))
 
     @ti.func
     def _begin_level(self, level: ti.template(), j, i, r):
@@ -651,8 +655,9 @@ class GridPCG(linalg.ConjugateGradients):
     """Conjugate gradients on H x = b on the grid, preconditioned by one V-cycle of
     ``BlockGridMultigrid`` ``mg`` (Galerkin coarse levels: a few iterations whatever the
     grid size). The right-hand side goes in with ``mg.set_rhs`` (0 at inactive nodes, which
-    stay 0); the solution is ``x`` (padded like the cycle's fields). One kernel launch per
-    iteration; the residual is the cycle's own right-hand side field."""
+    stay 0); the solution is ``x`` (padded like the cycle's fields). An iteration is the
+    cycle's launches and one more; the residual is the cycle's own right-hand side
+    field."""
 
     def __init__(self, mg):
         self.mg = mg
