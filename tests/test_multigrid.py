@@ -167,6 +167,12 @@ def test_block_coarse_operators_are_the_galerkin_products(f64):
                        dense @ np.arange(ny * nx * 3.0))
 
 
+def stored_blocks(solver, weights):
+    """Full-stencil block weights (ny, nx, k, 6) as the solver stores its fine level."""
+    return np.pad(weights[:, :, [PROVOT.index(o) for o in solver.halves[0]]],
+                  ((mg.WPAD,) * 2,) * 2 + ((0, 0),) * 2)
+
+
 def vcycle_matrix(solver, free):
     """B on the free degrees of freedom, column by column; pinned entries stay 0."""
     ny, nx = solver.shapes[0]
@@ -199,8 +205,7 @@ def test_block_vcycle_is_symmetric_with_the_spectrum_of_b_a_in_0_1(f64):
     assert np.abs(eig.imag).max() < 1e-9
     assert eig.real.min() > 0.05 and eig.real.max() < 1.0 + 1e-9, (eig.real.min(), eig.real.max())
     _, other, _ = random_block_grid_matrix(ny, nx, pinned, seed=8)
-    solver.w[0].from_numpy(np.pad(other[:, :, [PROVOT.index(o) for o in solver.halves[0]]],
-                                  ((mg.WPAD,) * 2,) * 2 + ((0, 0),) * 2))
+    solver.w[0].from_numpy(stored_blocks(solver, other))
     solver.build(coarse=False)
     stale, _ = vcycle_matrix(solver, free)
     assert np.allclose(stale, stale.T, atol=1e-12 * np.abs(stale).max())
@@ -224,3 +229,44 @@ def test_multigrid_preconditioned_cg_solves_in_a_few_iterations(f64):
     assert residual < 1e-10 and iterations <= 20, iterations     # 16 measured
     assert np.abs(x - exact).max() < 1e-8 * np.abs(exact).max()
     assert np.all(x[~dofs] == 0.0)
+
+
+def test_cg_on_an_indefinite_matrix_stops_with_a_descent_direction(f64):
+    """CG on a matrix W of its own, preconditioned by the cycle of an SPD A (as backward
+    Euler: the exact Hessian, preconditioned by the projected one). W = A + 30 I is solved
+    exactly; on W = A - 60 I (indefinite) CG stops at the first direction of
+    non-positive curvature with x a descent direction that lowers the quadratic model
+    1/2 x.W x - b.x; on W = -A it stops at once with x = B b."""
+    ny, nx = 12, 11
+    dense, weights, free = random_block_grid_matrix(ny, nx, pinned=[(0, 0)], seed=3)
+    solver = mg.BlockGridMultigrid(nx, ny, PROVOT)
+    solver.set_matrix(weights)
+    cg = mg.GridPCG(solver, own_matrix=True)
+    dofs = np.repeat(free, 3)
+    rhs = np.random.default_rng(4).normal(size=(ny * nx, 3)) * free[:, None]
+    eye = np.array([1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
+
+    def solve(shift, sign=1.0):
+        w = sign * weights
+        w[:, :, 0] += shift * free.reshape(ny, nx, 1) * eye
+        cg.w.from_numpy(stored_blocks(solver, w))
+        solver.r[0].from_numpy(np.pad(rhs.reshape(ny, nx, 3), ((mg.PAD,) * 2,) * 2 + ((0, 0),)))
+        iterations, residual = cg.solve(1e-10, 200)
+        x = cg.x.to_numpy()[mg.PAD:-mg.PAD, mg.PAD:-mg.PAD].reshape(-1)
+        matrix = (sign * dense + shift * np.diag(dofs.astype(float)))[np.ix_(dofs, dofs)]
+        return iterations, residual, x, matrix
+    iterations, residual, x, matrix = solve(30.0)
+    assert residual < 1e-10
+    assert np.allclose(x[dofs], np.linalg.solve(matrix, rhs.ravel()[dofs]), rtol=0,
+                       atol=1e-8 * np.abs(x).max())
+    iterations, residual, x, matrix = solve(-60.0)
+    eig = np.linalg.eigvalsh(matrix)
+    assert eig.min() < 0.0 < eig.max()
+    assert 1 < iterations < 200 and residual > 1e-10
+    b, xf = rhs.ravel()[dofs], x[dofs]
+    assert b @ xf > 0.0 and 0.5 * xf @ matrix @ xf - b @ xf < 0.0
+    assert np.all(x[~dofs] == 0.0)
+    iterations, residual, x, _ = solve(0.0, sign=-1.0)
+    assert iterations == 1 and residual == 1.0
+    assert np.allclose(x, solver.vcycle(rhs.reshape(ny, nx, 3)).ravel(), rtol=0,
+                       atol=1e-12 * np.abs(x).max())

@@ -17,20 +17,31 @@ grad E = 0 is backward Euler. Newton's method: each Newton step solves H dx = -g
 conjugate gradients, filtered so that pinned particles do not move (Baraff & Witkin's
 filtered CG); a backtracking line search on E makes every iteration decrease E, so a step
 never gains energy. H is assembled as symmetric 3 x 3 blocks in Taichi kernels:
-  - a scene that is one cloth grid and nothing else: as block stencil weights on the
-    grid, with a geometric multigrid V-cycle (Galerkin coarse levels built at each step's
-    first Newton iteration, block Gauss-Seidel smoothing; ``multigrid.py``) as the CG
-    preconditioner: a few CG iterations per solve however the cloth folds;
-  - any other scene: blocks per spring end, gathered per particle, with a block-Jacobi
-    (3 x 3 per particle) preconditioner.
-Spring Hessians are made positive semi-definite by clamping the transverse term
-k (1 - l0/|x_ij|) at zero for compressed springs (definiteness fix).
-``newton_iterations=1, line_search=False`` is Baraff & Witkin's single linearised solve.
+  - blocks per spring end, gathered per particle, with a block-Jacobi (3 x 3 per
+    particle) preconditioner;
+  - or, for a scene that is one cloth grid and nothing else (``linear_solver``), as
+    block stencil weights on the grid, with a geometric multigrid V-cycle (Galerkin
+    coarse levels built at each step's first Newton iteration, block Gauss-Seidel
+    smoothing; ``multigrid.py``) as the CG preconditioner: a few CG iterations per
+    solve however the cloth folds.
+Compressed springs make H indefinite: their transverse stiffness k (1 - l0/|x_ij|) is
+negative. The definiteness fix clamps it at 0 (the projected H, positive definite). With
+the line search (the default) CG multiplies by the exact H instead, preconditioned by
+the projected one, and stops at the first direction of non-positive curvature with a
+descent direction (truncated Newton-CG, ``linalg.ConjugateGradients``). The step's
+solution is a minimum of E, where the exact H is positive semi-definite, so Newton
+converges quadratically there; on the projected H it converges linearly once the cloth
+folds (on the 128 x 128 benchmark cloth 6 Newton iterations a step over the swing
+instead of 3; ``test_newton_on_the_exact_hessian_converges_quadratically_on_folded_cloth``).
+``newton_iterations=1, line_search=False`` is Baraff & Witkin's single linearised solve,
+on the projected H: a full step along a truncated direction can gain energy without
+bound (the benchmark cloth blew up).
 """
 import taichi as ti
 
 from .. import runtime
 from ..colliders import signed_distance
+from ..errors import SceneError
 from ..forces import eval_attraction, eval_wind, grid_rest_lengths, rest_length, OWNED
 from ..runtime import serial
 from . import linalg, multigrid
@@ -50,16 +61,25 @@ class BackwardEuler(Integrator):
         half the CG iterations; docs/implicit.md).
     cg_max_iterations (500).
     line_search (True): backtracking on E (Armijo); False takes full Newton steps.
+    exact_hessian (None: the same as line_search): CG on the exact Hessian, stopped at
+        negative curvature and preconditioned by the projected one (needs the line
+        search), or on the projected Hessian (the definiteness fix).
     linear_solver ("auto"): the CG preconditioner, "multigrid" (only for a scene that is a
-        single cloth grid, its default) or "cg" (block Jacobi, the default for every
-        other scene).
+        single cloth grid) or "cg" (block Jacobi). "auto" takes the multigrid for CG on
+        the projected Hessian of a single cloth grid, which its cycle inverts (one
+        linearised solve on the 128 x 128 benchmark cloth: 3-4 CG iterations against
+        40-60, 1.6x faster), and block Jacobi otherwise: preconditioning the exact
+        Hessian, a cycle still saves 8 of 9 CG iterations, but costs 10 of them (Newton
+        over the benchmark swing: as fast or slower at 128 x 128 and 256 x 256;
+        docs/implicit.md).
 
     After each step ``stats`` holds newton_iterations, cg_iterations (total) and
     residual (the last CG relative residual).
     """
     name = "backward_euler"
     defaults = {"newton_iterations": 8, "newton_tol": 1e-4, "cg_tol": 1e-2,
-                "cg_max_iterations": 500, "line_search": True, "linear_solver": "auto"}
+                "cg_max_iterations": 500, "line_search": True, "linear_solver": "auto",
+                "exact_hessian": None}
 
     def __init__(self, model, **options):
         super().__init__(model, **options)
@@ -69,12 +89,23 @@ class BackwardEuler(Integrator):
         springs = max(model.spring_count, 1)
         self.d0, self.g_spring = (ti.Vector.field(3, real, shape=springs) for _ in range(2))
         self.adj_start, self.adj = model.adjacency()
-        self.grid = multigrid.single_grid(model, self.options["linear_solver"])
+        exact = self.options["exact_hessian"]
+        line_search = self.options["line_search"]
+        if exact not in (None, True, False):
+            raise SceneError(f"exact_hessian must be None, True or False (got {exact!r})")
+        if exact and not line_search:
+            raise SceneError("exact_hessian=True needs line_search=True: without it a step "
+                             "along a direction of negative curvature can gain energy")
+        self.exact = line_search if exact is None else exact
+        linear_solver = self.options["linear_solver"]
+        if linear_solver == "auto" and self.exact:
+            linear_solver = "cg"
+        self.grid = multigrid.single_grid(model, linear_solver)
         if self.grid is not None:
             self.grid_reals = model.grid_reals
             self.mg = multigrid.BlockGridMultigrid(
                 self.grid.nx, self.grid.ny, multigrid.grid_stencil(self.grid.families))
-            self.solver = multigrid.GridPCG(self.mg)
+            self.solver = multigrid.GridPCG(self.mg, own_matrix=self.exact)
             self.dx = ti.Vector.field(3, real, shape=n)
         else:
             self.diag = ti.Vector.field(6, real, shape=n)
@@ -179,7 +210,7 @@ class BackwardEuler(Integrator):
         self._assemble(model, x, h, t)
         if self.grid is not None:
             shape = self.mg.shapes[0] + (3,)
-            return self.mg.product(p.to_numpy().reshape(shape)).reshape(-1, 3)
+            return self.solver.product(p.to_numpy().reshape(shape)).reshape(-1, 3)
         self.solver.apply(p, self.solver.ap)
         return self.solver.ap.to_numpy()
 
@@ -333,15 +364,17 @@ class BackwardEuler(Integrator):
 
     # -- kernels: Hessian products and preconditioner ------------------------------------
     @ti.func
-    def _spring_block(self, xi, xj, ks, kd, rest, d0, h):
-        """3x3 Hessian block of one spring (PSD: transverse term clamped at 0)."""
+    def _spring_blocks(self, xi, xj, ks, kd, rest, d0, h):
+        """The 3x3 Hessian block of one spring, exact and made positive semi-definite
+        (transverse stiffness k (1 - l0/|x_ij|), negative under compression, clamped at 0)."""
         d = xi - xj
         length = d.norm()
         n = d / ti.max(length, 1e-30)
         nn = n.outer_product(n)
-        transverse = ti.max(1.0 - rest / ti.max(length, 1e-30), 0.0)
+        transverse = 1.0 - rest / ti.max(length, 1e-30)
         eye = ti.Matrix.identity(float, 3)
-        return ks * (nn + transverse * (eye - nn)) + kd / h * d0.outer_product(d0)
+        exact = ks * (nn + transverse * (eye - nn)) + kd / h * d0.outer_product(d0)
+        return exact, exact + ks * ti.max(-transverse, 0.0) * (eye - nn)
 
     @ti.func
     def _contact_block(self, kind: ti.template(), rec, xp, p, c, m, h, t):
@@ -388,8 +421,9 @@ class BackwardEuler(Integrator):
                          params: ti.template(), pairs: ti.template(), ks: ti.template(),
                          kd: ti.template(), rest: ti.template(), count: ti.i32,
                          records: ti.template(), ranges: ti.template(), h: float, t: float):
-        """Each spring's block at both of its ends' adjacency entries, so that the CG
-        products read them in order."""
+        """Each spring's block (exact or projected, see ``exact_hessian``) at both of its
+        ends' adjacency entries, so that the CG products read them in order; the
+        preconditioner from the projected blocks."""
         ti.loop_config(serialize=ti.static(serial(x)))
         for p in range(x.shape[0]):
             block = ((mass[p] / (h * h) + params[3] / h) * ti.Matrix.identity(float, 3)
@@ -397,9 +431,11 @@ class BackwardEuler(Integrator):
             self.diag[p] = linalg.symmetric6(block)
             for k in range(self.adj_start[p], self.adj_start[p + 1]):
                 s, q = self.adj[k][0], self.adj[k][1]
-                b = self._spring_block(x[p], x[q], ks[s], kd[s], rest[s], self.d0[s], h)
-                self.blocks[k] = linalg.symmetric6(b)
-                block += b
+                exact, projected = self._spring_blocks(x[p], x[q], ks[s], kd[s], rest[s],
+                                                       self.d0[s], h)
+                self.blocks[k] = linalg.symmetric6(exact if ti.static(self.exact)
+                                                   else projected)
+                block += projected
             self.precond[p] = block.inverse()
 
     @ti.kernel
@@ -409,7 +445,8 @@ class BackwardEuler(Integrator):
         """The Hessian as the grid's block stencil weights: at the centre each particle's
         inertia, drag, contact and spring blocks, at the other end of each spring it
         stores (``multigrid.half_stencil``) minus its block; pinned particles' rows and
-        columns 0."""
+        columns 0. The multigrid gets the projected spring blocks, CG the exact ones
+        (``exact_hessian``)."""
         ny, nx = ti.static(self.mg.shapes[0])
         stencil, half = ti.static(self.mg.stencil, self.mg.halves[0])
         g = self.grid_reals[0]
@@ -420,25 +457,34 @@ class BackwardEuler(Integrator):
             free = ti.cast(inv_mass[p] > 0.0, float)
             centre = ((mass[p] / (h * h) + params[3] / h) * ti.Matrix.identity(float, 3)
                       + self._contact_blocks(x, inv_mass, records, ranges, p, h, t))
+            centre_exact = centre
             for k in ti.static(range(1, len(stencil))):
                 di, dj = ti.static(stencil[k])
                 fam = ti.static(_family(di, dj))
                 stored = ti.static((di, dj) in half)
                 coupling = ti.Matrix.zero(float, 3, 3)
+                coupling_exact = ti.Matrix.zero(float, 3, 3)
                 if 0 <= i + di < nx and 0 <= j + dj < ny:
                     q = (j + dj) * nx + i + di
                     d0 = self.x0[p] - self.x0[q]
-                    b = self._spring_block(x[p], x[q], g[2 + fam], g[5 + fam],
-                                           rest_length(rest, di, dj),
-                                           d0 / ti.max(d0.norm(), 1e-30), h)
-                    centre += b
+                    exact, projected = self._spring_blocks(
+                        x[p], x[q], g[2 + fam], g[5 + fam], rest_length(rest, di, dj),
+                        d0 / ti.max(d0.norm(), 1e-30), h)
+                    centre += projected
+                    centre_exact += exact
                     if ti.static(stored):
                         if inv_mass[q] > 0.0:
-                            coupling = -b
+                            coupling = -projected
+                            coupling_exact = -exact
                 if ti.static(stored):
-                    self.mg.set_block(j, i, ti.static(half.index((di, dj))),
-                                      free * linalg.symmetric6(coupling))
+                    k_half = ti.static(half.index((di, dj)))
+                    self.mg.set_block(j, i, k_half, free * linalg.symmetric6(coupling))
+                    if ti.static(self.exact):
+                        self.solver.set_block(j, i, k_half,
+                                              free * linalg.symmetric6(coupling_exact))
             self.mg.set_block(j, i, 0, free * linalg.symmetric6(centre))
+            if ti.static(self.exact):
+                self.solver.set_block(j, i, 0, free * linalg.symmetric6(centre_exact))
 
     @ti.kernel
     def _grid_rhs(self, inv_mass: ti.template()):

@@ -35,6 +35,13 @@ def axpy_into(out: ti.template(), x: ti.template(), alpha: float, d: ti.template
 
 
 @ti.kernel
+def copy_into(out: ti.template(), a: ti.template()):
+    """out = a (fields of one shape, any number of dimensions)."""
+    for I in ti.grouped(out):
+        out[I] = a[I]
+
+
+@ti.kernel
 def scale_into(out: ti.template(), alpha: float, d: ti.template()):
     """out = alpha d."""
     ti.loop_config(serialize=ti.static(serial(out)))
@@ -86,11 +93,16 @@ def _apply(field: ti.template(), p, v):
 class ConjugateGradients:
     """The iteration loop of a conjugate-gradient solver whose kernels ``_start`` (set up
     from x = 0, return r.r) and ``_iterate`` (one iteration, return r.r, or -1 when the
-    matrix is not positive definite along the search direction) are given by a subclass."""
+    matrix is not positive definite along the search direction p, leaving x as it was)
+    are given by a subclass, with fields ``x`` and ``p``."""
 
     def solve(self, tol, max_iterations):
         """Iterate from x = 0 until the residual has dropped to tol times |b| or
-        max_iterations. Returns (iterations, relative residual)."""
+        max_iterations. Returns (iterations, relative residual). On an indefinite matrix
+        CG stops at the first direction of non-positive curvature, with x as it was, or
+        at the first iteration with x = p, the preconditioned right-hand side (truncated
+        CG as in Newton-CG, Nocedal & Wright, Numerical Optimization, Algorithm 7.1): for a
+        Newton step on E, with b = -grad E, x is then still a descent direction."""
         r0 = np.sqrt(self._start())
         if r0 == 0.0:
             return 0, 0.0
@@ -99,6 +111,8 @@ class ConjugateGradients:
             k += 1
             rr = self._iterate()
             if rr < 0.0:
+                if k == 1:
+                    copy_into(self.x, self.p)
                 break
             rel = np.sqrt(rr) / r0
         return k, rel

@@ -534,27 +534,30 @@ class BlockGridMultigrid(GridLevels):
 
     @ti.func
     def product_at(self, level: ti.template(), v: ti.template(), j, i):
-        """(H_level v) at node (j, i) (unpadded indices) of a padded field v: the centre,
+        """(H_level v) at node (j, i) (unpadded indices) of a padded field v."""
+        return self.product_with(self.w[level], level, v, j, i)
+
+    @ti.func
+    def product_with(self, w: ti.template(), level: ti.template(), v: ti.template(), j, i):
+        """(W v) at node (j, i) for blocks w laid out like level ``level``'s: the centre,
         and each stored offset s both ways (node + s with this node's block, node - s with
         that node's). The fine level's stencil is unrolled; coarse levels loop over theirs
         (a quarter of the work or less per level, and a much shorter compile)."""
-        acc = linalg.symmetric6_times(self.w[level][j + WPAD, i + WPAD, 0],
-                                      v[j + PAD, i + PAD])
+        acc = linalg.symmetric6_times(w[j + WPAD, i + WPAD, 0], v[j + PAD, i + PAD])
         if ti.static(level == 0):
             for k in ti.static(range(1, len(self.halves[0]))):
                 di, dj = ti.static(self.halves[0][k])
-                acc += self._coupling(level, v, j, i, k, di, dj)
+                acc += self._coupling(w, v, j, i, k, di, dj)
         else:
             offsets = ti.static(self.offsets[level])
             for k in range(1, offsets.shape[0]):
-                acc += self._coupling(level, v, j, i, k, offsets[k][0], offsets[k][1])
+                acc += self._coupling(w, v, j, i, k, offsets[k][0], offsets[k][1])
         return acc
 
     @ti.func
-    def _coupling(self, level: ti.template(), v: ti.template(), j, i, k, di, dj):
+    def _coupling(self, w: ti.template(), v: ti.template(), j, i, k, di, dj):
         """Stored offset k = (di, dj) of node (j, i) both ways: node + (di, dj) through this
         node's block, node - (di, dj) through that node's."""
-        w = ti.static(self.w[level])
         jw, iw = j + WPAD, i + WPAD
         return (linalg.symmetric6_times(w[jw, iw, k], v[j + PAD + dj, i + PAD + di])
                 + linalg.symmetric6_times(w[jw - dj, iw - di, k], v[j + PAD - dj, i + PAD - di]))
@@ -637,16 +640,17 @@ class BlockGridMultigrid(GridLevels):
         self.e[level][j + PAD, i + PAD] += self.inv_diag[level][j, i] @ res
 
     @ti.kernel
-    def _apply(self):
+    def _apply(self, w: ti.template()):
         ny, nx = ti.static(self.shapes[0])
         for j, i in ti.ndrange(ny, nx):
-            self.t[0][j + PAD, i + PAD] = self.product_at(0, self.e[0], j, i)
+            self.t[0][j + PAD, i + PAD] = self.product_with(w, 0, self.e[0], j, i)
 
-    def product(self, v):
-        """H v for a (ny, nx, 3) NumPy array (for tests and tools)."""
+    def product(self, v, w=None):
+        """H v (or W v for fine blocks w) for a (ny, nx, 3) NumPy array (for tests and
+        tools)."""
         self.e[0].from_numpy(np.pad(v, ((PAD, PAD), (PAD, PAD), (0, 0)))
                              .astype(runtime.numpy_real()))
-        self._apply()
+        self._apply(self.w[0] if w is None else w)
         return self.t[0].to_numpy()[PAD:-PAD, PAD:-PAD]
 
 
@@ -654,22 +658,26 @@ class BlockGridMultigrid(GridLevels):
 class GridPCG(linalg.ConjugateGradients):
     """Conjugate gradients on H x = b on the grid, preconditioned by one V-cycle of
     ``BlockGridMultigrid`` ``mg`` (Galerkin coarse levels: a few iterations whatever the
-    grid size). The right-hand side goes in with ``mg.set_rhs`` (0 at inactive nodes, which
-    stay 0); the solution is ``x`` (padded like the cycle's fields). An iteration is the
-    cycle's launches and one more; the residual is the cycle's own right-hand side
-    field."""
+    grid size). H is the cycle's own fine matrix, or with ``own_matrix`` another one of
+    the same layout written with ``set_block`` (the cycle then preconditions a matrix
+    other than the one it inverts). The right-hand side goes in with ``mg.set_rhs`` (0 at
+    inactive nodes, which stay 0); the solution is ``x`` (padded like the cycle's fields).
+    An iteration is the cycle's launches and one more; the residual is the cycle's own
+    right-hand side field."""
 
-    def __init__(self, mg):
+    def __init__(self, mg, own_matrix=False):
         self.mg = mg
         real = runtime.real()
         ny, nx = mg.shapes[0]
+        self.w = (ti.Vector.field(6, real, shape=mg.w[0].shape) if own_matrix
+                  else mg.w[0])
         self.x, self.p, self.ap = (ti.Vector.field(3, real, shape=(ny + 2 * PAD, nx + 2 * PAD))
                                    for _ in range(3))
         self.scalars = ti.field(ti.f64, shape=3)     # r.z, p.Ap, the next r.z
 
     @ti.kernel
     def _start(self) -> ti.f64:
-        """x = p = 0; returns r.r."""
+        """x = p = 0 and the cycle's start; returns r.r."""
         ny, nx = ti.static(self.mg.shapes[0])
         self.scalars[0] = 0.0
         rr = ti.cast(0.0, ti.f64)
@@ -678,8 +686,18 @@ class GridPCG(linalg.ConjugateGradients):
             self.x[j + PAD, i + PAD] = ti.Vector.zero(float, 3)
             self.p[j + PAD, i + PAD] = ti.Vector.zero(float, 3)
             r = self.mg.r[0][j + PAD, i + PAD]
+            self.mg._begin_level(0, j, i, r)
             rr += ti.cast(r.dot(r), ti.f64)
         return rr
+
+    @ti.func
+    def set_block(self, j, i, k, block):
+        """H's block at node (j, i), offset ``mg.halves[0][k]`` (``own_matrix``)."""
+        self.w[j + WPAD, i + WPAD, k] = block
+
+    def product(self, v):
+        """H v for a (ny, nx, 3) NumPy array (for tests and tools)."""
+        return self.mg.product(v, self.w)
 
     def _iterate(self):
         """z = B r (``mg.cycle``), then one CG iteration (``_update``)."""
@@ -706,7 +724,7 @@ class GridPCG(linalg.ConjugateGradients):
             self.p[j + PAD, i + PAD] = self.mg.result(j, i) + beta * self.p[j + PAD, i + PAD]
         ti.loop_config(serialize=ti.static(self.mg.serial))
         for j, i in ti.ndrange(ny, nx):
-            ap = self.mg.product_at(0, self.p, j, i)
+            ap = self.mg.product_with(self.w, 0, self.p, j, i)
             self.ap[j + PAD, i + PAD] = ap
             self.scalars[1] += ti.cast(self.p[j + PAD, i + PAD].dot(ap), ti.f64)
         rr = ti.cast(0.0, ti.f64)
