@@ -307,43 +307,54 @@ def test_static_equilibrium_matches_a_long_explicit_run(f64, integrator):
     assert np.abs(implicit.positions() - explicit.positions()).max() < 1e-5
 
 
-def test_parallel_loops_give_the_serial_results():
+def general_paths():
+    """Cloth, a list spring and a sphere: explicit, backward Euler and projective steps on
+    the general (adjacency) paths, with the tolerance each gets."""
+    scene = tcloth.Scene(air_drag=0.01)
+    scene.add_cloth(resolution=(7, 7), size=(0.6, 0.6), center=(0, 0.3, 0), pinned=[],
+                    structural=(3e3, 0.5), shear=(600.0, 0.1), flexion=(50.0, 0.01))
+    scene.add_springs([[0, 48]], stiffness=5.0)
+    scene.add_sphere((0, 0, 0), 0.2, friction=0.4, thickness=0.01)
+    out = []
+    # solvers converged far below their stopping tolerances, so that rounding in the
+    # order of parallel sums cannot change an iteration count
+    for integrator, dt, options, tol in (
+            ("symplectic_euler", 1e-3, {}, 1e-12),
+            ("backward_euler", 1 / 60, {"cg_tol": 1e-10, "newton_tol": 1e-10}, 1e-9),
+            ("projective", 1 / 60, {"cg_tol": 1e-10, "cg_max_iterations": 1000}, 1e-9)):
+        sim = tcloth.Simulator(scene, integrator, dt=dt, **options)
+        sim.step(4)
+        out.append((sim.positions(), tol))
+    return out
+
+
+def grid_paths():
+    """The multigrid paths (9 x 9: two levels) of both implicit solvers."""
+    grid = tcloth.Scene(air_drag=0.01)
+    grid.add_cloth(resolution=(9, 9), size=(0.6, 0.6), structural=(3e3, 0.5),
+                   shear=(600.0, 0.1), flexion=(50.0, 0.01))
+    out = []
+    # Newton without line search: near convergence the line search compares energies
+    # equal to rounding, and the order of parallel sums can flip its decision
+    for integrator, options in (("projective", {}),
+                                ("backward_euler", {"cg_tol": 1e-12, "line_search": False,
+                                                    "newton_iterations": 3})):
+        sim = tcloth.Simulator(grid, integrator, dt=1 / 60, **options)
+        sim.step(4)
+        out.append((sim.positions(), 1e-12))
+    return out
+
+
+@pytest.mark.parametrize("paths", [general_paths, grid_paths])
+def test_parallel_loops_give_the_serial_results(paths):
     """Loops below init(serial_below=...) items run on one thread, so the tests mostly see
     serial code: the same steps with every loop parallel agree to rounding."""
-    def steps():
-        scene = tcloth.Scene(air_drag=0.01)
-        scene.add_cloth(resolution=(7, 7), size=(0.6, 0.6), center=(0, 0.3, 0), pinned=[],
-                        structural=(3e3, 0.5), shear=(600.0, 0.1), flexion=(50.0, 0.01))
-        scene.add_springs([[0, 48]], stiffness=5.0)
-        scene.add_sphere((0, 0, 0), 0.2, friction=0.4, thickness=0.01)
-        out = []
-        # solvers converged far below their stopping tolerances, so that rounding in the
-        # order of parallel sums cannot change an iteration count
-        for integrator, dt, options in (
-                ("symplectic_euler", 1e-3, {}),
-                ("backward_euler", 1 / 60, {"cg_tol": 1e-10, "newton_tol": 1e-10}),
-                ("projective", 1 / 60, {"cg_tol": 1e-10, "cg_max_iterations": 1000})):
-            sim = tcloth.Simulator(scene, integrator, dt=dt, **options)
-            sim.step(4)
-            out.append(sim.positions())
-        grid = tcloth.Scene(air_drag=0.01)      # the multigrid paths (9 x 9: two levels)
-        grid.add_cloth(resolution=(9, 9), size=(0.6, 0.6), structural=(3e3, 0.5),
-                       shear=(600.0, 0.1), flexion=(50.0, 0.01))
-        # Newton without line search: near convergence the line search compares energies
-        # equal to rounding, and the order of parallel sums can flip its decision
-        for integrator, options in (("projective", {}),
-                                    ("backward_euler", {"cg_tol": 1e-12, "line_search": False,
-                                                        "newton_iterations": 3})):
-            sim = tcloth.Simulator(grid, integrator, dt=1 / 60, **options)
-            sim.step(4)
-            out.append(sim.positions())
-        return out
     try:
         tcloth.init(arch="cpu", precision="f64")
-        serial = steps()
+        serial = paths()
         tcloth.init(arch="cpu", precision="f64", serial_below=0)
-        parallel = steps()
+        parallel = paths()
     finally:
         tcloth.init(arch="cpu", precision="f64", serial_below=tcloth.runtime.SERIAL_BELOW)
-    for a, b, tol in zip(serial, parallel, (1e-12, 1e-9, 1e-9, 1e-12, 1e-12), strict=True):
+    for (a, tol), (b, _) in zip(serial, parallel, strict=True):
         assert np.abs(a - b).max() < tol
