@@ -68,10 +68,10 @@ class BackwardEuler(Integrator):
         single cloth grid) or "cg" (block Jacobi). "auto" takes the multigrid for CG on
         the projected Hessian of a single cloth grid, which its cycle inverts (one
         linearised solve on the 128 x 128 benchmark cloth: 3-4 CG iterations against
-        40-60, 1.6x faster), and block Jacobi otherwise: preconditioning the exact
+        40-60, 1.2-1.6x faster), and block Jacobi otherwise: preconditioning the exact
         Hessian, a cycle still saves 8 of 9 CG iterations, but costs 10 of them (Newton
-        over the benchmark swing: as fast or slower at 128 x 128 and 256 x 256;
-        docs/implicit.md).
+        over the benchmark swing: as fast within the noise at 128 x 128 and 256 x 256,
+        with a longer tail; docs/implicit.md).
 
     After each step ``stats`` holds newton_iterations, cg_iterations (total) and
     residual (the last CG relative residual).

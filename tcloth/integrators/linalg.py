@@ -37,6 +37,7 @@ def axpy_into(out: ti.template(), x: ti.template(), alpha: float, d: ti.template
 @ti.kernel
 def copy_into(out: ti.template(), a: ti.template()):
     """out = a (fields of one shape, any number of dimensions)."""
+    ti.loop_config(serialize=ti.static(runtime.serial_count(int(np.prod(out.shape)))))
     for I in ti.grouped(out):
         out[I] = a[I]
 

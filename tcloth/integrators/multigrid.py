@@ -686,7 +686,7 @@ class GridPCG(linalg.ConjugateGradients):
             self.x[j + PAD, i + PAD] = ti.Vector.zero(float, 3)
             self.p[j + PAD, i + PAD] = ti.Vector.zero(float, 3)
             r = self.mg.r[0][j + PAD, i + PAD]
-            self.mg._begin_level(0, j, i, r)
+            self.mg.set_rhs(j, i, r)
             rr += ti.cast(r.dot(r), ti.f64)
         return rr
 
