@@ -3,6 +3,7 @@ consistency, order 1) and Liu et al.'s projective solver (agreement with backwar
 both reach the static equilibrium of a long explicit run."""
 import numpy as np
 import pytest
+import taichi as ti
 
 import tcloth
 from tcloth import InstabilityError
@@ -358,3 +359,48 @@ def test_parallel_loops_give_the_serial_results(paths):
         tcloth.init(arch="cpu", precision="f64", serial_below=tcloth.runtime.SERIAL_BELOW)
     for (a, tol), (b, _) in zip(serial, parallel, strict=True):
         assert np.abs(a - b).max() < tol
+
+
+def test_block_jacobi_cg_on_an_indefinite_matrix_stops_with_a_descent_direction(f64):
+    """linalg.PCG on A = diag(d) + a spring chain's Laplacian (scalars, the same for x, y
+    and z), preconditioned by a fixed positive diagonal: A positive definite is solved;
+    A indefinite stops CG at the first direction of non-positive curvature with x a
+    descent direction that lowers 1/2 x.A x - b.x; A negative definite stops it at once
+    with x = P^-1 b."""
+    from tcloth.integrators import linalg
+    n = 8
+    rng = np.random.default_rng(2)
+    w = rng.uniform(1.0, 3.0, n - 1)                     # spring s joins s and s + 1
+    # adjacency entries (particle, spring, other particle), sorted by particle
+    entries = sorted([(s, s, s + 1) for s in range(n - 1)]
+                     + [(s + 1, s, s) for s in range(n - 1)])
+    start = np.searchsorted([p for p, _, _ in entries], np.arange(n + 1)).astype(np.int32)
+
+    def field(values, dtype=ti.f64):
+        f = ti.field(dtype, shape=len(values))
+        f.from_numpy(np.asarray(values))
+        return f
+    adj = ti.Vector.field(2, ti.i32, shape=len(entries))
+    adj.from_numpy(np.array([(s, q) for _, s, q in entries], dtype=np.int32))
+    laplacian = np.zeros((n, n))
+    for s in range(n - 1):
+        laplacian[np.ix_([s, s + 1], [s, s + 1])] += w[s] * np.array([[1, -1], [-1, 1]])
+    precond = rng.uniform(0.1, 0.3, n)
+    b = rng.normal(size=(n, 3))
+
+    def solve(d):
+        cg = linalg.PCG(n, field(d), field(w[[s for _, s, _ in entries]]),
+                        field(start, ti.i32), adj, field(precond), field(np.ones(n)))
+        cg.b.from_numpy(b)
+        iterations, residual = cg.solve(1e-12, 100)
+        return iterations, residual, cg.x.to_numpy(), np.diag(d) + laplacian
+    iterations, residual, x, a = solve(rng.uniform(1.0, 2.0, n))
+    assert residual < 1e-12 and np.allclose(x, np.linalg.solve(a, b), rtol=0, atol=1e-10)
+    iterations, residual, x, a = solve(np.full(n, -3.0))
+    eig = np.linalg.eigvalsh(a)
+    assert eig.min() < 0.0 < eig.max()
+    assert 1 < iterations < 100 and residual > 1e-12
+    assert np.sum(b * x) > 0.0 and 0.5 * np.sum(x * (a @ x)) - np.sum(b * x) < 0.0
+    iterations, residual, x, _ = solve(np.full(n, -20.0))
+    assert iterations == 1 and residual == 1.0
+    assert np.allclose(x, precond[:, None] * b, rtol=0, atol=1e-14)
