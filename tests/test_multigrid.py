@@ -167,12 +167,6 @@ def test_block_coarse_operators_are_the_galerkin_products(f64):
                        dense @ np.arange(ny * nx * 3.0))
 
 
-def stored_blocks(solver, weights):
-    """Full-stencil block weights (ny, nx, k, 6) as the solver stores its fine level."""
-    return np.pad(weights[:, :, [PROVOT.index(o) for o in solver.halves[0]]],
-                  ((mg.WPAD,) * 2,) * 2 + ((0, 0),) * 2)
-
-
 def vcycle_matrix(solver, free):
     """B on the free degrees of freedom, column by column; pinned entries stay 0."""
     ny, nx = solver.shapes[0]
@@ -205,7 +199,7 @@ def test_block_vcycle_is_symmetric_with_the_spectrum_of_b_a_in_0_1(f64):
     assert np.abs(eig.imag).max() < 1e-9
     assert eig.real.min() > 0.05 and eig.real.max() < 1.0 + 1e-9, (eig.real.min(), eig.real.max())
     _, other, _ = random_block_grid_matrix(ny, nx, pinned, seed=8)
-    solver.w[0].from_numpy(stored_blocks(solver, other))
+    solver.w[0].from_numpy(solver.stored_blocks(other))
     solver.build(coarse=False)
     stale, _ = vcycle_matrix(solver, free)
     assert np.allclose(stale, stale.T, atol=1e-12 * np.abs(stale).max())
@@ -220,7 +214,7 @@ def test_multigrid_preconditioned_cg_solves_in_a_few_iterations(f64):
     solver.set_matrix(weights)
     cg = mg.GridPCG(solver)
     rhs = np.random.default_rng(7).normal(size=(ny * nx, 3)) * free[:, None]
-    solver.r[0].from_numpy(np.pad(rhs.reshape(ny, nx, 3), ((mg.PAD,) * 2,) * 2 + ((0, 0),)))
+    solver.load_rhs(rhs.reshape(ny, nx, 3))
     iterations, residual = cg.solve(1e-10, 50)
     x = cg.x.to_numpy()[mg.PAD:-mg.PAD, mg.PAD:-mg.PAD].reshape(-1)
     exact = np.zeros(ny * nx * 3)
@@ -249,8 +243,8 @@ def test_cg_on_an_indefinite_matrix_stops_with_a_descent_direction(f64):
     def solve(shift, sign=1.0):
         w = sign * weights
         w[:, :, 0] += shift * free.reshape(ny, nx, 1) * eye
-        cg.w.from_numpy(stored_blocks(solver, w))
-        solver.r[0].from_numpy(np.pad(rhs.reshape(ny, nx, 3), ((mg.PAD,) * 2,) * 2 + ((0, 0),)))
+        cg.w.from_numpy(solver.stored_blocks(w))
+        solver.load_rhs(rhs.reshape(ny, nx, 3))
         iterations, residual = cg.solve(1e-10, 200)
         x = cg.x.to_numpy()[mg.PAD:-mg.PAD, mg.PAD:-mg.PAD].reshape(-1)
         matrix = (sign * dense + shift * np.diag(dofs.astype(float)))[np.ix_(dofs, dofs)]

@@ -310,11 +310,16 @@ class GridLevels:
         for j, i in ti.ndrange(ny, nx):
             self.set_rhs(j, i, self.t[0][j + PAD, i + PAD])
 
-    def vcycle(self, r):
-        """One V-cycle on a (ny, nx, 3) NumPy right-hand side: B r (for tests and tools)."""
+    def load_rhs(self, r):
+        """``set_rhs`` at every fine node from a (ny, nx, 3) NumPy array (for tests and
+        tools)."""
         padded = np.pad(r, ((PAD, PAD), (PAD, PAD), (0, 0)))
         self.t[0].from_numpy(padded.astype(runtime.numpy_real()))
         self._load_rhs()
+
+    def vcycle(self, r):
+        """One V-cycle on a (ny, nx, 3) NumPy right-hand side: B r (for tests and tools)."""
+        self.load_rhs(r)
         self._run_cycle()
         return self._solution(0).to_numpy()[PAD:-PAD, PAD:-PAD]
 
@@ -455,13 +460,17 @@ class BlockGridMultigrid(GridLevels):
         ``halves[0][k]``."""
         self.w[0][j + WPAD, i + WPAD, k] = block
 
+    def stored_blocks(self, weights):
+        """Fine blocks (ny, nx, len(stencil), 6) over the whole stencil in the layout of
+        ``w[0]``: the ``half_stencil``'s blocks, padded (for tests and tools)."""
+        half = weights[:, :, [self.stencil.index(o) for o in self.halves[0]]]
+        return np.pad(half, ((WPAD, WPAD), (WPAD, WPAD), (0, 0), (0, 0))).astype(
+            runtime.numpy_real())
+
     def set_matrix(self, weights):
         """Fine blocks from NumPy (ny, nx, len(stencil), 6) over the whole stencil, then
         ``build`` (for tests and tools)."""
-        half = [weights[:, :, self.stencil.index(o)] for o in self.halves[0]]
-        self.w[0].from_numpy(np.pad(np.stack(half, axis=2),
-                                    ((WPAD, WPAD), (WPAD, WPAD), (0, 0), (0, 0)))
-                             .astype(runtime.numpy_real()))
+        self.w[0].from_numpy(self.stored_blocks(weights))
         self.build()
 
     def level_weights(self, level):
@@ -660,8 +669,9 @@ class GridPCG(linalg.ConjugateGradients):
     ``BlockGridMultigrid`` ``mg`` (Galerkin coarse levels: a few iterations whatever the
     grid size). H is the cycle's own fine matrix, or with ``own_matrix`` another one of
     the same layout written with ``set_block`` (the cycle then preconditions a matrix
-    other than the one it inverts). The right-hand side goes in with ``mg.set_rhs`` (0 at
-    inactive nodes, which stay 0); the solution is ``x`` (padded like the cycle's fields).
+    other than the one it inverts). The right-hand side goes in with ``mg.set_rhs`` in a
+    kernel, or ``mg.load_rhs`` from NumPy (0 at inactive nodes, which stay 0); the
+    solution is ``x`` (padded like the cycle's fields).
     An iteration is the cycle's launches and one more; the residual is the cycle's own
     right-hand side field."""
 
@@ -677,7 +687,7 @@ class GridPCG(linalg.ConjugateGradients):
 
     @ti.kernel
     def _start(self) -> ti.f64:
-        """x = p = 0 and the cycle's start; returns r.r."""
+        """x = p = 0; returns r.r."""
         ny, nx = ti.static(self.mg.shapes[0])
         self.scalars[0] = 0.0
         rr = ti.cast(0.0, ti.f64)
@@ -686,7 +696,6 @@ class GridPCG(linalg.ConjugateGradients):
             self.x[j + PAD, i + PAD] = ti.Vector.zero(float, 3)
             self.p[j + PAD, i + PAD] = ti.Vector.zero(float, 3)
             r = self.mg.r[0][j + PAD, i + PAD]
-            self.mg.set_rhs(j, i, r)
             rr += ti.cast(r.dot(r), ti.f64)
         return rr
 
