@@ -80,13 +80,23 @@ def test_vcycles_converge_to_the_dense_solution(f64, ny, nx):
 
 
 def test_a_grid_of_at_most_64_nodes_is_solved_exactly(f64):
+    """The coarsest level's inverse (Gauss-Jordan in a kernel, pinned rows skipped), on
+    scalar weights from NumPy and on blocks assembled in the kernel."""
+    rhs = np.random.default_rng(2).normal(size=(56, 3))
     dense, weights, free = random_grid_matrix(8, 7, pinned=[(3, 3)])
     solver = mg.GridMultigrid(7, 8, PROVOT)
     assert solver.levels == 1
     solver.set_matrix(weights)
-    rhs = np.random.default_rng(2).normal(size=(56, 3)) * free[:, None]
-    e = solver.vcycle(rhs.reshape(8, 7, 3)).reshape(-1, 3)
-    assert np.allclose(dense @ e, rhs, atol=1e-12)
+    e = solver.vcycle((rhs * free[:, None]).reshape(8, 7, 3)).reshape(-1, 3)
+    assert np.allclose(dense @ e, rhs * free[:, None], atol=1e-12)
+    assert np.all(e[~free] == 0.0)
+    dense, weights, free = random_block_grid_matrix(8, 7, pinned=[(3, 3), (7, 0)])
+    solver = mg.BlockGridMultigrid(7, 8, PROVOT)
+    assert solver.levels == 1
+    solver.set_matrix(weights)
+    e = solver.vcycle((rhs * free[:, None]).reshape(8, 7, 3)).ravel()
+    assert np.allclose(dense @ e, (rhs * free[:, None]).ravel(), atol=1e-12)
+    assert np.all(e.reshape(-1, 3)[~free] == 0.0)
 
 
 def test_two_level_cycle_is_smoothing_coarse_correction_smoothing(f64):
