@@ -91,10 +91,11 @@ def test_newton_on_the_exact_hessian_converges_quadratically_on_folded_cloth(f64
     indefinite. CG on the exact Hessian (stopped at negative curvature, preconditioned by
     the projected one) takes Newton to the backward Euler step in a few iterations: the
     NumPy residual M (x0 + h v0 - x) / h^2 + f(x) of the free particles drops below 1e-9
-    of its start (measured: 2e-13 in 5 iterations). CG on the projected Hessian (the
-    definiteness fix alone) converges linearly: more than twice the iterations for the
-    same step-size tolerance, and a residual 100 times larger or more (measured: 17
-    iterations, 6e-9)."""
+    of its start (measured: 8e-12 N in 5 iterations). CG on the projected Hessian (the
+    definiteness fix alone) converges linearly: more than three times the iterations for
+    the same step-size tolerance, and a residual 10 times larger or more, since a linear
+    rate leaves more behind its last step than a quadratic one (measured: 22 iterations,
+    2.5e-10 N)."""
     n, h = 16, 1 / 60
     scene = tcloth.Scene()
     scene.add_cloth(resolution=(n, n), size=(0.1 * (n - 1),) * 2, mass=0.1 * n * n,
@@ -117,7 +118,7 @@ def test_newton_on_the_exact_hessian_converges_quadratically_on_folded_cloth(f64
         sim.step()
         runs[exact] = (sim.integrator.stats["newton_iterations"], residual(sim.positions()))
     assert runs[True][0] <= 6 and runs[True][1] < 1e-9 * start, runs
-    assert runs[False][0] > 2 * runs[True][0] and runs[False][1] > 100 * runs[True][1], runs
+    assert runs[False][0] > 3 * runs[True][0] and runs[False][1] > 10 * runs[True][1], runs
 
 
 def test_multigrid_and_block_jacobi_cg_give_the_same_backward_euler_steps(f64):
@@ -256,6 +257,29 @@ def test_linear_solver_is_checked(integrator):
     sim.step()
 
 
+def test_line_search_takes_full_steps_whose_energy_change_is_rounding(f64):
+    """In float32, at a converged backward Euler step of a folded cloth, steps of 1e-8 m
+    change E by far less than its rounding error: the Armijo test would compare rounding
+    and backtrack at random, so the line search takes them whole. Random steps of 1 cm,
+    which stretch springs and raise E by far more than its rounding, are still cut."""
+    try:
+        tcloth.init(arch="cpu")
+        sim = tcloth.Simulator(cloth(1e4, n=12), "backward_euler", dt=1 / 60)
+        sim.step(30)
+        be, model, h = sim.integrator, sim.model, sim.dt
+        t = sim.time
+        x = sim.state.x          # the last step's end: x0, x_hat and d0 are still its own
+        energy = be._energy_and_gradient(model, x, h, t)
+        rng = np.random.default_rng(0)
+        for _ in range(5):
+            be.dx.from_numpy(1e-8 * rng.normal(size=x.shape + (3,)).astype(np.float32))
+            assert be._line_search(model, x, h, t, energy, False)[0] == 1.0
+        be.dx.from_numpy(1e-2 * rng.normal(size=x.shape + (3,)).astype(np.float32))
+        assert be._line_search(model, x, h, t, energy, False)[0] < 0.1
+    finally:
+        tcloth.init(arch="cpu", precision="f64")
+
+
 def test_exact_hessian_is_checked_and_needs_the_line_search():
     scene = tcloth.Scene()
     scene.add_cloth(resolution=(4, 4), size=(1, 1))
@@ -263,11 +287,11 @@ def test_exact_hessian_is_checked_and_needs_the_line_search():
         tcloth.Simulator(scene, "backward_euler", exact_hessian=True, line_search=False)
     with pytest.raises(tcloth.SceneError, match="exact_hessian must be.*'yes'"):
         tcloth.Simulator(scene, "backward_euler", exact_hessian="yes")
-    # "auto": the multigrid preconditions the projected Hessian, block Jacobi the exact one
+    # the exact Hessian goes with the line search; "auto" takes the multigrid either way
     for line_search in (True, False):
         sim = tcloth.Simulator(scene, "backward_euler", line_search=line_search)
         assert sim.integrator.exact is line_search
-        assert (sim.integrator.grid is None) is line_search
+        assert sim.integrator.grid is not None
 
 
 def test_projective_keeps_particles_out_of_colliders(f64):

@@ -29,8 +29,8 @@ SOLVERS = {
     "backward_euler_1solve_jacobi": ("backward_euler", {"newton_iterations": 1,
                                                         "line_search": False, "cg_tol": 1e-3,
                                                         "linear_solver": "cg"}),
-    "backward_euler_newton": ("backward_euler", {}),                     # block Jacobi
-    "backward_euler_newton_multigrid": ("backward_euler", {"linear_solver": "multigrid"}),
+    "backward_euler_newton": ("backward_euler", {}),                     # multigrid
+    "backward_euler_newton_jacobi": ("backward_euler", {"linear_solver": "cg"}),
     "backward_euler_newton_projected": ("backward_euler", {"exact_hessian": False}),
 }
 

@@ -15,8 +15,9 @@ f_lag: wind and attraction, evaluated at the start of the step (explicit).
 
 grad E = 0 is backward Euler. Newton's method: each Newton step solves H dx = -grad E by
 conjugate gradients, filtered so that pinned particles do not move (Baraff & Witkin's
-filtered CG); a backtracking line search on E makes every iteration decrease E, so a step
-never gains energy. H is assembled as symmetric 3 x 3 blocks in Taichi kernels:
+filtered CG); a backtracking line search on E makes every iteration decrease E (or
+change it by less than its rounding error), so a step never gains energy. H is assembled
+as symmetric 3 x 3 blocks in Taichi kernels:
   - blocks per spring end, gathered per particle, with a block-Jacobi (3 x 3 per
     particle) preconditioner;
   - or, for a scene that is one cloth grid and nothing else (``linear_solver``), as
@@ -37,6 +38,7 @@ instead of 3; ``test_newton_on_the_exact_hessian_converges_quadratically_on_fold
 on the projected H: a full step along a truncated direction can gain energy without
 bound (the benchmark cloth blew up).
 """
+import numpy as np
 import taichi as ti
 
 from .. import runtime
@@ -65,13 +67,11 @@ class BackwardEuler(Integrator):
         negative curvature and preconditioned by the projected one (needs the line
         search), or on the projected Hessian (the definiteness fix).
     linear_solver ("auto"): the CG preconditioner, "multigrid" (only for a scene that is a
-        single cloth grid) or "cg" (block Jacobi). "auto" takes the multigrid for CG on
-        the projected Hessian of a single cloth grid, which its cycle inverts (one
-        linearised solve on the 128 x 128 benchmark cloth: 3-4 CG iterations against
-        40-60, 1.2-1.6x faster), and block Jacobi otherwise: preconditioning the exact
-        Hessian, a cycle still saves 8 of 9 CG iterations, but costs 10 of them (Newton
-        over the benchmark swing: as fast within the noise at 128 x 128 and 256 x 256,
-        with a longer tail; docs/implicit.md).
+        single cloth grid) or "cg" (block Jacobi). "auto" takes the multigrid for a
+        single cloth grid and block Jacobi otherwise. On the 128 x 128 benchmark cloth,
+        measured side by side: one linearised solve 3-4 CG iterations against 60; Newton
+        on the exact Hessian 7 against 86-105 CG iterations a step, and 0.69x the time
+        (docs/implicit.md).
 
     After each step ``stats`` holds newton_iterations, cg_iterations (total) and
     residual (the last CG relative residual).
@@ -97,10 +97,7 @@ class BackwardEuler(Integrator):
             raise SceneError("exact_hessian=True needs line_search=True: without it a step "
                              "along a direction of negative curvature can gain energy")
         self.exact = line_search if exact is None else exact
-        linear_solver = self.options["linear_solver"]
-        if linear_solver == "auto" and self.exact:
-            linear_solver = "cg"
-        self.grid = multigrid.single_grid(model, linear_solver)
+        self.grid = multigrid.single_grid(model, self.options["linear_solver"])
         if self.grid is not None:
             self.grid_reals = model.grid_reals
             self.mg = multigrid.BlockGridMultigrid(
@@ -117,7 +114,8 @@ class BackwardEuler(Integrator):
         c = max(model.collider_count, 1)
         self.fn0 = ti.field(real, shape=(n, c))
         self.n0 = ti.Vector.field(3, real, shape=(n, c))
-        self.acc = ti.field(runtime.accumulator(), shape=2)
+        self.acc = ti.field(runtime.accumulator(), shape=2)     # E, sum of |terms|
+        self._eps = float(np.finfo(runtime.numpy_real()).eps)
         self.stats = {}
         self._lagged = model.wind is not None or model.attraction is not None
 
@@ -135,28 +133,40 @@ class BackwardEuler(Integrator):
             if model.attraction is not None:
                 eval_attraction(state_in.x, model.mass, *model.attraction, self.f_lag)
         cg_total, residual, it = 0, 0.0, 0
-        v_scale = 1.0 + linalg.max_norm(state_in.v)
+        tol = opt["newton_tol"] * (1.0 + linalg.max_norm(state_in.v))
         energy = self._energy_and_gradient(model, x, h, t1)
         for it in range(1, opt["newton_iterations"] + 1):
             iters, residual = self._solve(model, x, h, t1, first=it == 1)
             cg_total += iters
-            slope = linalg.dot(self.grad, self.dx)
+            size = linalg.max_norm(self.dx) / h              # a full step's velocity change
+            last = it == opt["newton_iterations"] or size < tol
             alpha = 1.0
             if opt["line_search"]:
-                while True:
-                    linalg.axpy_into(self.x_try, x, alpha, self.dx)
-                    trial = self._energy(model, self.x_try, h, t1)
-                    if trial <= energy + 1e-4 * alpha * slope or alpha < 1e-4:
-                        break
-                    alpha *= 0.5
+                alpha, energy = self._line_search(model, x, h, t1, energy, not last)
             linalg.axpy_into(x, x, alpha, self.dx)           # = x_try, bit for bit
-            step = alpha * linalg.max_norm(self.dx) / h
-            if step < opt["newton_tol"] * v_scale or it == opt["newton_iterations"]:
+            if last or alpha * size < tol:
                 break
-            energy = self._energy_and_gradient(model, x, h, t1)
+            if not opt["line_search"]:
+                energy = self._energy_and_gradient(model, x, h, t1)
         self._finish(state_in.x, x, 1.0 / h, state_out.v)
         state_out.t = t1
         self.stats = {"newton_iterations": it, "cg_iterations": cg_total, "residual": residual}
+
+    def _line_search(self, model, x, h, t, energy, with_grad):
+        """Backtracking from alpha = 1 along dx until E falls by the Armijo fraction 1e-4
+        of the slope, or by less than E's rounding error (near convergence the decrease is
+        below it, and the test would compare rounding); alpha >= 2^-14. Each trial also
+        computes the gradient when ``with_grad``, so that the accepted one is the next
+        iteration's (the gradient at x is not needed once the slope is known). Returns
+        (alpha, E at x + alpha dx)."""
+        slope = linalg.dot(self.grad, self.dx)
+        alpha = 1.0
+        while True:
+            linalg.axpy_into(self.x_try, x, alpha, self.dx)
+            trial, rounding = self._terms(model, self.x_try, h, t, with_grad)
+            if trial <= energy + 1e-4 * alpha * slope + rounding or alpha < 1e-4:
+                return alpha, trial
+            alpha *= 0.5
 
     def _solve(self, model, x, h, t, first=True):
         """Preconditioned CG on H dx = -grad (filtered: pinned entries stay 0). The
@@ -175,13 +185,15 @@ class BackwardEuler(Integrator):
 
     # -- energy, gradient, Hessian products (Python wrappers) ------------------------------
     def _energy(self, model, x, h, t):
-        return self._terms(model, x, h, t, False)
+        return self._terms(model, x, h, t, False)[0]
 
     def _energy_and_gradient(self, model, x, h, t):
-        return self._terms(model, x, h, t, True)
+        return self._terms(model, x, h, t, True)[0]
 
     def _terms(self, model, x, h, t, with_grad):
-        self.acc[0] = 0.0
+        """(E at x, a bound on the rounding error of comparing two such evaluations:
+        8 ulps of the sum of the terms' magnitudes); the gradient into ``grad`` when
+        ``with_grad``."""
         self._particle_terms(x, model.mass, model.inv_mass, model.params, h, with_grad)
         if model.spring_count:
             self._spring_terms(x, model.spring_pairs, model.spring_ks, model.spring_kd,
@@ -189,7 +201,12 @@ class BackwardEuler(Integrator):
         if model.collider_count:
             self._contact_terms(x, model.inv_mass, model.collider_records,
                                 model.collider_ranges, h, t, with_grad)
-        return float(self.acc[0])
+        energy, magnitude = self._sums()
+        return energy, 8.0 * self._eps * magnitude
+
+    @ti.kernel
+    def _sums(self) -> ti.types.vector(2, ti.f64):
+        return ti.Vector([self.acc[0], self.acc[1]], ti.f64)
 
     def _assemble(self, model, x, h, t, coarse=True):
         """Hessian blocks at positions x: on the grid with its multigrid levels (the coarse
@@ -269,21 +286,25 @@ class BackwardEuler(Integrator):
     @ti.kernel
     def _particle_terms(self, x: ti.template(), mass: ti.template(), inv_mass: ti.template(),
                         params: ti.template(), h: float, with_grad: ti.template()):
-        """Inertia, gravity, air drag and lagged forces."""
+        """Inertia, gravity, air drag and lagged forces; the first of E's kernels (sets acc
+        to 0)."""
+        self.acc[0] = 0.0
+        self.acc[1] = 0.0
         gravity = ti.Vector([params[0], params[1], params[2]])
         ti.loop_config(serialize=ti.static(serial(x)))
         for p in range(x.shape[0]):
             m = mass[p]
             dxh = x[p] - self.x_hat[p]
             dx0 = x[p] - self.x0[p]
-            e = (0.5 * m / (h * h) * dxh.dot(dxh) - m * gravity.dot(x[p])
-                 + 0.5 * params[3] / h * dx0.dot(dx0))
+            e_pos = 0.5 * m / (h * h) * dxh.dot(dxh) + 0.5 * params[3] / h * dx0.dot(dx0)
+            e_lin = -m * gravity.dot(x[p])
             g = m / (h * h) * dxh - m * gravity + params[3] / h * dx0
             if ti.static(self._lagged):
-                e -= self.f_lag[p].dot(x[p])
+                e_lin -= self.f_lag[p].dot(x[p])
                 g -= self.f_lag[p]
             if inv_mass[p] > 0.0:
-                self.acc[0] += ti.cast(e, self.acc.dtype)
+                self.acc[0] += ti.cast(e_pos + e_lin, self.acc.dtype)
+                self.acc[1] += ti.cast(e_pos + ti.abs(e_lin), self.acc.dtype)
             if ti.static(with_grad):
                 self.grad[p] = g
 
@@ -301,8 +322,9 @@ class BackwardEuler(Integrator):
             n = d / ti.max(length, 1e-30)
             stretch = length - rest[s]
             rel = (d - (self.x0[i] - self.x0[j])).dot(self.d0[s])
-            self.acc[0] += ti.cast(0.5 * ks[s] * stretch * stretch
-                                   + 0.5 * kd[s] / h * rel * rel, self.acc.dtype)
+            e = 0.5 * ks[s] * stretch * stretch + 0.5 * kd[s] / h * rel * rel
+            self.acc[0] += ti.cast(e, self.acc.dtype)
+            self.acc[1] += ti.cast(e, self.acc.dtype)
             if ti.static(with_grad):
                 self.g_spring[s] = ks[s] * stretch * n + kd[s] / h * rel * self.d0[s]
         if ti.static(with_grad):
@@ -359,6 +381,7 @@ class BackwardEuler(Integrator):
                             e, g = self._contact_one(kind, records[c], x[p], p, c,
                                                      1.0 / inv_mass[p], h, t)
                             self.acc[0] += ti.cast(e, self.acc.dtype)
+                            self.acc[1] += ti.cast(e, self.acc.dtype)
                             if ti.static(with_grad):
                                 self.grad[p] += g
 
