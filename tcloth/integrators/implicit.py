@@ -68,10 +68,10 @@ class BackwardEuler(Integrator):
         search), or on the projected Hessian (the definiteness fix).
     linear_solver ("auto"): the CG preconditioner, "multigrid" (only for a scene that is a
         single cloth grid) or "cg" (block Jacobi). "auto" takes the multigrid for a
-        single cloth grid and block Jacobi otherwise. On the 128 x 128 benchmark cloth,
-        measured side by side: one linearised solve 3-4 CG iterations against 60; Newton
-        on the exact Hessian 7 against 86-105 CG iterations a step, and 0.69x the time
-        (docs/implicit.md).
+        single cloth grid and block Jacobi otherwise. On the benchmark cloth over its
+        swing, side by side: one linearised solve 3 CG iterations a step against 62;
+        Newton on the exact Hessian 12 against 108, 0.70x the median time at 128 x 128
+        and 0.72x at 256 x 256, with a longer tail (docs/implicit.md).
 
     After each step ``stats`` holds newton_iterations, cg_iterations (total) and
     residual (the last CG relative residual).
