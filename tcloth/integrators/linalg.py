@@ -38,7 +38,7 @@ def axpy_into(out: ti.template(), x: ti.template(), alpha: float, d: ti.template
 def copy_into(out: ti.template(), a: ti.template()):
     """out = a (fields of one shape, any number of dimensions)."""
     ti.loop_config(serialize=ti.static(runtime.serial_count(int(np.prod(out.shape)))))
-    for I in ti.grouped(out):
+    for I in ti.grouped(ti.ndrange(*out.shape)):     # a range-for: serialize applies
         out[I] = a[I]
 
 
