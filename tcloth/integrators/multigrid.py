@@ -28,7 +28,7 @@ update that decreases the energy a linear solve would minimise.
 Vectors are vec3 fields padded by two nodes of zeros on every side, so that stencils need
 no bounds tests. The scalar cycle's loops are ``ti.func`` bodies called from the projective
 solver's kernel, so that a whole iteration is one launch; the block cycle is small kernels
-(they compile far faster): on one thread four for the fine level and one for the coarse
+(they compile far faster): on one thread four for the fine level and two for the coarse
 ones, in parallel a few per level. ``vcycle`` runs one from NumPy for tests and tools.
 """
 import numpy as np
@@ -633,11 +633,13 @@ class BlockGridMultigrid(GridLevels):
         ``result``. Launched as small kernels: Taichi's compile time grows faster than the
         number of loops in a kernel (the whole cycle as one kernel, with a loop per colour,
         took minutes to compile on a 13 x 18 grid). A serial grid runs its coarse levels
-        in one launch (``_coarse_cycle``; each launch costs about 50 us of Python)."""
+        in two launches, down and up (each launch costs about 50 us of Python; on
+        128 x 128 the two compile in 5.9 s, one kernel for both took 8.2 s)."""
         if self.serial and self.levels > 1:
             self._serial_sweep(0, False)
             self._residual_restrict(0)
-            self._coarse_cycle()
+            self._coarse_down()
+            self._coarse_up()
             self._prolong_kernel(0)
             self._serial_sweep(0, True)
             return
@@ -680,12 +682,17 @@ class BlockGridMultigrid(GridLevels):
             self._relax(level, m // nx, m % nx)
 
     @ti.kernel
-    def _coarse_cycle(self):
-        """Levels 1 and coarser of a serial V-cycle, after ``_residual_restrict(0)``."""
+    def _coarse_down(self):
+        """Levels 1 and coarser of a serial V-cycle on the way down, after
+        ``_residual_restrict(0)``, and the coarsest solve."""
         for level in ti.static(range(1, self.levels - 1)):
             self._sweep_in_order(level, False)
             self._residual_restrict_loops(level)
         self._solve_coarsest()
+
+    @ti.kernel
+    def _coarse_up(self):
+        """Levels coarser than 0 of a serial V-cycle on the way up."""
         for level in ti.static(range(self.levels - 2, 0, -1)):
             self._prolong(level)
             self._sweep_in_order(level, True)
