@@ -654,8 +654,8 @@ class BlockGridMultigrid(GridLevels):
     _run_cycle = cycle
 
     def _smooth(self, level, backward):
-        """One symmetric block Gauss-Seidel sweep on e_l: forwards, or backwards (the
-        adjoint sweep, so that the cycle is symmetric). A serial grid sweeps its nodes in
+        """One block Gauss-Seidel sweep on e_l: forwards, or backwards (the adjoint
+        sweep, so that the cycle is symmetric). A serial grid sweeps its nodes in
         order (``_serial_sweep``); a parallel one colour by colour, a kernel per colour."""
         if self.serial:
             self._serial_sweep(level, backward)
