@@ -69,9 +69,10 @@ class BackwardEuler(Integrator):
     linear_solver ("auto"): the CG preconditioner, "multigrid" (only for a scene that is a
         single cloth grid) or "cg" (block Jacobi). "auto" takes the multigrid for a
         single cloth grid and block Jacobi otherwise. On the benchmark cloth over its
-        swing, side by side: one linearised solve 3 CG iterations a step against 62;
-        Newton on the exact Hessian 12 against 108, 0.70x the median time at 128 x 128
-        and 0.72x at 256 x 256, with a longer tail (docs/implicit.md).
+        swing: one linearised solve 3 CG iterations a step against 62; Newton on the
+        exact Hessian 12 against 108, 0.6-0.7x the time before the cloth folds and about
+        the same after (128 x 128), 0.72x over 1.5 s at 256 x 256, with a longer tail
+        (docs/implicit.md).
 
     After each step ``stats`` holds newton_iterations, cg_iterations (total) and
     residual (the last CG relative residual).
