@@ -185,9 +185,6 @@ class BackwardEuler(Integrator):
         return result
 
     # -- energy, gradient, Hessian products (Python wrappers) ------------------------------
-    def _energy(self, model, x, h, t):
-        return self._terms(model, x, h, t, False)[0]
-
     def _energy_and_gradient(self, model, x, h, t):
         return self._terms(model, x, h, t, True)[0]
 

@@ -635,21 +635,24 @@ class BlockGridMultigrid(GridLevels):
         took minutes to compile on a 13 x 18 grid). A serial grid runs its coarse levels
         in two launches, down and up (each launch costs about 50 us of Python; on
         128 x 128 the two compile in 5.9 s, one kernel for both took 8.2 s)."""
-        if self.serial and self.levels > 1:
-            self._serial_sweep(0, False)
-            self._residual_restrict(0)
+        if self.levels == 1:
+            self._coarsest()
+            return
+        self._smooth(0, False)
+        self._residual_restrict(0)
+        if self.serial:
             self._coarse_down()
             self._coarse_up()
-            self._prolong_kernel(0)
-            self._serial_sweep(0, True)
-            return
-        for level in range(self.levels - 1):
-            self._smooth(level, False)
-            self._residual_restrict(level)
-        self._coarsest()
-        for level in range(self.levels - 2, -1, -1):
-            self._prolong_kernel(level)
-            self._smooth(level, True)
+        else:
+            for level in range(1, self.levels - 1):
+                self._smooth(level, False)
+                self._residual_restrict(level)
+            self._coarsest()
+            for level in range(self.levels - 2, 0, -1):
+                self._prolong_kernel(level)
+                self._smooth(level, True)
+        self._prolong_kernel(0)
+        self._smooth(0, True)
 
     _run_cycle = cycle
 
