@@ -8,9 +8,11 @@ os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "False")
 from . import cli  # noqa: E402  (after the environment default above)
 from .errors import InstabilityError, SceneError, StaleSimulatorError
 from .mesh import export_mesh, write_obj, write_ply
-from .render import Camera, Renderer, render
+from .camera import Camera
+from .render import Renderer, render
 from .runtime import init
-from .scene import Cloth, Rope, Scene
+from .builders import Cloth, Rope
+from .scene import Scene
 from .simulator import Simulator
 from .video import record, write_png
 

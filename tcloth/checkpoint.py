@@ -12,7 +12,8 @@ import zipfile
 import numpy as np
 
 from .errors import SceneError
-from .scene import KIND_CODE, SPRING_KINDS, Cloth, Rope, Scene
+from .builders import Cloth, Rope
+from .scene import KIND_CODE, SPRING_KINDS, Scene
 
 FORMAT = "tcloth-checkpoint"
 VERSION = 1
@@ -134,7 +135,7 @@ def save(sim, path):
     meta = {"format": FORMAT, "version": VERSION, "scene": desc,
             "integrator": sim.integrator_name, "dt": sim.dt, "options": sim.integrator.options,
             "settings": sim.settings, "precision": sim.precision,
-            "num_steps": sim.num_steps, "forces_valid": sim.state.forces_valid}
+            "num_steps": sim.num_steps, "forces_valid": sim.integrator.holds_forces(sim.state)}
     state = sim.state
     payload = {f"scene_{k}": v for k, v in arrays.items()}
     payload.update(meta=np.array(json.dumps(meta)), state_x=state.x.to_numpy(),

@@ -8,6 +8,7 @@ state stays consistent with the corrected motion.
 """
 import taichi as ti
 
+from . import runtime
 from .runtime import serial
 
 
@@ -51,17 +52,29 @@ def _correct_velocities(x_before: ti.template(), x: ti.template(), inv_dt: float
         v[p] += (x[p] - x_before[p]) * inv_dt
 
 
-def limit_strain(model, state, dt):
-    """Apply the model's strain limit to ``state`` in place. Returns the number of springs
-    still too long before the last pass."""
-    lim = model.strain_limit
-    model.limit_x0.copy_from(state.x)
-    violated = 0
-    for _ in range(lim["iterations"]):
-        violated = _limit_pass(state.x, model.inv_mass, model.spring_pairs, model.spring_rest,
-                               model.limit_index, model.limit_count, lim["max_stretch"],
-                               model.limit_dx, model.limit_hits)
-        if violated == 0:
-            break
-    _correct_velocities(model.limit_x0, state.x, 1.0 / dt, state.v)
-    return violated
+class StrainLimiter:
+    """The model's strain limit with its scratch (corrections, hit counts, the positions
+    before the passes)."""
+
+    def __init__(self, model):
+        self.model = model
+        real, n = runtime.real(), model.particle_count
+        self.dx = ti.Vector.field(3, real, shape=n)
+        self.hits = ti.field(ti.i32, shape=n)
+        self.x_before = ti.Vector.field(3, real, shape=n)
+
+    def apply(self, state, dt):
+        """Apply the strain limit to ``state`` in place. Returns the number of springs
+        still too long before the last pass."""
+        m = self.model
+        lim = m.strain_limit
+        self.x_before.copy_from(state.x)
+        violated = 0
+        for _ in range(lim["iterations"]):
+            violated = _limit_pass(state.x, m.inv_mass, m.spring_pairs, m.spring_rest,
+                                   m.limit_index, m.limit_count, lim["max_stretch"],
+                                   self.dx, self.hits)
+            if violated == 0:
+                break
+        _correct_velocities(self.x_before, state.x, 1.0 / dt, state.v)
+        return violated

@@ -4,11 +4,10 @@ Everything visible is ray-cast exactly. Cloth triangles and particle spheres are
 each primitive tests the camera rays of the pixels its projected bounding box covers.
 The ground and the colliders (spheres, boxes, planes) are tested at every pixel.
 
-Visibility is race-free and deterministic: every hit is one int64 key, the hit distance's
-float32 bits above the primitive id (positive floats order like their bits), combined
-with ``atomic_min``: the nearest hit wins, ties go to the smaller id, whatever the order
-of the threads. The shading pass reads the winning id alone. The same scene gives the
-same image, bit for bit, every run.
+Visibility is race-free and deterministic: every hit is one int64 key (``raycast.py``)
+combined with ``atomic_min``: the nearest hit wins, ties go to the smaller id, whatever
+the order of the threads. The shading pass reads the winning id alone. The same scene
+gives the same image, bit for bit, every run.
 
 Shadows come from a shadow map: the same splatting seen from the light (orthographic).
 """
@@ -17,9 +16,10 @@ import math
 import numpy as np
 import taichi as ti
 
-from . import runtime
-from .colliders import BOX, PLANE, SPHERE
+from . import raycast, runtime
+from .camera import Camera
 from .errors import SceneError
+from .shapes import SHAPES
 
 SKY_ID = 2147483647
 SKY_KEY = (2147483647 << 32) | SKY_ID
@@ -32,142 +32,6 @@ PARTICLE_COLOUR = (0.95, 0.78, 0.25)
 COLLIDER_COLOUR = (0.50, 0.58, 0.66)
 LIGHT_DIR = (0.35, 0.85, 0.4)
 SHADOW_MAP = 768
-
-
-class Camera:
-    """A perspective camera looking from ``eye`` at ``target``.
-
-    Args:
-        eye, target: (3,) metres. up: (3,) world up. fov: vertical field of view, degrees.
-    """
-
-    def __init__(self, eye, target, up=(0.0, 1.0, 0.0), fov=40.0):
-        self.eye = np.asarray(eye, dtype=np.float64)
-        self.target = np.asarray(target, dtype=np.float64)
-        up = np.asarray(up, dtype=np.float64)
-        fwd = self.target - self.eye
-        if self.eye.shape != (3,) or fwd.shape != (3,) or not np.all(np.isfinite(fwd)) \
-                or np.linalg.norm(fwd) == 0:
-            raise SceneError(f"camera eye and target must be distinct finite 3-vectors "
-                             f"(got eye={self.eye.tolist()}, target={self.target.tolist()})")
-        if not 1.0 <= fov <= 170.0:
-            raise SceneError(f"camera fov must be within [1, 170] degrees (got {fov})")
-        self.fov = float(fov)
-        self.forward = fwd / np.linalg.norm(fwd)
-        right = np.cross(self.forward, up)
-        if np.linalg.norm(right) < 1e-9:
-            right = np.cross(self.forward, (1.0, 0.0, 0.0))
-        self.right = right / np.linalg.norm(right)
-        self.up = np.cross(self.right, self.forward)
-
-    @classmethod
-    def fit(cls, points, direction=(0.55, 0.45, 1.0), fov=40.0, margin=1.25):
-        """A camera that sees all ``points`` (N,3) from ``direction``."""
-        lo, hi = points.min(0), points.max(0)
-        centre = 0.5 * (lo + hi)
-        radius = max(0.5 * np.linalg.norm(hi - lo), 1e-3)
-        d = np.asarray(direction, dtype=np.float64)
-        dist = margin * radius / math.sin(math.radians(fov) / 2)
-        return cls(centre + dist * d / np.linalg.norm(d), centre, fov=fov)
-
-    @classmethod
-    def from_config(cls, config, points):
-        """None -> fit to points; a dict of Camera arguments; or a Camera."""
-        if config is None:
-            return cls.fit(points)
-        if isinstance(config, Camera):
-            return config
-        if isinstance(config, dict):
-            return cls(**config)
-        raise SceneError(f"camera must be None, a dict or a tcloth.Camera (got {config!r})")
-
-
-@ti.func
-def _hit_triangle(o, d, a, b, c):
-    """Moller-Trumbore: (t, u, v) with t < 0 when the ray misses."""
-    e1, e2 = b - a, c - a
-    pv = d.cross(e2)
-    det = e1.dot(pv)
-    result = ti.Vector([-1.0, 0.0, 0.0], ti.f32)
-    if abs(det) > 1e-12:
-        inv = 1.0 / det
-        tv = o - a
-        u = tv.dot(pv) * inv
-        qv = tv.cross(e1)
-        v = d.dot(qv) * inv
-        if u >= 0.0 and v >= 0.0 and u + v <= 1.0:
-            result = ti.Vector([e2.dot(qv) * inv, u, v], ti.f32)
-    return result
-
-
-@ti.func
-def _hit_sphere(o, d, centre, radius):
-    """Nearest positive t of the ray on the sphere, or -1."""
-    oc = o - centre
-    b = oc.dot(d)
-    disc = b * b - (oc.dot(oc) - radius * radius)
-    t = -1.0
-    if disc >= 0.0:
-        s = ti.sqrt(disc)
-        t = -b - s
-        if t <= 0.0:
-            t = -b + s
-    return t
-
-
-@ti.func
-def _box_frame(rec):
-    return ti.Matrix([[rec[9], rec[10], rec[11]], [rec[12], rec[13], rec[14]],
-                      [rec[15], rec[16], rec[17]]], ti.f32)
-
-
-@ti.func
-def _hit_box(o, d, centre, rot, half):
-    """Slab test in the box frame: entry t > 0, or -1 (a ray from inside does not hit)."""
-    ol = rot.transpose() @ (o - centre)
-    dl = rot.transpose() @ d
-    t_near, t_far = -1e30, 1e30
-    for k in ti.static(range(3)):
-        inv = 1.0 / dl[k] if abs(dl[k]) > 1e-12 else 1e30
-        t0 = (-half[k] - ol[k]) * inv
-        t1 = (half[k] - ol[k]) * inv
-        t_near = ti.max(t_near, ti.min(t0, t1))
-        t_far = ti.min(t_far, ti.max(t0, t1))
-    return t_near if (t_near <= t_far and t_near > 0.0) else -1.0
-
-
-@ti.func
-def _hit_collider(kind: ti.template(), rec, o, d, time):
-    """Ray parameter of the first hit on one collider record at ``time``, or -1."""
-    centre = ti.Vector([rec[0], rec[1], rec[2]], ti.f32) + time * ti.Vector(
-        [rec[3], rec[4], rec[5]], ti.f32)
-    t = -1.0
-    if ti.static(kind == SPHERE):
-        t = _hit_sphere(o, d, centre, rec[6])
-    elif ti.static(kind == PLANE):
-        n = ti.Vector([rec[6], rec[7], rec[8]], ti.f32)
-        dn = d.dot(n)
-        if dn < -1e-6:
-            t = (centre - o).dot(n) / dn
-    else:
-        t = _hit_box(o, d, centre, _box_frame(rec), ti.Vector([rec[6], rec[7], rec[8]], ti.f32))
-    return t
-
-
-@ti.func
-def _key(t, prim_id):
-    """int64 key ordering hits by distance t > 0, then by id."""
-    return (ti.cast(ti.bit_cast(ti.cast(t, ti.f32), ti.i32), ti.i64) << 32) | ti.cast(prim_id, ti.i64)
-
-
-@ti.func
-def _key_t(key):
-    return ti.bit_cast(ti.cast(key >> 32, ti.i32), ti.f32)
-
-
-@ti.func
-def _key_id(key):
-    return ti.cast(key & 0x7FFFFFFF, ti.i32)
 
 
 @ti.data_oriented
@@ -196,13 +60,12 @@ class Renderer:
         self.camera = Camera.from_config(camera, x0)
         lo, hi = x0.min(0), x0.max(0)
         extent = float(np.linalg.norm(hi - lo)) or 1.0
-        has_planes = any(c["kind"] == "plane" for c in scene.colliders)
+        has_planes = any(SHAPES[s].checkered for s in model.colliders.kinds)
         if ground is None:
             ground = False if has_planes else float(lo[1]) - 0.5 * extent
         self.ground = ground
         self.checker = 10.0 ** math.floor(math.log10(extent)) / 4
-        self.records, self.ranges = model.collider_records, model.collider_ranges
-        self.collider_count = model.collider_count
+        self.colliders = model.colliders
         self.shadows = bool(shadows)
 
         tris = [c.triangles for c in scene.cloths]
@@ -358,16 +221,16 @@ class Renderer:
                     t = (ti.static(self.view[14]) - o[1]) / d[1]
                     if t > 0.0:
                         best, best_id = t, GROUND_ID
-            for kind in ti.static(range(3)):
-                # planes receive shadows but cast none worth a shadow-map test
-                if ti.static(self.ranges[kind][1] > 0 and (camera or kind != PLANE)):
-                    for k in range(self.ranges[kind][0], self.ranges[kind][0] + self.ranges[kind][1]):
-                        t = _hit_collider(kind, self.records[k], o, d, time)
+            for g in ti.static(self.colliders.groups):
+                # checkered shapes (planes) receive shadows but cast none worth a test
+                if ti.static(camera or not SHAPES[g.shape].checkered):
+                    for k in range(g.first, g.first + g.count):
+                        t = SHAPES[g.shape].ray_hit(self.colliders.data[k], o, d, time)
                         if 0.0 < t < best:
                             best, best_id = t, COLLIDER_ID + k
             key = ti.i64(SKY_KEY)
             if best_id != SKY_ID:
-                key = _key(best, best_id)
+                key = raycast.key(best, best_id)
             depth[r, c] = key
 
     @ti.kernel
@@ -394,11 +257,11 @@ class Renderer:
                 o, d = self._ray(camera, r, col, h, w)
                 hit = 0.0
                 if ti.static(sphere):
-                    hit = _hit_sphere(o, d, a, radius)
+                    hit = raycast.hit_sphere(o, d, a, radius)
                 else:
-                    hit = _hit_triangle(o, d, a, b, c)[0]
+                    hit = raycast.hit_triangle(o, d, a, b, c)[0]
                 if hit > 0.0:
-                    ti.atomic_min(depth[r, col], _key(hit, prim_id))
+                    ti.atomic_min(depth[r, col], raycast.key(hit, prim_id))
 
     @ti.kernel
     def _splat_triangles(self, x: ti.template(), depth: ti.template(), camera: ti.template()):
@@ -459,7 +322,7 @@ class Renderer:
                 blocked = False
                 if 0 <= r < SHADOW_MAP and 0 <= c < SHADOW_MAP:
                     blocker = self.shadow[r, c]
-                    blocked = blocker != ti.i64(SKY_KEY) and _key_t(blocker) < s[2] - bias
+                    blocked = blocker != ti.i64(SKY_KEY) and raycast.key_t(blocker) < s[2] - bias
                 if not blocked:
                     visible += 0.25
             lit *= visible
@@ -474,18 +337,17 @@ class Renderer:
         checker = ti.static(self.view[15])
         for r, c in ti.ndrange(h, w):
             o, d = self._ray(True, r, c, h, w)
-            k = _key_id(self.depth[r, c])
-            t = _key_t(self.depth[r, c])
+            k = raycast.key_id(self.depth[r, c])
+            t = raycast.key_t(self.depth[r, c])
             p = o + t * d
             base = ti.math.vec3(0.0)
             n = ti.math.vec3(0.0, 1.0, 0.0)
             if k == SKY_ID:
                 s = 0.5 + 0.5 * d[1]
                 base = (1.0 - s) * ti.math.vec3(0.93, 0.95, 0.98) + s * ti.math.vec3(0.55, 0.70, 0.92)
-            elif k == GROUND_ID or (k >= COLLIDER_ID and self._kind(k - COLLIDER_ID) == PLANE):
+            elif k == GROUND_ID or (k >= COLLIDER_ID and self._checkered(k - COLLIDER_ID)):
                 if k != GROUND_ID:
-                    rec = self.records[k - COLLIDER_ID]
-                    n = ti.Vector([rec[6], rec[7], rec[8]], ti.f32)
+                    n = self._collider_normal(k - COLLIDER_ID, p, time)
                 # squares on the two axes least aligned with the normal
                 an = ti.abs(n)
                 skip = 0 if an[0] >= an[1] and an[0] >= an[2] else (1 if an[1] >= an[2] else 2)
@@ -498,30 +360,14 @@ class Renderer:
                 fade = 1.0 / (1.0 + 0.02 * t / checker)
                 base = fade * base + (1.0 - fade) * ti.math.vec3(0.71)
             elif k >= COLLIDER_ID:
-                rec = self.records[k - COLLIDER_ID]
-                centre = ti.Vector([rec[0], rec[1], rec[2]], ti.f32) + time * ti.Vector(
-                    [rec[3], rec[4], rec[5]], ti.f32)
                 base = ti.math.vec3(COLLIDER_COLOUR)
-                if self._kind(k - COLLIDER_ID) == SPHERE:
-                    n = (p - centre).normalized()
-                else:
-                    rot = _box_frame(rec)
-                    q = rot.transpose() @ (p - centre)
-                    e = ti.abs(q) - ti.Vector([rec[6], rec[7], rec[8]], ti.f32)
-                    axis = 0
-                    if e[1] > e[axis]:
-                        axis = 1
-                    if e[2] > e[axis]:
-                        axis = 2
-                    nl = ti.Vector([0.0, 0.0, 0.0])
-                    nl[axis] = 1.0 if q[axis] >= 0.0 else -1.0
-                    n = rot @ nl
+                n = self._collider_normal(k - COLLIDER_ID, p, time)
             elif k < self.tri_count:
                 i = self.tris[k]
                 a = ti.cast(x[i[0]], ti.f32)
                 b = ti.cast(x[i[1]], ti.f32)
                 cv = ti.cast(x[i[2]], ti.f32)
-                hit = _hit_triangle(o, d, a, b, cv)
+                hit = raycast.hit_triangle(o, d, a, b, cv)
                 u, v = hit[1], hit[2]
                 ns = ((1.0 - u - v) * self.normals[i[0]] + u * self.normals[i[1]]
                       + v * self.normals[i[2]])
@@ -547,13 +393,23 @@ class Renderer:
             self.colour[r, c] = ti.cast(base, ti.f32)
 
     @ti.func
-    def _kind(self, k):
-        kind = BOX
-        if k < self.ranges[PLANE][0]:
-            kind = SPHERE
-        elif k < self.ranges[BOX][0]:
-            kind = PLANE
-        return kind
+    def _checkered(self, k):
+        """True when collider k is drawn with the ground's squares."""
+        checkered = False
+        for g in ti.static(self.colliders.groups):
+            if ti.static(SHAPES[g.shape].checkered):
+                if g.first <= k < g.first + g.count:
+                    checkered = True
+        return checkered
+
+    @ti.func
+    def _collider_normal(self, k, p, time):
+        """The shading normal of collider k at surface point p."""
+        n = ti.Vector([0.0, 1.0, 0.0], ti.f32)
+        for g in ti.static(self.colliders.groups):
+            if g.first <= k < g.first + g.count:
+                n = SHAPES[g.shape].normal(self.colliders.data[k], p, time)
+        return n
 
     @ti.kernel
     def _resolve(self):

@@ -17,9 +17,8 @@ _ARCHS = {
 }
 _PRECISIONS = {"f32": ti.f32, "f64": ti.f64}
 
-# Measured on the 2-core development VM (tools/bench_threads.py): a parallel loop costs
-# about 0.2 ms to start and two threads gain at most 1.4x even at a million items, so one
-# thread is faster below about 10^5 items, for memory-bound and arithmetic-heavy loops alike.
+# Below this many items a CPU loop runs on one thread: starting Taichi's thread pool costs
+# more than a second thread gains (docs/benchmarks.md, "One thread against the thread pool").
 SERIAL_BELOW = 131072
 
 

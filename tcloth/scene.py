@@ -5,101 +5,12 @@ input when it is added, so that a ``Simulator`` built from it never sees bad dat
 """
 import numpy as np
 
+from . import builders
 from .errors import SceneError
+from .validate import as_int, as_per_item, as_points, as_scalar, as_vec3, fmt
 
 SPRING_KINDS = ("structural", "shear", "flexion", "custom")
 KIND_CODE = {name: code for code, name in enumerate(SPRING_KINDS)}
-
-
-def _fmt(value):
-    text = np.array2string(np.asarray(value), threshold=8, precision=6) \
-        if np.ndim(value) else repr(value)
-    return text if len(text) < 200 else text[:197] + "..."
-
-
-def as_vec3(name, value):
-    """A finite 3-vector as float64, or SceneError naming ``name``."""
-    try:
-        arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise SceneError(f"{name} must be a 3-vector of numbers (got {_fmt(value)})") from None
-    if arr.shape != (3,):
-        raise SceneError(f"{name} must be a 3-vector, shape (3,) (got shape {arr.shape}: {_fmt(value)})")
-    if not np.all(np.isfinite(arr)):
-        raise SceneError(f"{name} must be finite (got {_fmt(value)})")
-    return arr
-
-
-def as_points(name, value):
-    """A finite (N,3) float64 array with N >= 1."""
-    try:
-        arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise SceneError(f"{name} must be an (N,3) array of numbers (got {_fmt(value)})") from None
-    if arr.ndim != 2 or arr.shape[1] != 3 or arr.shape[0] == 0:
-        raise SceneError(f"{name} must have shape (N,3) with N >= 1 (got shape {arr.shape})")
-    bad = np.argwhere(~np.isfinite(arr))
-    if len(bad):
-        r, c = bad[0]
-        raise SceneError(f"{name} must be finite (got {name}[{r},{c}] = {arr[r, c]})")
-    return arr
-
-
-def as_scalar(name, value, minimum=None, strict=False):
-    """A finite float; ``minimum`` is inclusive unless ``strict``."""
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        raise SceneError(f"{name} must be a number (got {_fmt(value)})") from None
-    if np.ndim(value) != 0:
-        raise SceneError(f"{name} must be a scalar (got {_fmt(value)})")
-    if not np.isfinite(x):
-        raise SceneError(f"{name} must be finite (got {x})")
-    if minimum is not None and (x <= minimum if strict else x < minimum):
-        raise SceneError(f"{name} must be {'>' if strict else '>='} {minimum} (got {x})")
-    return x
-
-
-def as_per_item(name, value, n, minimum=None, strict=False):
-    """A scalar broadcast to (n,), or an (n,) array; finite, bounded below."""
-    try:
-        arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise SceneError(f"{name} must be a number or an array of numbers (got {_fmt(value)})") from None
-    if arr.ndim == 0:
-        arr = np.full(n, float(arr))
-    elif arr.shape != (n,):
-        raise SceneError(f"{name} must be a scalar or have shape ({n},) (got shape {arr.shape})")
-    if minimum is None:
-        bad = ~np.isfinite(arr)
-        rule = "finite"
-    else:
-        below = arr <= minimum if strict else arr < minimum
-        bad = ~np.isfinite(arr) | below
-        rule = f"finite and {'>' if strict else '>='} {minimum}"
-    if bad.any():
-        k = int(np.argmax(bad))
-        where = f"{name}[{k}]" if np.ndim(value) else name
-        raise SceneError(f"{name} must be {rule} (got {where} = {arr[k]})")
-    return arr
-
-
-def as_int(name, value, minimum):
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
-        raise SceneError(f"{name} must be an integer (got {_fmt(value)})")
-    if value < minimum:
-        raise SceneError(f"{name} must be >= {minimum} (got {value})")
-    return int(value)
-
-
-def as_spring_params(name, value):
-    """A spring family's (k_s, k_d), or None when the family is absent."""
-    if value is None:
-        return None
-    if np.ndim(value) != 1 or len(value) != 2:
-        raise SceneError(f"{name} must be None or a pair (k_s, k_d) (got {_fmt(value)})")
-    return (as_scalar(f"{name}[0] (k_s)", value[0], minimum=0.0),
-            as_scalar(f"{name}[1] (k_d)", value[1], minimum=0.0))
 
 
 def wind_velocity(wind, t):
@@ -116,57 +27,6 @@ def wind_velocity(wind, t):
         return as_vec3("wind gust callable's result", value)
     except SceneError as e:
         raise SceneError(f"{e} at t = {t}") from None
-
-
-class Cloth:
-    """A Provot cloth on a regular grid, as added by ``Scene.add_cloth``.
-
-    Attributes:
-        particles: (ny, nx) int array of particle ids; row j, column i.
-        triangles: (T, 3) int array of particle ids, counter-clockwise seen from the front.
-        springs: dict family -> (M_family,) int array of spring ids.
-        resolution: (nx, ny); spacing: (dx, dy) in metres; offset: id of particle (0, 0).
-        params: dict family -> (k_s, k_d) or None.
-    """
-
-    def __init__(self, offset, resolution, spacing, params, plane):
-        self.offset = offset
-        self.resolution = resolution
-        self.spacing = spacing
-        self.params = params
-        self.plane = plane
-        nx, ny = resolution
-        self.particles = offset + np.arange(nx * ny).reshape(ny, nx)
-        p = self.particles
-        a, b, c, d = p[:-1, :-1], p[:-1, 1:], p[1:, 1:], p[1:, :-1]
-        self.triangles = np.concatenate([
-            np.stack([a, d, b], -1).reshape(-1, 3),
-            np.stack([b, d, c], -1).reshape(-1, 3)])
-        self.springs = {}
-
-    def grid_pairs(self, family):
-        """(M,2) particle pairs of one Provot family on this grid."""
-        p = self.particles
-        if family == "structural":
-            parts = [(p[:, :-1], p[:, 1:]), (p[:-1, :], p[1:, :])]
-        elif family == "shear":
-            parts = [(p[:-1, :-1], p[1:, 1:]), (p[:-1, 1:], p[1:, :-1])]
-        elif family == "flexion":
-            parts = [(p[:, :-2], p[:, 2:]), (p[:-2, :], p[2:, :])]
-        else:
-            raise SceneError(f"family must be structural, shear or flexion (got {family!r})")
-        return np.concatenate([np.stack([u.ravel(), v.ravel()], 1) for u, v in parts])
-
-
-class Rope:
-    """A chain of particles joined by springs, as added by ``Scene.add_rope``.
-
-    Attributes: particles (segments+1,) ids from start to end; springs (segments,) ids.
-    """
-
-    def __init__(self, particles, springs):
-        self.particles = particles
-        self.springs = springs
 
 
 class Scene:
@@ -212,7 +72,7 @@ class Scene:
             raise SceneError(f"velocities must have shape {x.shape} like positions (got {v.shape})")
         pin = np.asarray(pinned)
         if pin.dtype != bool or pin.shape not in ((), (n,)):
-            raise SceneError(f"pinned must be a bool or a ({n},) bool array (got {_fmt(pinned)})")
+            raise SceneError(f"pinned must be a bool or a ({n},) bool array (got {fmt(pinned)})")
         ids = self.num_particles + np.arange(n)
         self._x.append(x)
         self._v.append(v)
@@ -237,7 +97,7 @@ class Scene:
         try:
             p = np.asarray(pairs)
         except (TypeError, ValueError):
-            raise SceneError(f"pairs must be an (M,2) integer array (got {_fmt(pairs)})") from None
+            raise SceneError(f"pairs must be an (M,2) integer array (got {fmt(pairs)})") from None
         if p.ndim != 2 or p.shape[1] != 2 or p.shape[0] == 0 or p.dtype.kind not in "iu":
             raise SceneError(f"pairs must be an (M,2) integer array with M >= 1 "
                              f"(got shape {p.shape}, dtype {p.dtype})")
@@ -299,47 +159,8 @@ class Scene:
         Returns:
             Cloth.
         """
-        if np.ndim(resolution) != 1 or len(resolution) != 2:
-            raise SceneError(f"resolution must be a pair (nx, ny) (got {_fmt(resolution)})")
-        nx = as_int("resolution[0] (nx)", resolution[0], 2)
-        ny = as_int("resolution[1] (ny)", resolution[1], 2)
-        if np.ndim(size) != 1 or len(size) != 2:
-            raise SceneError(f"size must be a pair (w, h) (got {_fmt(size)})")
-        w = as_scalar("size[0] (w)", size[0], minimum=0.0, strict=True)
-        h = as_scalar("size[1] (h)", size[1], minimum=0.0, strict=True)
-        c = as_vec3("center", center)
-        if plane not in ("xz", "xy"):
-            raise SceneError(f"plane must be 'xz' or 'xy' (got {plane!r})")
-        total = as_scalar("mass", mass, minimum=0.0, strict=True)
-        params = {"structural": as_spring_params("structural", structural),
-                  "shear": as_spring_params("shear", shear),
-                  "flexion": as_spring_params("flexion", flexion)}
-        pins = [(0, 0), (nx - 1, 0)] if pinned is None else list(pinned)
-        pin = np.zeros((ny, nx), dtype=bool)
-        for k, ij in enumerate(pins):
-            if np.ndim(ij) != 1 or len(ij) != 2 or not all(
-                    isinstance(t, (int, np.integer)) for t in ij):
-                raise SceneError(f"pinned[{k}] must be an (i, j) pair of ints (got {_fmt(ij)})")
-            i, j = int(ij[0]), int(ij[1])
-            if not (0 <= i < nx and 0 <= j < ny):
-                raise SceneError(f"pinned[{k}] = {(i, j)} is outside the {nx} x {ny} grid")
-            pin[j, i] = True
-        dx, dy = w / (nx - 1), h / (ny - 1)
-        ii, jj = np.meshgrid(np.arange(nx) * dx - w / 2, np.arange(ny) * dy - h / 2)
-        if plane == "xz":
-            pos = np.stack([ii, np.zeros_like(ii), jj], -1)
-        else:
-            pos = np.stack([ii, -jj, np.zeros_like(ii)], -1)
-        cloth = Cloth(self.num_particles, (nx, ny), (dx, dy), params, plane)
-        self.add_particles(pos.reshape(-1, 3) + c, mass=total / (nx * ny), pinned=pin.ravel())
-        for family, kskd in params.items():
-            pairs = cloth.grid_pairs(family)
-            if kskd is None or len(pairs) == 0:
-                cloth.springs[family] = np.zeros(0, dtype=np.int64)
-                continue
-            cloth.springs[family] = self.add_springs(pairs, kskd[0], kskd[1], kind=family)
-        self.cloths.append(cloth)
-        return cloth
+        return builders.add_cloth(self, resolution, size, center, plane, mass, structural,
+                                  shear, flexion, pinned)
 
     def add_rope(self, start, end, segments, mass, stiffness, damping=0.0, pinned=("start",)):
         """Add a straight rope of ``segments`` springs from ``start`` to ``end``.
@@ -351,24 +172,7 @@ class Scene:
         Returns:
             Rope.
         """
-        a, b = as_vec3("start", start), as_vec3("end", end)
-        n = as_int("segments", segments, 1)
-        if np.allclose(a, b, rtol=0, atol=0):
-            raise SceneError(f"start and end must differ (both are {a.tolist()})")
-        total = as_scalar("mass", mass, minimum=0.0, strict=True)
-        ends = {"start": 0, "end": n}
-        if isinstance(pinned, str) or any(p not in ends for p in pinned):
-            raise SceneError(f"pinned must be a tuple of 'start' and/or 'end' (got {pinned!r})")
-        pin = np.zeros(n + 1, dtype=bool)
-        for p in pinned:
-            pin[ends[p]] = True
-        t = np.linspace(0.0, 1.0, n + 1)[:, None]
-        ids = self.add_particles(a + t * (b - a), mass=total / (n + 1), pinned=pin)
-        sids = self.add_springs(np.stack([ids[:-1], ids[1:]], 1), stiffness, damping,
-                                kind="structural")
-        rope = Rope(ids, sids)
-        self.ropes.append(rope)
-        return rope
+        return builders.add_rope(self, start, end, segments, mass, stiffness, damping, pinned)
 
     # -- colliders -------------------------------------------------------------------------
     def _add_collider(self, kind, friction, velocity, thickness, stiffness, damping,
@@ -386,7 +190,7 @@ class Scene:
 
     def add_sphere(self, center, radius, friction=0.0, velocity=(0.0, 0.0, 0.0),
                    thickness=0.005, stiffness=1000.0, damping=0.5, stick_velocity=1e-3):
-        """Add a sphere collider (see tcloth.colliders for the contact model).
+        """Add a sphere collider (see tcloth.terms.colliders for the contact model).
 
         Args:
             center: (3,) m at t = 0; it moves with constant ``velocity`` (3,) m/s.
@@ -434,12 +238,12 @@ class Scene:
             try:
                 r = np.asarray(rotation, dtype=np.float64)
             except (TypeError, ValueError):
-                raise SceneError(f"rotation must be a 3x3 matrix (got {_fmt(rotation)})") from None
+                raise SceneError(f"rotation must be a 3x3 matrix (got {fmt(rotation)})") from None
             if r.shape != (3, 3) or not np.all(np.isfinite(r)):
-                raise SceneError(f"rotation must be a finite 3x3 matrix (got {_fmt(rotation)})")
+                raise SceneError(f"rotation must be a finite 3x3 matrix (got {fmt(rotation)})")
             if not np.allclose(r @ r.T, np.eye(3), atol=1e-6) or np.linalg.det(r) < 0:
                 raise SceneError(f"rotation must be a rotation matrix: orthonormal with "
-                                 f"determinant +1 (got {_fmt(r)}, det {np.linalg.det(r):.6g})")
+                                 f"determinant +1 (got {fmt(r)}, det {np.linalg.det(r):.6g})")
         return self._add_collider("box", friction, velocity, thickness, stiffness, damping,
                                   stick_velocity, center=as_vec3("center", center),
                                   half_extents=h, rotation=r)
@@ -522,7 +326,7 @@ class Scene:
             if ids.ndim != 1 or ids.dtype.kind not in "iu" or len(ids) == 0 or \
                     ids.min() < 0 or ids.max() >= self.num_springs:
                 raise SceneError(f"springs must be a 1-D array of spring ids in "
-                                 f"[0, {self.num_springs}) (got {_fmt(springs)})")
+                                 f"[0, {self.num_springs}) (got {fmt(springs)})")
         self.strain_limit = {"max_stretch": as_scalar("max_stretch", max_stretch, 0.0, strict=True),
                              "iterations": as_int("iterations", iterations, 1),
                              "springs": np.unique(ids)}

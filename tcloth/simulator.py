@@ -3,13 +3,14 @@ import numpy as np
 import taichi as ti
 
 from . import checkpoint, runtime
-from .constraints import limit_strain
+from .constraints import StrainLimiter
 from .diagnostics import Diagnostics
 from .errors import InstabilityError, SceneError
 from .integrators import INTEGRATORS
 from .model import Model
 from .runtime import serial
-from .scene import Scene, as_points, as_scalar
+from .scene import Scene
+from .validate import as_points, as_scalar
 
 _HINTS = {
     "forward_euler": "forward Euler gains energy at every dt on undamped springs: use "
@@ -69,6 +70,9 @@ class Simulator:
         self.integrator = INTEGRATORS[integrator](self.model, **options)
         self._generation = self.model.generation
         self._states = [self.model.state(), self.model.state()]
+        limit = self.model.strain_limit
+        self._limiter = (StrainLimiter(self.model) if limit is not None and self.model.limit_count
+                         else None)
         self._diag = Diagnostics(self.model)
         self.num_steps = 0
 
@@ -97,11 +101,10 @@ class Simulator:
             raise SceneError(f"n must be an integer >= 0 (got {n!r})")
         for _ in range(int(n)):
             s_in, s_out = self._states
-            s_out.forces_valid = False
             self.integrator.simulate(self.model, s_in, s_out, self.dt)
-            if self.model.strain_limit is not None and self.model.limit_count:
-                limit_strain(self.model, s_out, self.dt)
-                s_out.forces_valid = False
+            if self._limiter is not None:
+                self._limiter.apply(s_out, self.dt)
+                self.integrator.invalidate()
             bad = _first_bad_particle(s_out.x, s_out.v, self.position_bound,
                                       self.velocity_bound)
             if bad >= 0:
@@ -134,7 +137,7 @@ class Simulator:
     def forces(self):
         """(N,3) total force on each particle at the current state, N."""
         self._check()
-        self.integrator.forces_at(self.model, self.state)
+        self.integrator.forces_at(self.state)
         return self.state.f.to_numpy()
 
     def set_state(self, positions=None, velocities=None):
@@ -150,7 +153,7 @@ class Simulator:
             if arr.shape != (n, 3):
                 raise SceneError(f"{name} must have shape ({n}, 3) (got {arr.shape})")
             field.from_numpy(arr.astype(npr))
-        self.state.forces_valid = False
+        self.integrator.invalidate()
 
     def reset(self, dt=None):
         """Back to the scene's initial positions and velocities at t = 0, optionally with a
@@ -187,7 +190,8 @@ class Simulator:
         state.x.from_numpy(files["state_x"].astype(npr))
         state.v.from_numpy(files["state_v"].astype(npr))
         state.f.from_numpy(files["state_f"].astype(npr))
-        state.forces_valid = bool(meta["forces_valid"])
+        if meta["forces_valid"]:
+            sim.integrator.adopt_forces(state)
         sim.num_steps = int(meta["num_steps"])
         state.t = sim.time
         return sim

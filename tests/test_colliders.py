@@ -3,6 +3,8 @@ import numpy as np
 import pytest
 
 import tcloth
+from tcloth.shapes import SHAPES
+from tcloth.terms.colliders import Colliders
 from tcloth import SceneError
 
 G = 9.81
@@ -241,7 +243,10 @@ def test_colliders_absent_from_scene_are_not_compiled(f64):
     scene.add_sphere((0, 0, 0), 0.5)
     scene.add_sphere((2, 0, 0), 0.5)
     sim = tcloth.Simulator(scene)
-    assert sim.model.collider_ranges == ((0, 2), (2, 0), (2, 0))
+    groups = sim.model.colliders.groups
+    assert [(SHAPES[g.shape].name, g.first, g.count) for g in groups] == [("sphere", 0, 2)]
     plain = tcloth.Scene()
     plain.add_particles([[0, 1, 0]])
-    assert tcloth.Simulator(plain).model.collider_count == 0
+    sim = tcloth.Simulator(plain)
+    assert sim.model.colliders.count == 0
+    assert not any(isinstance(t, Colliders) for t in sim.integrator.forces.terms)

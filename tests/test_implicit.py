@@ -57,20 +57,20 @@ def hessian_product_matches_finite_differences(scene, pinned, solver):
     x = scene.positions * [1.15, 1.0, 1.15] + 0.002 * rng.normal(size=(12, 3))
     v = 0.3 * rng.normal(size=(12, 3))
     sim.set_state(positions=x, velocities=v)
-    be, model, h = sim.integrator, sim.model, sim.dt
+    be, h = sim.integrator, sim.dt
     probe = sim.model.state()
-    be._begin(model, sim.state.x, sim.state.v, h, 0.0, probe.x)
+    be.potential.begin(sim.state.x, sim.state.v, h, 0.0, probe.x)
     y = x + 0.004 * rng.normal(size=x.shape)            # an iterate near x0 + h v0
     direction = rng.normal(size=x.shape)
     direction[pinned] = 0.0
     probe.v.from_numpy(direction)
     probe.x.from_numpy(y)
-    hp = be.hessian_product(model, probe.x, probe.v, h)
+    hp = be.hessian_product(probe.x, probe.v, h)
 
     def gradient(at):
         probe.x.from_numpy(at)
-        be._energy_and_gradient(model, probe.x, h, 0.0)
-        return be.grad.to_numpy()
+        be.potential.evaluate(probe.x, h, 0.0, True)
+        return be.potential.grad.to_numpy()
     eps = 1e-6
     fd = (gradient(y + eps * direction) - gradient(y - eps * direction)) / (2 * eps)
     free = np.ones(12, dtype=bool)
@@ -79,7 +79,7 @@ def hessian_product_matches_finite_differences(scene, pinned, solver):
 
     def energy(at):
         probe.x.from_numpy(at)
-        return be._terms(model, probe.x, h, 0.0, False)[0]
+        return be.potential.evaluate(probe.x, h, 0.0, False)[0]
     g = gradient(y)
     fd_e = (energy(y + eps * direction) - energy(y - eps * direction)) / (2 * eps)
     assert np.isclose(fd_e, (g * direction).sum(), rtol=1e-6)
@@ -268,16 +268,17 @@ def test_line_search_takes_full_steps_whose_energy_change_is_rounding(f64):
         sim = tcloth.Simulator(cloth(1e4, n=12), "backward_euler", dt=1 / 60,
                                linear_solver="cg")
         sim.step(30)
-        be, model, h = sim.integrator, sim.model, sim.dt
+        be, h = sim.integrator, sim.dt
         t = sim.time
         x = sim.state.x          # the last step's end: x0, x_hat and d0 are still its own
-        energy = be._energy_and_gradient(model, x, h, t)
+        energy = be.potential.evaluate(x, h, t, True)[0]
+        dx = be.hessian.dx
         rng = np.random.default_rng(0)
         for _ in range(5):
-            be.dx.from_numpy(1e-8 * rng.normal(size=x.shape + (3,)).astype(np.float32))
-            assert be._line_search(model, x, h, t, energy, False)[0] == 1.0
-        be.dx.from_numpy(1e-2 * rng.normal(size=x.shape + (3,)).astype(np.float32))
-        assert be._line_search(model, x, h, t, energy, False)[0] < 0.1
+            dx.from_numpy(1e-8 * rng.normal(size=x.shape + (3,)).astype(np.float32))
+            assert be.line_search(x, h, t, energy, False)[0] == 1.0
+        dx.from_numpy(1e-2 * rng.normal(size=x.shape + (3,)).astype(np.float32))
+        assert be.line_search(x, h, t, energy, False)[0] < 0.1
     finally:
         tcloth.init(arch="cpu", precision="f64")
 

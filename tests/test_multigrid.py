@@ -3,8 +3,8 @@ coarse operators, V-cycle convergence to the exact solution, pinned nodes."""
 import numpy as np
 import pytest
 
-from tcloth.integrators import multigrid as mg
-from tcloth.integrators.multigrid import grid_stencil
+from tcloth.grid import stencil as grid_stencil
+from tcloth.integrators import block_multigrid, galerkin, multigrid
 
 PROVOT = grid_stencil((True, True, True))
 
@@ -46,21 +46,21 @@ def hat_prolongation(n_fine):
 def test_coarse_operators_are_the_galerkin_products(ny, nx):
     dense, weights, _ = random_grid_matrix(ny, nx, pinned=[(0, 0), (0, nx - 1)])
     py, px = hat_prolongation(ny), hat_prolongation(nx)
-    assert np.array_equal(py, mg.prolongation_1d(ny))
+    assert np.array_equal(py, galerkin.prolongation_1d(ny))
     p = np.kron(py, px)
-    coarse = mg.galerkin(weights, PROVOT)
-    assert np.allclose(mg.dense_matrix(coarse, mg.coarse_stencil(PROVOT)), p.T @ dense @ p,
+    coarse = galerkin.galerkin(weights, PROVOT)
+    assert np.allclose(galerkin.dense_matrix(coarse, galerkin.coarse_stencil(PROVOT)), p.T @ dense @ p,
                        rtol=0, atol=1e-10 * np.abs(dense).max())
-    assert np.allclose(mg.dense_matrix(weights, PROVOT), dense)
-    assert len(mg.coarse_stencil(PROVOT)) == 21
-    assert mg.coarse_stencil(mg.coarse_stencil(PROVOT)) == mg.coarse_stencil(PROVOT)
+    assert np.allclose(galerkin.dense_matrix(weights, PROVOT), dense)
+    assert len(galerkin.coarse_stencil(PROVOT)) == 21
+    assert galerkin.coarse_stencil(galerkin.coarse_stencil(PROVOT)) == galerkin.coarse_stencil(PROVOT)
 
 
 @pytest.mark.parametrize("ny, nx", [(24, 19), (40, 40)])
 def test_vcycles_converge_to_the_dense_solution(f64, ny, nx):
     pinned = [(0, 0), (0, nx - 1), (ny // 2, nx // 2)]
     dense, weights, free = random_grid_matrix(ny, nx, pinned, seed=ny)
-    solver = mg.GridMultigrid(nx, ny, PROVOT)
+    solver = multigrid.GridMultigrid(nx, ny, PROVOT)
     assert solver.levels >= 3
     solver.set_matrix(weights)
     rng = np.random.default_rng(1)
@@ -84,14 +84,14 @@ def test_a_grid_of_at_most_64_nodes_is_solved_exactly(f64):
     scalar weights from NumPy and on blocks assembled in the kernel."""
     rhs = np.random.default_rng(2).normal(size=(56, 3))
     dense, weights, free = random_grid_matrix(8, 7, pinned=[(3, 3)])
-    solver = mg.GridMultigrid(7, 8, PROVOT)
+    solver = multigrid.GridMultigrid(7, 8, PROVOT)
     assert solver.levels == 1
     solver.set_matrix(weights)
     e = solver.vcycle((rhs * free[:, None]).reshape(8, 7, 3)).reshape(-1, 3)
     assert np.allclose(dense @ e, rhs * free[:, None], atol=1e-12)
     assert np.all(e[~free] == 0.0)
     dense, weights, free = random_block_grid_matrix(8, 7, pinned=[(3, 3), (7, 0)])
-    solver = mg.BlockGridMultigrid(7, 8, PROVOT)
+    solver = block_multigrid.BlockGridMultigrid(7, 8, PROVOT)
     assert solver.levels == 1
     solver.set_matrix(weights)
     e = solver.vcycle((rhs * free[:, None]).reshape(8, 7, 3)).ravel()
@@ -105,7 +105,7 @@ def test_two_level_cycle_is_smoothing_coarse_correction_smoothing(f64):
     B is symmetric."""
     ny, nx = 13, 9
     dense, weights, free = random_grid_matrix(ny, nx, pinned=[(0, 0), (12, 4)], seed=3)
-    solver = mg.GridMultigrid(nx, ny, PROVOT)
+    solver = multigrid.GridMultigrid(nx, ny, PROVOT)
     assert solver.shapes == [(13, 9), (7, 5)]
     solver.set_matrix(weights)
     p = np.kron(hat_prolongation(ny), hat_prolongation(nx)) * free[:, None]
@@ -163,16 +163,16 @@ def random_block_grid_matrix(ny, nx, pinned, seed=0):
 def test_block_coarse_operators_are_the_galerkin_products(f64):
     ny, nx = 13, 18
     dense, weights, free = random_block_grid_matrix(ny, nx, pinned=[(0, 0), (0, nx - 1)])
-    solver = mg.BlockGridMultigrid(nx, ny, PROVOT)
+    solver = block_multigrid.BlockGridMultigrid(nx, ny, PROVOT)
     assert solver.shapes == [(13, 18), (7, 10), (4, 6)]
     solver.set_matrix(weights)
-    assert np.allclose(mg.dense_matrix(weights, PROVOT), dense)
+    assert np.allclose(galerkin.dense_matrix(weights, PROVOT), dense)
     p = np.kron(np.kron(hat_prolongation(ny), hat_prolongation(nx)), np.eye(3))
     coarse = solver.level_weights(1)
     assert np.allclose(solver.level_weights(0), weights)
-    assert np.allclose(mg.dense_matrix(coarse, mg.coarse_stencil(PROVOT)), p.T @ dense @ p,
+    assert np.allclose(galerkin.dense_matrix(coarse, galerkin.coarse_stencil(PROVOT)), p.T @ dense @ p,
                        rtol=0, atol=1e-10 * np.abs(dense).max())
-    assert np.allclose(mg.galerkin(weights, PROVOT), coarse)
+    assert np.allclose(galerkin.galerkin(weights, PROVOT), coarse)
     assert np.allclose(solver.product(np.arange(ny * nx * 3.0).reshape(ny, nx, 3)).ravel(),
                        dense @ np.arange(ny * nx * 3.0))
 
@@ -200,7 +200,7 @@ def test_block_vcycle_is_symmetric_with_the_spectrum_of_b_a_in_0_1(f64):
     ny, nx = 19, 17
     pinned = [(0, 0), (9, 8)]
     dense, weights, free = random_block_grid_matrix(ny, nx, pinned, seed=5)
-    solver = mg.BlockGridMultigrid(nx, ny, PROVOT)
+    solver = block_multigrid.BlockGridMultigrid(nx, ny, PROVOT)
     assert solver.levels == 3
     solver.set_matrix(weights)
     b, dofs = vcycle_matrix(solver, free)
@@ -220,13 +220,13 @@ def test_block_vcycle_is_symmetric_with_the_spectrum_of_b_a_in_0_1(f64):
 def test_multigrid_preconditioned_cg_solves_in_a_few_iterations(f64):
     ny, nx = 40, 33
     dense, weights, free = random_block_grid_matrix(ny, nx, pinned=[(0, 0), (0, 32)], seed=6)
-    solver = mg.BlockGridMultigrid(nx, ny, PROVOT)
+    solver = block_multigrid.BlockGridMultigrid(nx, ny, PROVOT)
     solver.set_matrix(weights)
-    cg = mg.GridPCG(solver)
+    cg = block_multigrid.GridPCG(solver)
     rhs = np.random.default_rng(7).normal(size=(ny * nx, 3)) * free[:, None]
     solver.load_rhs(rhs.reshape(ny, nx, 3))
     iterations, residual = cg.solve(1e-10, 50)
-    x = cg.x.to_numpy()[mg.PAD:-mg.PAD, mg.PAD:-mg.PAD].reshape(-1)
+    x = cg.x.to_numpy()[galerkin.PAD:-galerkin.PAD, galerkin.PAD:-galerkin.PAD].reshape(-1)
     exact = np.zeros(ny * nx * 3)
     dofs = np.repeat(free, 3)
     exact[dofs] = np.linalg.solve(dense[np.ix_(dofs, dofs)], rhs.ravel()[dofs])
@@ -243,9 +243,9 @@ def test_cg_on_an_indefinite_matrix_stops_with_a_descent_direction(f64):
     1/2 x.W x - b.x; on W = -A it stops at once with x = B b."""
     ny, nx = 12, 11
     dense, weights, free = random_block_grid_matrix(ny, nx, pinned=[(0, 0)], seed=3)
-    solver = mg.BlockGridMultigrid(nx, ny, PROVOT)
+    solver = block_multigrid.BlockGridMultigrid(nx, ny, PROVOT)
     solver.set_matrix(weights)
-    cg = mg.GridPCG(solver, own_matrix=True)
+    cg = block_multigrid.GridPCG(solver, own_matrix=True)
     dofs = np.repeat(free, 3)
     rhs = np.random.default_rng(4).normal(size=(ny * nx, 3)) * free[:, None]
     eye = np.array([1.0, 1.0, 1.0, 0.0, 0.0, 0.0])
@@ -256,7 +256,7 @@ def test_cg_on_an_indefinite_matrix_stops_with_a_descent_direction(f64):
         cg.w.from_numpy(solver.stored_blocks(w))
         solver.load_rhs(rhs.reshape(ny, nx, 3))
         iterations, residual = cg.solve(1e-10, 200)
-        x = cg.x.to_numpy()[mg.PAD:-mg.PAD, mg.PAD:-mg.PAD].reshape(-1)
+        x = cg.x.to_numpy()[galerkin.PAD:-galerkin.PAD, galerkin.PAD:-galerkin.PAD].reshape(-1)
         matrix = (sign * dense + shift * np.diag(dofs.astype(float)))[np.ix_(dofs, dofs)]
         return iterations, residual, x, matrix
     iterations, residual, x, matrix = solve(30.0)

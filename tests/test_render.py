@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 import tcloth
-from tcloth.render import COLLIDER_ID, Camera
+from tcloth import Camera
+from tcloth.render import COLLIDER_ID
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RED, GREEN, BLUE = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)

@@ -106,9 +106,12 @@ def test_pinned_particles_stay_put(f64):
     assert np.all(sim.positions()[cloth.particles[1:, 2], 1] < scene.positions[cloth.particles[1:, 2], 1])
 
 
-FEATURE_KERNELS = {"springs": ("forces", "eval_springs"), "grid": ("forces", "eval_grid_springs"),
-                   "wind": ("forces", "eval_wind"), "attraction": ("forces", "eval_attraction"),
-                   "colliders": ("forces", "collide"), "strain": ("constraints", "_limit_pass")}
+FEATURE_KERNELS = {"springs": ("terms.springs", "eval_springs"),
+                   "grid": ("terms.springs", "eval_grid_springs"),
+                   "wind": ("terms.wind", "eval_wind"),
+                   "attraction": ("terms.attraction", "eval_attraction"),
+                   "colliders": ("terms.colliders", "collide"),
+                   "strain": ("constraints", "_limit_pass")}
 
 
 def launches(monkeypatch, scene, steps=3):

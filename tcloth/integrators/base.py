@@ -1,11 +1,13 @@
-"""Integrator base class: option parsing and the shared force evaluation."""
+"""Integrator base class: option parsing and the force workspace."""
 from ..errors import SceneError
-from ..forces import compute_forces
+from ..forces import Forces
 
 
 class Integrator:
     """One entry point: ``simulate(model, state_in, state_out, dt)``, which also sets
-    ``state_out.t = state_in.t + dt``.
+    ``state_out.t = state_in.t + dt``. An integrator keeps its workspace (forces, solver
+    buffers), built from the model it is made for; it holds no simulation state, except a
+    cache of forces where it says so (``Verlet``).
 
     Subclasses list their options in ``defaults`` (name -> default); an unknown option
     raises SceneError naming it.
@@ -19,13 +21,22 @@ class Integrator:
             raise SceneError(f"unknown option {unknown[0]!r} for integrator {self.name!r} "
                              f"(its options: {sorted(self.defaults) or 'none'})")
         self.options = {**self.defaults, **options}
+        self.forces = Forces(model)
 
-    @staticmethod
-    def forces_at(model, state):
-        """Make ``state.f`` hold the forces at (state.x, state.v)."""
-        if not state.forces_valid:
-            compute_forces(model, state.x, state.v, state.f, state.t)
-            state.forces_valid = True
+    def forces_at(self, state):
+        """Make ``state.f`` hold the forces at (state.x, state.v) and time state.t."""
+        self.forces.compute(state.x, state.v, state.t, state.f)
+
+    def invalidate(self):
+        """The simulator changed a state outside ``simulate`` (strain limiting, set_state):
+        forget anything cached about it."""
+
+    def holds_forces(self, state):
+        """True when ``state.f`` holds forces this integrator will reuse (checkpoints)."""
+        return False
+
+    def adopt_forces(self, state):
+        """``state.f`` holds the forces a saved simulator had cached (checkpoints)."""
 
     def simulate(self, model, state_in, state_out, dt):
         raise NotImplementedError

@@ -34,14 +34,15 @@ removed, and its tangential velocity reduced by mu times that normal velocity ch
 import numpy as np
 import taichi as ti
 
+from .. import grid as grid_layout
 from .. import runtime
-from ..colliders import signed_distance
-from ..forces import (add_field_forces, body_force, compute_forces,
-                      grid_spring_sum, owned_grid_springs)
+from .. import terms as term_modules
+from ..forces import Forces
 from ..runtime import serial
+from ..terms.springs import grid_spring_sum, owned_grid_springs
 from . import linalg
 from .base import Integrator
-from .multigrid import GridMultigrid, grid_stencil, single_grid
+from .multigrid import GridMultigrid, single_grid
 
 
 @ti.data_oriented
@@ -69,14 +70,26 @@ class Projective(Integrator):
         self.mass, self.inv_mass, self.params = model.mass, model.inv_mass, model.params
         n, real = model.particle_count, runtime.real()
         self.x0, self.y, self.f = (ti.Vector.field(3, real, shape=n) for _ in range(3))
-        self.field_forces = model.wind is not None or model.attraction is not None
+        # the terms by their treatment: in the force residual, in y, or projected after
+        self.residual_forces = Forces(model, lambda cls: cls.projective == "force")
+        lagged = [cls for cls in term_modules.TERMS
+                  if cls.present(model) and cls.projective == "lagged"]
+        self.field_forces = Forces(model, lambda cls: cls.projective == "lagged") \
+            if lagged else None
+        self.has_field_forces = bool(lagged)
+        self.projections = term_modules.build(model, lambda cls: cls.projective == "projection")
         if self.grid is not None:
-            self.grid_reals, self.grid_forces = model.grid_reals, model.grid_forces
+            self.body = self.residual_forces.first
+            self.grid_reals = model.grid_table.reals
+            springs = self.residual_forces.springs
+            self.grid_forces = (springs.grid_forces() if springs is not None else
+                                ti.Vector.field(3, real, shape=(1, 6)))
             self.mg = GridMultigrid(self.grid.nx, self.grid.ny,
-                                    grid_stencil(self.grid.families))
+                                    grid_layout.stencil(self.grid.families))
         else:
             self.ks, self.kd = model.spring_ks, model.spring_kd
-            self.adj_start, self.adj = model.adjacency()
+            springs = self.residual_forces.springs or term_modules.Springs(model)
+            self.adj_start, self.adj = springs.adjacency()
             self.weight = ti.field(real, shape=self.adj.shape[0])
             self.diag, self.precond = (ti.field(real, shape=n) for _ in range(2))
             self.solver = linalg.PCG(n, self.diag, self.weight, self.adj_start, self.adj,
@@ -90,9 +103,8 @@ class Projective(Integrator):
             self._build_matrix(model, h)
             self._h = h
         x, v = state_out.x, state_out.v
-        if self.field_forces:
-            self.f.fill(0)
-            add_field_forces(model, state_in.x, state_in.v, self.f, state_in.t)
+        if self.field_forces is not None:
+            self.field_forces.compute(state_in.x, state_in.v, state_in.t, self.f)
         self._begin(state_in.x, state_in.v, h, x, v)
         cg_total, first, last = 0, None, None
         if self.grid is not None and self.mg.serial:
@@ -102,7 +114,7 @@ class Projective(Integrator):
                 if self.grid is not None:
                     last = self._grid_iteration(x, v, h)
                 else:
-                    compute_forces(model, x, v, self.f, t1, contacts=False, field=False)
+                    self.residual_forces.compute(x, v, t1, self.f)
                     last = self._residual(x, h)
                     if last > 0.0:
                         iters, _ = self.solver.solve(self.options["cg_tol"],
@@ -110,9 +122,8 @@ class Projective(Integrator):
                         cg_total += iters
                         self._update(x, v, h)
                 first = last if first is None else first
-        if model.collider_count:
-            self._collide(x, v, model.inv_mass, model.collider_records,
-                          model.collider_ranges, t1, h)
+        for term in self.projections:
+            term.project(x, v, t1)
         state_out.t = t1
         self.stats = {"iterations": self.options["iterations"], "cg_iterations": cg_total,
                       "residual": float(np.sqrt(last / first)) if first else 0.0}
@@ -176,7 +187,7 @@ class Projective(Integrator):
             x[p] = x_in[p] + h * v_in[p]
             v[p] = v_in[p]
             self.y[p] = x[p]
-            if ti.static(self.field_forces):
+            if ti.static(self.has_field_forces):
                 self.y[p] += h * h * self.inv_mass[p] * self.f[p]
 
     @ti.func
@@ -194,8 +205,8 @@ class Projective(Integrator):
     @ti.kernel
     def _grid_iterations(self, x: ti.template(), v: ti.template(), h: float,
                          n: ti.i32) -> ti.types.vector(2, ti.f64):
-        """n iterations in one launch, where every loop runs on one thread (a launch
-        costs about 50 us of Python); |g|^2 at the first and the last."""
+        """n iterations in one launch, where every loop runs on one thread (each launch
+        costs Python time); |g|^2 at the first and the last."""
         first = ti.cast(0.0, ti.f64)
         last = ti.cast(0.0, ti.f64)
         ti.loop_config(serialize=True)
@@ -217,7 +228,7 @@ class Projective(Integrator):
         ti.loop_config(serialize=ti.static(self.mg.serial))
         for j, i in ti.ndrange(ny, nx):
             p = j * nx + i
-            f = (body_force(self.mass, self.params, v, p)
+            f = (self.body.force(p, x, v, 0.0)
                  + grid_spring_sum(0, nx, ny, i, j, families, self.grid_forces))
             g = self._force_residual(x, p, f, h)
             self.mg.set_rhs(j, i, g)
@@ -247,28 +258,3 @@ class Projective(Integrator):
         for p in range(x.shape[0]):
             x[p] += self.solver.x[p]
             v[p] = (x[p] - self.x0[p]) / h
-
-    @ti.kernel
-    def _collide(self, x: ti.template(), v: ti.template(), inv_mass: ti.template(),
-                 records: ti.template(), ranges: ti.template(), t: float, h: float):
-        """Project penetrating particles out; inelastic normal, Coulomb tangential."""
-        ti.loop_config(serialize=ti.static(serial(x)))
-        for p in range(x.shape[0]):
-            if inv_mass[p] > 0.0:
-                for kind in ti.static(range(3)):
-                    if ti.static(ranges[kind][1] > 0):
-                        for c in range(ranges[kind][0], ranges[kind][0] + ranges[kind][1]):
-                            rec = records[c]
-                            phi, n = signed_distance(kind, rec, x[p], t)
-                            depth = rec[18] - phi
-                            if depth > 0.0:
-                                x[p] += depth * n
-                                vc = ti.Vector([rec[3], rec[4], rec[5]])
-                                v_rel = v[p] - vc
-                                vn = v_rel.dot(n)
-                                if vn < 0.0:
-                                    vt = v_rel - vn * n
-                                    speed = vt.norm()
-                                    cut = ti.min(rec[21] * (-vn), speed)
-                                    vt -= cut * vt / ti.max(speed, 1e-30)
-                                    v[p] = vc + vt

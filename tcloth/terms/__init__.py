@@ -1,0 +1,23 @@
+"""Physics terms, one module each (see ``base.py`` for what a term gives).
+
+``TERMS`` is the order in which forces accumulate. ``build(model)`` makes the terms a
+scene has, for one consumer (an integrator's workspace, the diagnostics).
+"""
+from .attraction import Attraction
+from .base import Term
+from .colliders import Colliders
+from .gravity_drag import GravityDrag
+from .springs import Springs
+from .wind import Wind
+
+TERMS = (GravityDrag, Springs, Wind, Attraction, Colliders)
+
+
+def build(model, select=None):
+    """The present terms, in ``TERMS`` order; select(term class) -> bool filters them."""
+    return [cls(model) for cls in TERMS
+            if cls.present(model) and (select is None or select(cls))]
+
+
+__all__ = ["TERMS", "Term", "build", "GravityDrag", "Springs", "Wind", "Attraction",
+           "Colliders"]

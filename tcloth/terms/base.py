@@ -1,0 +1,68 @@
+"""What a physics term is, and the kernels shared by per-particle terms.
+
+A term is one module with one class, built from the ``Model`` by each consumer that needs
+it (an integrator's workspace, the diagnostics); it reads the model's static fields and
+keeps its own scratch. Every term gives:
+
+  - ``present(model)`` (static): whether the scene has it; absent terms are never built,
+    so nothing of theirs is compiled or launched;
+  - ``add_forces(x, v, t, f_out)``: f_out += its force at positions x, velocities v and
+    time t (kernel launches);
+  - ``energy(x, t, out)``: its potential energy (J, a float), or None when it has none;
+  - ``name``: its key in ``Simulator.energy()``;
+  - ``implicit``: how backward Euler takes it: "potential" (its energy, gradient and
+    Hessian enter Newton's incremental potential) or "lagged" (its force at the start of
+    the step enters as a constant, explicitly);
+  - ``projective``: how projective dynamics takes it: "force" (in the force residual of
+    every iteration), "lagged" (in Liu's y at the start of the step) or "projection" (a
+    position projection after the iterations).
+
+A per-particle term (``per_particle = True``) also gives ``ti.func``s on one particle p,
+which the integrators' kernels call in loops over their term lists (so that all terms of
+a pass share one launch):
+
+  - ``force(p, x, v, t)`` -> vec3, ``potential(p, x, t)`` -> scalar;
+  - backward Euler (after ``begin_step``, which stores the lagged quantities):
+    ``incremental(p, x, x0, h, t)`` -> (energy, magnitude, gradient) of its part of the
+    incremental potential (magnitude: the sum of absolute values, for rounding bounds) and
+    ``hessian_block(p, x, x0, h, t)`` -> its 3x3 block of that potential's Hessian.
+
+Springs are a pair term: their per-spring functions live in ``springs.py`` and the
+solvers call them for each spring or grid offset.
+"""
+import taichi as ti
+
+from ..runtime import serial
+
+
+class Term:
+    """Defaults for the interface above."""
+    name = None
+    implicit = "lagged"
+    projective = "lagged"
+    per_particle = False
+
+    @staticmethod
+    def present(model):
+        return True
+
+    def add_forces(self, x, v, t, f_out):
+        raise NotImplementedError
+
+    def energy(self, x, t, out):
+        return None
+
+    def begin_step(self, x0, t0):
+        """Lagged quantities of backward Euler's step from positions x0 at time t0."""
+
+
+@ti.kernel
+def particle_energy(term: ti.template(), x: ti.template(), t: float,
+                    out: ti.template()) -> ti.f64:
+    """The sum over particles of a per-particle term's potential, accumulated in ``out``'s
+    type (f64 where the backend has it)."""
+    out[0] = 0
+    ti.loop_config(serialize=ti.static(serial(x)))
+    for p in range(x.shape[0]):
+        out[0] += ti.cast(term.potential(p, x, t), out.dtype)
+    return ti.cast(out[0], ti.f64)

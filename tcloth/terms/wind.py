@@ -1,0 +1,74 @@
+"""Wind: quadratic forces on cloth triangles after Wejchert & Haumann 1991.
+
+On a triangle of area A and unit normal n, with v_rel = wind(t) - (the mean velocity of
+its particles), u = v_rel . n and v_t = v_rel - u n:
+
+    f = A (drag u |u| n + tangential |v_t| v_t + lift |u| v_t),
+
+split equally onto its three particles (``Scene.set_wind``). The wind velocity is the
+mean plus a sinusoidal gust evaluated in the kernel, or a Python callable of t evaluated
+once per force evaluation and uploaded. No potential; backward Euler and projective take
+it at the start of the step.
+"""
+import numpy as np
+import taichi as ti
+
+from .. import runtime
+from ..runtime import serial
+from ..scene import wind_velocity
+from .base import Term
+
+
+@ti.kernel
+def eval_wind(
+        # Model:
+        triangles: ti.template(), params: ti.template(),
+        # State in:
+        x: ti.template(), v: ti.template(), t: float,
+        # Out:
+        f_out: ti.template()):
+    """Wejchert & Haumann quadratic wind on every triangle, a third to each particle.
+
+    params = (velocity (3), gust amplitude (3), frequency, phase, drag, lift, tangential).
+    """
+    wind = ti.Vector([params[0], params[1], params[2]]) + ti.Vector(
+        [params[3], params[4], params[5]]) * ti.sin(2.0 * 3.141592653589793 * params[6] * t
+                                                    + params[7])
+    ti.loop_config(serialize=ti.static(serial(triangles)))
+    for k in range(triangles.shape[0]):
+        a, b, c = triangles[k][0], triangles[k][1], triangles[k][2]
+        cross = (x[b] - x[a]).cross(x[c] - x[a])
+        twice_area = cross.norm()
+        if twice_area > 0.0:
+            n = cross / twice_area
+            area = 0.5 * twice_area
+            v_rel = wind - (v[a] + v[b] + v[c]) / 3.0
+            u = v_rel.dot(n)
+            vt = v_rel - u * n
+            force = area * (params[8] * u * abs(u) * n + params[10] * vt.norm() * vt
+                            + params[9] * abs(u) * vt)
+            for q in ti.static(range(3)):
+                f_out[triangles[k][q]] += force / 3.0
+
+
+class Wind(Term):
+    """The scene's wind on its cloth triangles (absent without cloth)."""
+
+    @staticmethod
+    def present(model):
+        return model.wind is not None
+
+    def __init__(self, model):
+        w = self.wind = model.wind
+        self.triangles = model.triangles
+        self._values = np.array([*w["velocity"], *w["amplitude"], w["frequency"], w["phase"],
+                                 w["drag"], w["lift"], w["tangential"]],
+                                dtype=runtime.numpy_real())
+        self.params = ti.field(runtime.real(), shape=len(self._values))
+        self.params.from_numpy(self._values)
+
+    def add_forces(self, x, v, t, f_out):
+        if self.wind["callable"] is not None:
+            self._values[:3] = wind_velocity(self.wind, t)
+            self.params.from_numpy(self._values)
+        eval_wind(self.triangles, self.params, x, v, t, f_out)
