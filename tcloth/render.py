@@ -18,6 +18,7 @@ import taichi as ti
 
 from . import raycast, runtime
 from .camera import Camera
+from .drawables import cloth_palette, particle_spheres
 from .errors import SceneError
 from .shapes import SHAPES
 
@@ -26,8 +27,6 @@ SKY_KEY = (2147483647 << 32) | SKY_ID
 GROUND_ID = 2147483646
 COLLIDER_ID = 1 << 30          # collider c has id COLLIDER_ID + c
 
-FRONT_COLOUR = (0.85, 0.28, 0.18)
-BACK_COLOUR = (0.20, 0.42, 0.80)
 PARTICLE_COLOUR = (0.95, 0.78, 0.25)
 COLLIDER_COLOUR = (0.50, 0.58, 0.66)
 LIGHT_DIR = (0.35, 0.85, 0.4)
@@ -70,29 +69,8 @@ class Renderer:
 
         tris = [c.triangles for c in scene.cloths]
         self.tri_count = sum(len(t) for t in tris)
-        palette = np.array(cloth_colours if cloth_colours is not None else
-                           [(FRONT_COLOUR, BACK_COLOUR)] * len(tris), dtype=np.float64)
-        if palette.size == 0:
-            palette = palette.reshape(0, 2, 3)
-        if palette.shape != (len(tris), 2, 3) or not np.all((palette >= 0) & (palette <= 1)):
-            raise SceneError(f"cloth_colours must hold one (front, back) pair of RGB values in "
-                             f"[0, 1] per cloth ({len(tris)} cloths; got {cloth_colours!r})")
-        in_cloth = np.zeros(scene.num_particles, dtype=bool)
-        for c in scene.cloths:
-            in_cloth[c.particles.ravel()] = True
-        free = np.flatnonzero(~in_cloth)
-        sp = scene.springs
-        free_spring = ~in_cloth[sp["pairs"][:, 0]] & ~in_cloth[sp["pairs"][:, 1]]
-        line = sp["pairs"][free_spring]
-        if particle_radius is None:
-            rest = sp["rest_length"][free_spring]
-            particle_radius = 0.35 * float(np.median(rest)) if len(rest) else 0.02 * extent
-        self.radius = float(particle_radius)
-        # beads along free springs, spaced about one radius apart at the initial length
-        beads = [np.stack([np.full(k, i), np.full(k, j), (np.arange(k) + 1) / (k + 1)], 1)
-                 for (i, j), k in zip(line, np.ceil(np.linalg.norm(
-                     x0[line[:, 0]] - x0[line[:, 1]], axis=1) / self.radius).astype(int))]
-        spheres = np.concatenate([np.stack([free, free, np.zeros(len(free))], 1)] + beads)
+        palette = cloth_palette(cloth_colours, len(tris))
+        spheres, self.radius = particle_spheres(scene, particle_radius, extent)
         self.sphere_count = len(spheres)
 
         c = self.camera
