@@ -33,8 +33,7 @@ class Diagnostics:
     def __init__(self, model):
         self.model = model
         self.terms = term_modules.build(model)
-        self.springs = next((t for t in self.terms if isinstance(t, term_modules.Springs)),
-                            None)
+        self.springs = term_modules.find(self.terms, term_modules.Springs)
         self._out = ti.field(runtime.accumulator(), shape=8)
 
     def particle_sums(self, state):

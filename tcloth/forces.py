@@ -24,8 +24,7 @@ class Forces:
         self.first = chosen[0] if chosen and isinstance(chosen[0], term_modules.GravityDrag) \
             else None
         self.terms = chosen[1:] if self.first is not None else chosen
-        self.springs = next((t for t in self.terms if isinstance(t, term_modules.Springs)),
-                            None)
+        self.springs = term_modules.find(self.terms, term_modules.Springs)
 
     def compute(self, x, v, t, f_out):
         """f_out = the force on every particle at positions x, velocities v, time t."""

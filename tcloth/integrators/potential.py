@@ -33,13 +33,10 @@ class IncrementalPotential:
         n, real = model.particle_count, runtime.real()
         terms = term_modules.build(model, lambda cls: cls.implicit == "potential")
         self.particle_terms = tuple(t for t in terms if t.per_particle)
-        self.springs = next((t for t in terms if isinstance(t, term_modules.Springs)), None)
+        self.springs = term_modules.find(terms, term_modules.Springs)
         self.terms = terms
-        has_lagged = any(cls.present(model) and cls.implicit == "lagged"
-                         for cls in term_modules.TERMS)
-        self.has_lagged = has_lagged
-        self.lagged = Forces(model, lambda cls: cls.implicit == "lagged") if has_lagged \
-            else None
+        self.lagged = Forces(model, lambda cls: cls.implicit == "lagged")
+        self.has_lagged = bool(self.lagged.terms)
         self.mass, self.inv_mass = model.mass, model.inv_mass
         self.x_hat, self.x0, self.grad, self.f_lag = (
             ti.Vector.field(3, real, shape=n) for _ in range(4))
@@ -52,7 +49,7 @@ class IncrementalPotential:
         self._begin_particles(x, v, h, x_start)
         for term in self.terms:
             term.begin_step(x, t0)
-        if self.lagged is not None:
+        if self.has_lagged:
             self.lagged.compute(x, v, t0, self.f_lag)
 
     def evaluate(self, x, h, t, with_grad):

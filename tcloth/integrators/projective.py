@@ -72,11 +72,8 @@ class Projective(Integrator):
         self.x0, self.y, self.f = (ti.Vector.field(3, real, shape=n) for _ in range(3))
         # the terms by their treatment: in the force residual, in y, or projected after
         self.residual_forces = Forces(model, lambda cls: cls.projective == "force")
-        lagged = [cls for cls in term_modules.TERMS
-                  if cls.present(model) and cls.projective == "lagged"]
-        self.field_forces = Forces(model, lambda cls: cls.projective == "lagged") \
-            if lagged else None
-        self.has_field_forces = bool(lagged)
+        self.field_forces = Forces(model, lambda cls: cls.projective == "lagged")
+        self.has_field_forces = bool(self.field_forces.terms)
         self.projections = term_modules.build(model, lambda cls: cls.projective == "projection")
         if self.grid is not None:
             self.body = self.residual_forces.first
@@ -103,7 +100,7 @@ class Projective(Integrator):
             self._build_matrix(model, h)
             self._h = h
         x, v = state_out.x, state_out.v
-        if self.field_forces is not None:
+        if self.has_field_forces:
             self.field_forces.compute(state_in.x, state_in.v, state_in.t, self.f)
         self._begin(state_in.x, state_in.v, h, x, v)
         cg_total, first, last = 0, None, None

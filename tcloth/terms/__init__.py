@@ -19,5 +19,10 @@ def build(model, select=None):
             if cls.present(model) and (select is None or select(cls))]
 
 
-__all__ = ["TERMS", "Term", "build", "GravityDrag", "Springs", "Wind", "Attraction",
+def find(terms, cls):
+    """The term of class ``cls`` in ``terms``, or None."""
+    return next((t for t in terms if isinstance(t, cls)), None)
+
+
+__all__ = ["TERMS", "Term", "build", "find", "GravityDrag", "Springs", "Wind", "Attraction",
            "Colliders"]
