@@ -41,7 +41,8 @@ class Diagnostics:
         return self._out.to_numpy().astype(np.float64)
 
     def energy(self, state):
-        """dict of energies in J: kinetic, spring, gravity, contact, (attraction,) total;
+        """dict of energies in J: kinetic, spring, gravity, contact, (attraction,
+        self_contact,) total;
         spring and contact are 0 in a scene without springs or colliders."""
         e = {"kinetic": float(self.particle_sums(state)[0]), "spring": 0.0, "gravity": 0.0,
              "contact": 0.0}
@@ -51,6 +52,12 @@ class Diagnostics:
                 e[term.name] = float(value)
         e["total"] = sum(e.values())
         return e
+
+    def self_contacts(self, state):
+        """Active self-contacts by kind (see ``SelfContact.active``)."""
+        term = term_modules.find(self.terms, term_modules.SelfContact)
+        return ({"point_triangle": 0, "edge_edge": 0} if term is None
+                else term.active(state.x))
 
     def momentum(self, state):
         """(linear (3,) kg m/s, angular about the origin (3,) kg m^2/s)."""

@@ -16,6 +16,7 @@ from . import runtime
 from .errors import SceneError
 from .grid import GridBlock, GridTable
 from .shapes import ColliderTable
+from .topology import SelfCollisionTable
 
 
 def _vec_field(n):
@@ -56,6 +57,7 @@ class Model:
         strain_limit: dict or None; limit_index: shape (limit_count,), the model rows
             of the limited springs.
         colliders: ``ColliderTable``.
+        self_collision: ``topology.SelfCollisionTable`` or None.
     """
 
     def __init__(self, scene, grid_stencil=True):
@@ -118,6 +120,8 @@ class Model:
             if len(idx):
                 self.limit_index.from_numpy(idx)
         self.colliders = ColliderTable(scene.colliders)
+        self.self_collision = (SelfCollisionTable(scene) if scene.self_collision is not None
+                               else None)
 
     def single_grid(self):
         """The GridBlock when the scene is one cloth grid and nothing else (no other

@@ -51,6 +51,7 @@ class Scene:
         self.wind = None
         self.attraction = None
         self.strain_limit = None
+        self.self_collision = None
 
     # -- particles -------------------------------------------------------------------------
     def add_particles(self, positions, mass=1.0, velocities=None, pinned=False):
@@ -331,6 +332,46 @@ class Scene:
                              "iterations": as_int("iterations", iterations, 1),
                              "springs": np.unique(ids)}
         return self.strain_limit
+
+    def set_self_collision(self, thickness=0.005, stiffness=None, friction=0.0, damping=0.1,
+                           stick_velocity=1e-3, skin=None):
+        """Keep every cloth and rope out of itself and out of each other
+        (``tcloth.terms.self_contact`` has the contact model).
+
+        Contacts are point-triangle (a cloth or rope particle against a cloth triangle) and
+        edge-edge (two cloth edges or rope segments), each a penalty k/2 (thickness - d)^2
+        on their distance d below ``thickness``, with normal damping and Coulomb friction
+        as the colliders have them. Pairs that touch by construction never repel: a
+        particle and a triangle (or two edges) are skipped when they share a particle or
+        when a particle of one is a mesh neighbour (joined by a triangle edge or a rope
+        segment) of a particle of the other.
+
+        Args:
+            thickness: contact distance, m (default 5 mm); keep it below the cloth's
+                spacing (flat, nothing within it at rest then: docs/self_collision.md).
+            stiffness: penalty k, N/m; None (default): the mean stiffness of the scene's
+                structural springs, so that a contact is as stiff as one structural spring
+                and a dt stable without self-collision stays stable with it.
+            friction: Coulomb mu >= 0 (default 0).
+            damping: normal damping as a ratio of critical for the pair (default 0.1).
+            stick_velocity: friction regularisation speed eps, m/s (default 1e-3).
+            skin: the broad phase's margin, m (default: thickness): candidate pairs within
+                thickness + skin are listed, and the list is rebuilt only after some
+                particle has moved more than skin / 2.
+        Returns:
+            dict of the settings (stiffness None until a Simulator resolves it).
+        """
+        t = as_scalar("thickness", thickness, minimum=0.0, strict=True)
+        self.self_collision = {
+            "thickness": t,
+            "stiffness": None if stiffness is None else
+            as_scalar("stiffness", stiffness, minimum=0.0, strict=True),
+            "friction": as_scalar("friction", friction, minimum=0.0),
+            "damping": as_scalar("damping", damping, minimum=0.0),
+            "stick_velocity": as_scalar("stick_velocity", stick_velocity, minimum=0.0,
+                                        strict=True),
+            "skin": t if skin is None else as_scalar("skin", skin, minimum=0.0, strict=True)}
+        return self.self_collision
 
     # -- concatenated views (read-only copies) ---------------------------------------------
     def _cat(self, parts, shape, dtype):

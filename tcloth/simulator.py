@@ -206,6 +206,12 @@ class Simulator:
         self._check()
         return self._diag.momentum(self.state)
 
+    def self_contacts(self):
+        """{"point_triangle": n, "edge_edge": m}: the self-contacts closer than the
+        thickness at the current state (both 0 without ``Scene.set_self_collision``)."""
+        self._check()
+        return self._diag.self_contacts(self.state)
+
     def max_strain(self):
         """Max over springs of (length - rest) / rest."""
         self._check()

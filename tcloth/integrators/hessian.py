@@ -3,7 +3,8 @@ in Taichi kernels and solved by preconditioned conjugate gradients.
 
 Two layouts, one interface (``assemble``, ``solve``, ``dx``, ``product``):
   - ``BlockHessian``: blocks per spring end, gathered per particle, with a block-Jacobi
-    (3 x 3 per particle) preconditioner; any scene.
+    (3 x 3 per particle) preconditioner; any scene. The pair terms' couplings that the
+    spring adjacency does not hold (self-contacts) enter CG's products matrix-free.
   - ``GridHessian``: for a scene that is one cloth grid and nothing else, the Hessian as
     block stencil weights on the grid, with a geometric multigrid V-cycle (Galerkin coarse
     levels built at each step's first Newton iteration, block Gauss-Seidel smoothing;
@@ -40,10 +41,11 @@ class BlockHessian:
         self.precond = ti.Matrix.field(3, 3, real, shape=n)
         self.blocks = ti.Vector.field(6, real, shape=self.adj.shape[0])
         self.solver = linalg.PCG(n, self.diag, self.blocks, self.adj_start, self.adj,
-                                 self.precond, model.inv_mass)
+                                 self.precond, model.inv_mass, potential.pair_terms)
         self.dx = self.solver.x
 
     def assemble(self, x, h, t, coarse=True):
+        self.potential.prepare_blocks(x, h)
         self._assemble(x, h, t)
 
     def solve(self, grad, tol, max_iterations):
@@ -95,6 +97,7 @@ class GridHessian:
     def assemble(self, x, h, t, coarse=True):
         """The fine blocks at x and the multigrid's levels; the coarse ones only when
         ``coarse`` (the first Newton iteration of a step), else kept from before."""
+        self.potential.prepare_blocks(x, h)
         self._assemble(x, h, t)
         self.mg.build(coarse)
 

@@ -56,7 +56,8 @@ class BackwardEuler(Integrator):
         search), or on the projected Hessian (the definiteness fix).
     linear_solver ("auto"): the CG preconditioner, "multigrid" (only for a scene that is a
         single cloth grid) or "cg" (block Jacobi). "auto" takes the multigrid for a
-        single cloth grid and block Jacobi otherwise (measurements in docs/implicit.md).
+        single cloth grid and block Jacobi otherwise (measurements in docs/implicit.md);
+        with self-collision block Jacobi, whose CG takes the contacts' couplings.
 
     After each step ``stats`` holds newton_iterations, cg_iterations (total) and
     residual (the last CG relative residual).
@@ -76,7 +77,13 @@ class BackwardEuler(Integrator):
             raise SceneError("exact_hessian=True needs line_search=True: without it a step "
                              "along a direction of negative curvature can gain energy")
         self.exact = line_search if exact is None else exact
-        self.grid = single_grid(model, self.options["linear_solver"])
+        solver = self.options["linear_solver"]
+        if model.self_collision is not None and solver != "cg":
+            if solver == "multigrid":
+                raise SceneError("linear_solver='multigrid' cannot take self-collision's "
+                                 "couplings: use 'cg' (or 'auto')")
+            solver = "cg"
+        self.grid = single_grid(model, solver)
         self.potential = IncrementalPotential(model)
         self.hessian = hessian.make(model, self.potential, self.exact, self.grid)
         self.x_try = ti.Vector.field(3, model.mass.dtype, shape=model.particle_count)

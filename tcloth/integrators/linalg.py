@@ -132,30 +132,52 @@ class PCG(ConjugateGradients):
     with inverse mass 0 are filtered out: their entries of x stay as they are. The operands
     are this object's fields ``b`` and ``x``, and every kernel reads the fields the solver
     was built with, so that a CG iteration is one kernel launch without field arguments
-    (each costs Python time)."""
+    (each costs Python time).
 
-    def __init__(self, n, diag, weights, adj_start, adj, precond, inv_mass):
+    ``couplings``: objects whose ``add_product(v, out, first)`` adds to out (sets it, when
+    ``first``) the product of a further, matrix-free part of A with v (couplings that the
+    adjacency does not hold, such as self-contacts); each costs a launch per iteration."""
+
+    def __init__(self, n, diag, weights, adj_start, adj, precond, inv_mass, couplings=()):
         real = runtime.real()
         self.diag, self.weights, self.adj_start, self.adj = diag, weights, adj_start, adj
         self.precond, self.inv_mass = precond, inv_mass
         self.x, self.b, self.r, self.z, self.p, self.ap = (
             ti.Vector.field(3, real, shape=n) for _ in range(6))
         self.scalars = ti.field(ti.f64, shape=3)     # r.z, p.Ap, the next r.z
+        self.couplings = tuple(couplings)
+        self.coupled = bool(self.couplings)
+        self.extra = ti.Vector.field(3, real, shape=n if self.coupled else 1)
+
+    def _couple(self, v):
+        """extra = the couplings' product with v."""
+        for k, coupling in enumerate(self.couplings):
+            coupling.add_product(v, self.extra, k == 0)
 
     @ti.func
     def _product(self, v: ti.template(), p):
-        """(A v)_p."""
+        """(A v)_p (the couplings' part read from ``extra``, computed beforehand)."""
         vp = v[p]
         acc = _apply(self.diag, p, vp)
         for k in range(self.adj_start[p], self.adj_start[p + 1]):
             acc += _apply(self.weights, k, vp - v[self.adj[k][1]])
+        if ti.static(self.coupled):
+            acc += self.extra[p]
         return acc
 
-    @ti.kernel
-    def apply(self, v: ti.template(), out: ti.template()):
+    def apply(self, v, out):
         """out = A v (for tests and tools)."""
+        self._couple(v)
+        self._multiply(v, out)
+
+    @ti.kernel
+    def _multiply(self, v: ti.template(), out: ti.template()):
         for p in range(out.shape[0]):
             out[p] = self._product(v, p)
+
+    def _iterate(self):
+        self._couple(self.p)
+        return self._iteration()
 
     @ti.kernel
     def _start(self) -> ti.f64:
@@ -179,7 +201,7 @@ class PCG(ConjugateGradients):
         return rr
 
     @ti.kernel
-    def _iterate(self) -> ti.f64:
+    def _iteration(self) -> ti.f64:
         """One CG iteration: Ap; alpha = r.z / p.Ap; x += alpha p; r -= alpha Ap;
         z = P^-1 r; p = z + beta p. Returns r.r, or -1 when p.Ap <= 0 (A not positive
         definite along p: x and r are left unchanged)."""

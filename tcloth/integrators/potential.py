@@ -27,6 +27,9 @@ class IncrementalPotential:
         grad: the gradient of the last evaluation with ``with_grad``, (n,) vec3.
         particle_terms: the per-particle potential terms (gravity and drag, colliders).
         springs: the Springs term or None.
+        pair_terms: the other potential terms (self-contact): each gives
+            ``add_incremental`` like the springs, and its Hessian's diagonal blocks
+            (``prepare_blocks``, then the ti.func ``diagonal_block(p)``).
     """
 
     def __init__(self, model):
@@ -34,6 +37,7 @@ class IncrementalPotential:
         terms = term_modules.build(model, lambda cls: cls.implicit == "potential")
         self.particle_terms = tuple(t for t in terms if t.per_particle)
         self.springs = term_modules.find(terms, term_modules.Springs)
+        self.pair_terms = tuple(t for t in terms if not t.per_particle and t is not self.springs)
         self.terms = terms
         self.lagged = Forces(model, lambda cls: cls.implicit == "lagged")
         self.has_lagged = bool(self.lagged.terms)
@@ -59,16 +63,25 @@ class IncrementalPotential:
         self._particle_terms(x, h, t, with_grad)
         if self.springs is not None:
             self.springs.add_incremental(x, self.x0, h, with_grad, self.acc, self.grad)
+        for term in self.pair_terms:
+            term.add_incremental(x, self.x0, h, with_grad, self.acc, self.grad)
         energy, magnitude = self._sums()
         return energy, 8.0 * self._eps * magnitude
 
+    def prepare_blocks(self, x, h):
+        """The pair terms' diagonal blocks at x, before a kernel reads ``particle_block``."""
+        for term in self.pair_terms:
+            term.prepare_blocks(x, self.x0, h)
+
     @ti.func
     def particle_block(self, p, x, h, t):
-        """Particle p's diagonal Hessian block without springs: inertia M/h^2 and the
-        per-particle terms' blocks."""
+        """Particle p's diagonal Hessian block without springs: inertia M/h^2, the
+        per-particle terms' blocks and the pair terms' diagonal blocks."""
         block = self.mass[p] / (h * h) * ti.Matrix.identity(float, 3)
         for term in ti.static(self.particle_terms):
             block += term.hessian_block(p, x, self.x0, h, t)
+        for term in ti.static(self.pair_terms):
+            block += term.diagonal_block(p)
         return block
 
     @ti.kernel

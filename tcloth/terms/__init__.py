@@ -7,10 +7,11 @@ from .attraction import Attraction
 from .base import Term
 from .colliders import Colliders
 from .gravity_drag import GravityDrag
+from .self_contact import SelfContact
 from .springs import Springs
 from .wind import Wind
 
-TERMS = (GravityDrag, Springs, Wind, Attraction, Colliders)
+TERMS = (GravityDrag, Springs, Wind, Attraction, Colliders, SelfContact)
 
 
 def build(model, select=None):
@@ -25,4 +26,4 @@ def find(terms, cls):
 
 
 __all__ = ["TERMS", "Term", "build", "find", "GravityDrag", "Springs", "Wind", "Attraction",
-           "Colliders"]
+           "Colliders", "SelfContact"]
