@@ -2,7 +2,7 @@
 import numpy as np
 
 from .errors import SceneError
-from .validate import (as_int, as_scalar, as_spring_params, as_vec3, fmt)
+from .validate import (as_int, as_rotation, as_scalar, as_spring_params, as_vec3, fmt)
 
 
 class Cloth:
@@ -57,7 +57,7 @@ class Rope:
 
 
 def add_cloth(scene, resolution, size, center, plane, mass, structural, shear, flexion,
-              pinned):
+              pinned, rotation=None):
     """``Scene.add_cloth``: the particles and springs of a Provot cloth grid."""
     if np.ndim(resolution) != 1 or len(resolution) != 2:
         raise SceneError(f"resolution must be a pair (nx, ny) (got {fmt(resolution)})")
@@ -91,7 +91,10 @@ def add_cloth(scene, resolution, size, center, plane, mass, structural, shear, f
     else:
         pos = np.stack([ii, -jj, np.zeros_like(ii)], -1)
     cloth = Cloth(scene.num_particles, (nx, ny), (dx, dy), params, plane)
-    scene.add_particles(pos.reshape(-1, 3) + c, mass=total / (nx * ny), pinned=pin.ravel())
+    pos = pos.reshape(-1, 3)
+    if rotation is not None:
+        pos = pos @ as_rotation("rotation", rotation).T
+    scene.add_particles(pos + c, mass=total / (nx * ny), pinned=pin.ravel())
     for family, kskd in params.items():
         pairs = cloth.grid_pairs(family)
         if kskd is None or len(pairs) == 0:

@@ -61,6 +61,8 @@ def scene_to_arrays(scene):
         desc["strain_limit"] = {"max_stretch": lim["max_stretch"],
                                 "iterations": lim["iterations"]}
         arrays["strain_springs"] = lim["springs"]
+    if scene.self_collision is not None:
+        desc["self_collision"] = dict(scene.self_collision)
     return desc, arrays
 
 
@@ -126,6 +128,8 @@ def scene_from_arrays(desc, arrays):
         scene.limit_strain(desc["strain_limit"]["max_stretch"],
                            desc["strain_limit"]["iterations"],
                            springs=arrays["strain_springs"])
+    if desc.get("self_collision") is not None:
+        scene.set_self_collision(**desc["self_collision"])
     return scene
 
 
@@ -143,6 +147,7 @@ def save(sim, path):
     folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder):
         raise SceneError(f"cannot save checkpoint: folder {folder!r} does not exist")
+    path = os.fspath(path)
     tmp = path + ".partial"
     with open(tmp, "wb") as f:
         np.savez(f, **payload)

@@ -7,7 +7,7 @@ import numpy as np
 
 from . import builders
 from .errors import SceneError
-from .validate import as_int, as_per_item, as_points, as_scalar, as_vec3, fmt
+from .validate import as_int, as_per_item, as_points, as_rotation, as_scalar, as_vec3, fmt
 
 SPRING_KINDS = ("structural", "shear", "flexion", "custom")
 KIND_CODE = {name: code for code, name in enumerate(SPRING_KINDS)}
@@ -146,7 +146,7 @@ class Scene:
     # -- builders --------------------------------------------------------------------------
     def add_cloth(self, resolution=(32, 32), size=(1.0, 1.0), center=(0.0, 1.0, 0.0),
                   plane="xz", mass=0.2, structural=(1000.0, 0.05), shear=(200.0, 0.02),
-                  flexion=(50.0, 0.01), pinned=None):
+                  flexion=(50.0, 0.01), pinned=None, rotation=None):
         """Add a Provot cloth: particles on a regular nx x ny grid.
 
         Args:
@@ -157,11 +157,12 @@ class Scene:
             structural, shear, flexion: (k_s, k_d) per family or None (absent).
                 structural = 4-neighbours, shear = diagonals, flexion = 2 apart.
             pinned: list of (i, j) grid coordinates; None pins (0, 0) and (nx-1, 0).
+            rotation: None, or a 3x3 rotation matrix turning the grid about its centre.
         Returns:
             Cloth.
         """
         return builders.add_cloth(self, resolution, size, center, plane, mass, structural,
-                                  shear, flexion, pinned)
+                                  shear, flexion, pinned, rotation)
 
     def add_rope(self, start, end, segments, mass, stiffness, damping=0.0, pinned=("start",)):
         """Add a straight rope of ``segments`` springs from ``start`` to ``end``.
@@ -233,18 +234,7 @@ class Scene:
         h = as_vec3("half_extents", half_extents)
         if (h <= 0).any():
             raise SceneError(f"half_extents must all be > 0 (got {h.tolist()})")
-        if rotation is None:
-            r = np.eye(3)
-        else:
-            try:
-                r = np.asarray(rotation, dtype=np.float64)
-            except (TypeError, ValueError):
-                raise SceneError(f"rotation must be a 3x3 matrix (got {fmt(rotation)})") from None
-            if r.shape != (3, 3) or not np.all(np.isfinite(r)):
-                raise SceneError(f"rotation must be a finite 3x3 matrix (got {fmt(rotation)})")
-            if not np.allclose(r @ r.T, np.eye(3), atol=1e-6) or np.linalg.det(r) < 0:
-                raise SceneError(f"rotation must be a rotation matrix: orthonormal with "
-                                 f"determinant +1 (got {fmt(r)}, det {np.linalg.det(r):.6g})")
+        r = as_rotation("rotation", rotation)
         return self._add_collider("box", friction, velocity, thickness, stiffness, damping,
                                   stick_velocity, center=as_vec3("center", center),
                                   half_extents=h, rotation=r)

@@ -94,3 +94,19 @@ def as_spring_params(name, value):
         raise SceneError(f"{name} must be None or a pair (k_s, k_d) (got {fmt(value)})")
     return (as_scalar(f"{name}[0] (k_s)", value[0], minimum=0.0),
             as_scalar(f"{name}[1] (k_d)", value[1], minimum=0.0))
+
+
+def as_rotation(name, value):
+    """A 3x3 rotation matrix (orthonormal, determinant +1); None is the identity."""
+    if value is None:
+        return np.eye(3)
+    try:
+        r = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise SceneError(f"{name} must be a 3x3 matrix (got {fmt(value)})") from None
+    if r.shape != (3, 3) or not np.all(np.isfinite(r)):
+        raise SceneError(f"{name} must be a finite 3x3 matrix (got {fmt(value)})")
+    if not np.allclose(r @ r.T, np.eye(3), atol=1e-6) or np.linalg.det(r) < 0:
+        raise SceneError(f"{name} must be a rotation matrix: orthonormal with "
+                         f"determinant +1 (got {fmt(r)}, det {np.linalg.det(r):.6g})")
+    return r

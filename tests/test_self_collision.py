@@ -254,3 +254,48 @@ def test_bad_self_collision_input_names_the_argument():
     scene.set_self_collision()
     with pytest.raises(SceneError, match="cloth or a rope"):
         tcloth.Simulator(scene)
+
+
+def load_scene(name):
+    import importlib.util
+    import pathlib
+    path = pathlib.Path(__file__).resolve().parents[1] / "scenes" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.parametrize("integrator,dt", [("symplectic_euler", 2.5e-4),
+                                           ("backward_euler", 1e-3)])
+def test_folding_cloth_never_crosses_itself(integrator, dt):
+    """scenes/fold.py at 16 x 16: no cloth edge crosses a cloth triangle at any sampled
+    frame while it folds onto itself (float32, the default). A penalty contact sees only
+    what comes within the thickness at the end of a step: dt keeps the motion of a step
+    (about 2 m/s x dt) below the thickness."""
+    tcloth.init()
+    scene = load_scene("fold").build(resolution=(16, 16))
+    topo = contact_topology(scene)
+    sim = tcloth.Simulator(scene, integrator, dt=dt)
+    hits, contacts = [], []
+    for _ in range(12):
+        sim.step(int(round(0.1 / dt)))
+        hits.append(crossings(sim.positions().astype(np.float64), topo["edges"],
+                              topo["triangles"]))
+        contacts.append(sum(sim.self_contacts().values()))
+    assert max(contacts) > 10, contacts
+    assert hits == [0] * 12
+
+
+def test_checkpoint_with_self_collision_continues_the_run(tmp_path):
+    tcloth.init()
+    scene = load_scene("cloth_pile").build(resolution=(8, 8))
+    sim = tcloth.Simulator(scene, dt=5e-4)
+    sim.step(300)
+    sim.save(tmp_path / "pile.npz")
+    loaded = tcloth.Simulator.load(tmp_path / "pile.npz")
+    assert loaded.scene.self_collision == sim.scene.self_collision
+    assert loaded.self_contacts() == sim.self_contacts()
+    sim.step(200)
+    loaded.step(200)
+    np.testing.assert_allclose(loaded.positions(), sim.positions(), atol=1e-4)

@@ -111,7 +111,8 @@ FEATURE_KERNELS = {"springs": ("terms.springs", "eval_springs"),
                    "wind": ("terms.wind", "eval_wind"),
                    "attraction": ("terms.attraction", "eval_attraction"),
                    "colliders": ("terms.colliders", "collide"),
-                   "strain": ("constraints", "_limit_pass")}
+                   "strain": ("constraints", "_limit_pass"),
+                   "self_contact": ("terms.self_contact", "self_contact_forces")}
 
 
 def launches(monkeypatch, scene, steps=3):
@@ -134,7 +135,7 @@ def test_absent_features_launch_nothing(f64, monkeypatch):
     plain = tcloth.Scene()
     plain.add_cloth(resolution=(4, 4), flexion=None)
     assert launches(monkeypatch, plain) == {"springs": 0, "grid": 3, "wind": 0, "attraction": 0,
-                                            "colliders": 0, "strain": 0}
+                                            "colliders": 0, "strain": 0, "self_contact": 0}
     full = tcloth.Scene()
     cloth = full.add_cloth(resolution=(4, 4))
     full.add_springs([cloth.particles[[0, 3], [0, 3]]], stiffness=1.0)
@@ -142,5 +143,6 @@ def test_absent_features_launch_nothing(f64, monkeypatch):
     full.add_attraction(1e-3)
     full.add_sphere((0, 0, 0), 0.1)
     full.limit_strain(0.1)
+    full.set_self_collision()
     counts = launches(monkeypatch, full)
     assert all(counts[f] >= 3 for f in FEATURE_KERNELS), counts

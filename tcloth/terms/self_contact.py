@@ -30,9 +30,11 @@ Broad phase (``hashgrid.py``): particles and edge midpoints are binned in hashed
 cells of size max(longest edge, T + skin), sorted by counting sort; each triangle visits
 the particles in the cells its box (grown by T + skin) covers, each edge the edges in the
 cells its box (grown by T + skin + half the longest edge) covers, and pairs closer than
-T + skin become the candidate list. The list is rebuilt only when some particle has moved
-more than skin / 2 since the last build (no pair left out can then be closer than T), so
-most evaluations only walk the candidates. A build costs O(particles + edges + table)
+T + skin become the candidate list. The list is rebuilt only when the bounding box of the
+particles' displacements since the last build has a diagonal longer than the skin: no
+two particles have then moved by more than the skin relative to each other, so no pair
+left out can be closer than T, and a motion the particles share (a cloth falling) costs
+no rebuild. Most evaluations only walk the candidates. A build costs O(particles + edges + table)
 plus, per triangle or edge, the cells its box covers (at most 4 and 5 per axis with this
 cell size) times the items per cell, which is bounded by how many layers of cloth lie
 within a cell of each other.
@@ -104,14 +106,14 @@ class ContactList:
     def _consider(self, ids, kind, n_a):
         """Append the contact if it is not excluded, not between pinned particles only,
         and its gap at x_ref is within thickness + skin."""
-        if not self.table.excluded(ids, n_a):
-            alpha, g = self.gap(ids, kind, self.x_ref)
-            reach = self.table.params[0] + self.table.params[5]
+        alpha, g = self.gap(ids, kind, self.x_ref)
+        reach = self.table.params[0] + self.table.params[5]
+        if g.norm() <= reach:
             free = False
             for k in ti.static(range(4)):
                 if self.inv_mass[ids[k]] > 0.0:
                     free = True
-            if free and g.norm() <= reach:
+            if free and not self.table.excluded(ids, n_a):
                 row = ti.atomic_add(self.counter[None], 1)
                 if row < self.capacity:
                     self.ids[row] = ids
@@ -132,13 +134,19 @@ class ContactList:
 
 
 @ti.kernel
-def _max_displacement(cl: ti.template(), x: ti.template()) -> ti.f64:
-    worst = ti.cast(0.0, ti.f64)
+def _relative_displacement(cl: ti.template(), x: ti.template()) -> ti.f64:
+    """The diagonal of the bounding box of the displacements x - x_ref: no two particles
+    have moved relative to each other by more (a shared motion does not count)."""
+    lo = ti.Vector([1e30, 1e30, 1e30], ti.f64)
+    hi = ti.Vector([-1e30, -1e30, -1e30], ti.f64)
     ti.loop_config(serialize=ti.static(serial(cl.table.points)))
     for i in range(cl.table.point_count):
         p = cl.table.points[i]
-        ti.atomic_max(worst, ti.cast((x[p] - cl.x_ref[p]).norm(), ti.f64))
-    return worst
+        d = ti.cast(x[p] - cl.x_ref[p], ti.f64)
+        for c in ti.static(range(3)):
+            ti.atomic_min(lo[c], d[c])
+            ti.atomic_max(hi[c], d[c])
+    return (hi - lo).norm()
 
 
 @ti.kernel
@@ -470,10 +478,10 @@ class SelfContact(Term):
         return self._scratch[key]
 
     def update(self, x):
-        """Rebuild the candidate list at x when some particle has moved more than half
-        the skin since the last build (or on first use)."""
+        """Rebuild the candidate list at x when two particles may have moved relative to
+        each other by more than the skin since the last build (or on first use)."""
         skin = self.table.settings["skin"]
-        if self._built and _max_displacement(self.candidates, x) <= 0.5 * skin:
+        if self._built and _relative_displacement(self.candidates, x) <= skin:
             return
         while True:
             count = _rebuild(self.candidates, x)

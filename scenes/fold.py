@@ -1,0 +1,31 @@
+"""A cloth dropped upright onto a thin rod lying on the floor: its lower edge catches,
+it buckles and folds over onto itself, the layers kept apart by self-collision."""
+import numpy as np
+
+import tcloth
+
+CONFIG = {
+    "integrator": "symplectic_euler",
+    "dt": 2.5e-4,
+    "steps_per_frame": 133,
+    "frames": 120,
+    "camera": {"eye": (1.7, 1.1, 1.5), "target": (0.0, 0.15, 0.0), "fov": 40.0},
+}
+
+
+def build(resolution=(40, 40), size=(1.0, 1.0), tilt=0.25, friction=0.3, thickness=0.006):
+    scene = tcloth.Scene(gravity=(0.0, -9.81, 0.0), air_drag=2e-4)
+    c, s = np.cos(tilt), np.sin(tilt)
+    scene.add_cloth(resolution=resolution, size=size, plane="xy",
+                    center=(0.0, 0.06 + 0.5 * size[1] * c, 0.5 * size[1] * s), mass=0.2,
+                    rotation=[[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]],
+                    structural=(400.0, 0.05), shear=(80.0, 0.02), flexion=(10.0, 0.005),
+                    pinned=[])
+    scene.add_box(center=(0.0, 0.02, 0.1), half_extents=(0.7, 0.02, 0.02), friction=0.8)
+    scene.add_plane(point=(0.0, 0.0, 0.0), normal=(0.0, 1.0, 0.0), friction=0.6)
+    scene.set_self_collision(thickness=thickness, friction=friction)
+    return scene
+
+
+if __name__ == "__main__":
+    tcloth.cli.run_script(__file__)
