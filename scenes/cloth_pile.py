@@ -10,6 +10,10 @@ CONFIG = {
     "steps_per_frame": 133,
     "frames": 120,
     "camera": {"eye": (1.5, 1.3, 1.9), "target": (0.0, 0.1, 0.0), "fov": 40.0},
+    # one (front, back) pair per layer, bottom to top
+    "render": {"cloth_colours": [[(0.85, 0.45, 0.35), (0.6, 0.3, 0.25)],
+                                 [(0.35, 0.6, 0.85), (0.25, 0.4, 0.6)],
+                                 [(0.95, 0.8, 0.35), (0.65, 0.55, 0.25)]]},
 }
 
 
@@ -20,9 +24,9 @@ def turn(yaw, tilt):
         [[1.0, 0.0, 0.0], [0.0, ct, -st], [0.0, st, ct]])
 
 
-def build(resolution=(32, 32), size=(0.8, 0.8), layers=3, friction=0.3, thickness=0.006):
+def build(resolution=(32, 32), size=(0.8, 0.8), friction=0.3, thickness=0.006):
     scene = tcloth.Scene(gravity=(0.0, -9.81, 0.0), air_drag=2e-4)
-    for k in range(layers):
+    for k in range(3):
         scene.add_cloth(resolution=resolution, size=size, plane="xz",
                         center=(0.08 * k, 0.15 + 0.25 * k, -0.05 * k),
                         rotation=turn(np.pi / 7 * k, 0.12 * (-1) ** k), mass=0.15,

@@ -337,8 +337,10 @@ class Scene:
         segment) of a particle of the other.
 
         Args:
-            thickness: contact distance, m (default 5 mm); keep it below the cloth's
-                spacing (flat, nothing within it at rest then: docs/self_collision.md).
+            thickness: contact distance, m (default 5 mm). Keep it below the cloth's
+                spacing (a flat grid cloth has no contact at rest below sqrt(2) spacing)
+                and above the distance cloth moves in a step (a penalty sees only what
+                ends a step within it).
             stiffness: penalty k, N/m; None (default): the mean stiffness of the scene's
                 structural springs, so that a contact is as stiff as one structural spring
                 and a dt stable without self-collision stays stable with it.
@@ -346,8 +348,8 @@ class Scene:
             damping: normal damping as a ratio of critical for the pair (default 0.1).
             stick_velocity: friction regularisation speed eps, m/s (default 1e-3).
             skin: the broad phase's margin, m (default: thickness): candidate pairs within
-                thickness + skin are listed, and the list is rebuilt only after some
-                particle has moved more than skin / 2.
+                thickness + skin are listed, and the list is rebuilt only after two
+                particles may have moved relative to each other by more than the skin.
         Returns:
             dict of the settings (stiffness None until a Simulator resolves it).
         """

@@ -46,6 +46,9 @@ def main(argv=None):
     if args.compare:
         stored = np.load(args.compare)
         for name, x in positions.items():
+            if name not in stored.files:
+                print(f"scene_snapshot.{name}: not in {args.compare} (a new scene)")
+                continue
             diff = np.abs(x - stored[name]).max()
             print(f"scene_snapshot.{name}.max_abs_diff_m: {diff:.3g}"
                   f" ({'bit for bit' if np.array_equal(x, stored[name]) else 'differs'})")

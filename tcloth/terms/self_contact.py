@@ -121,14 +121,25 @@ class ContactList:
         return 0
 
     @ti.func
+    def _near(self, a, b):
+        """A cheap bound first: two primitives within thickness + skin have centres (a
+        triangle's centroid, an edge's midpoint) within that plus the longest edge, and
+        the cell size is at least the longest edge."""
+        reach = self.table.params[0] + self.table.params[5]
+        bound = reach + 1.0 / self.points_grid.inv_cell[None]
+        return (a - b).norm_sqr() <= bound * bound
+
+    @ti.func
     def _point_triangle(self, item, t):
         tri = self.table.triangles[t]
-        self._consider(ti.Vector([self.table.points[item], tri[0], tri[1], tri[2]]),
-                       POINT_TRIANGLE, 1)
+        centroid = (self.x_ref[tri[0]] + self.x_ref[tri[1]] + self.x_ref[tri[2]]) / 3.0
+        if self._near(self.points_grid.pos[item], centroid):
+            self._consider(ti.Vector([self.table.points[item], tri[0], tri[1], tri[2]]),
+                           POINT_TRIANGLE, 1)
 
     @ti.func
     def _edge_edge(self, item, e):
-        if item > e:
+        if item > e and self._near(self.edges_grid.pos[item], self.edges_grid.pos[e]):
             a, b = self.table.edges[e], self.table.edges[item]
             self._consider(ti.Vector([a[0], a[1], b[0], b[1]]), EDGE_EDGE, 2)
 

@@ -1,0 +1,161 @@
+"""The cost of self-collision, side by side with the same substep without it.
+
+A cloth folded onto itself (scenes/fold.py, run at 40 x 40 until it has folded, then
+resampled bilinearly to n x n) is stepped with symplectic Euler from that state twice in
+one run: with self-collision and without (the same scene otherwise). dt is scaled with
+the spacing (1.5e-4 s x 40 / n, and at most half the bound 2 m / sum k_d that the
+springs' damping sets) so that every size is stable, the contact thickness too
+(6 mm x 40 / n, about a quarter of the spacing: a thickness above sqrt(2) spacings would
+put a flat cloth's own neighbours in contact), and the resampled state settles for 200
+steps before the timing. Per size it prints the
+median ms per substep of each (over chunks of steps), their ratio, the cost per particle
+and how often the candidate list was rebuilt.
+
+Next to it, the particle-particle neighbour search of warp-lang's ``HashGrid`` (build the
+grid and count every particle's neighbours within the same reach, thickness + skin, in a
+Warp kernel, on the same positions): the part of a self-contact step that it can match.
+It has no triangles, edges, exclusion rule or forces, so it bounds from below what a
+broad phase costs rather than matching tcloth's whole step.
+
+Lines: ``self_collision.<n>x<n>.{off,on}.ms_per_substep``, ``.ratio``,
+``.ns_per_particle``, ``.rebuilds_per_100``, ``.warp_hashgrid_cpu.ms``; <out>/self_collision.csv.
+
+Usage: python tools/bench_self_collision.py [--sizes 64,128,256,512] [--steps 300]
+                                            [--arch cpu|cuda] [--out docs]
+"""
+import argparse
+import importlib.util
+import os
+import time
+
+import numpy as np
+
+import tcloth
+from benchcsv import write_csv
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+# a particle's springs' k_d in scenes/fold.py: 4 structural, 4 shear, 4 flexion
+DAMPING_SUM = 4 * (0.05 + 0.02 + 0.005)
+
+
+def fold_module():
+    spec = importlib.util.spec_from_file_location(
+        "fold", os.path.join(HERE, "..", "scenes", "fold.py"))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def folded_state(module, base=40, seconds=0.9):
+    """(positions, velocities) of the 40 x 40 fold scene after ``seconds``, as (40, 40, 3)."""
+    sim = tcloth.Simulator(module.build(resolution=(base, base)), dt=2.5e-4)
+    sim.step(int(seconds / 2.5e-4))
+    return (sim.positions().reshape(base, base, 3), sim.velocities().reshape(base, base, 3))
+
+
+def resample(grid, n):
+    """Bilinear resampling of a (m, m, 3) grid to (n, n, 3)."""
+    m = grid.shape[0]
+    t = np.linspace(0, m - 1, n)
+    i0 = np.minimum(np.floor(t).astype(int), m - 2)
+    w = (t - i0)[:, None]
+    rows = grid[i0] * (1 - w)[:, :, None] + grid[i0 + 1] * w[:, :, None]
+    cols = rows[:, i0] * (1 - w.T)[:, :, None] + rows[:, i0 + 1] * w.T[:, :, None]
+    return cols.reshape(-1, 3)
+
+
+def time_steps(sim, steps, chunk=20):
+    sim.step(chunk)                                     # compile and warm up
+    times = []
+    for _ in range(max(steps // chunk, 1)):
+        t = time.perf_counter()
+        sim.step(chunk)
+        sim.positions()                                 # wait for the device
+        times.append((time.perf_counter() - t) / chunk * 1e3)
+    return float(np.median(times))
+
+
+def warp_hashgrid_ms(x, reach, repeats=5):
+    """Median ms of building a warp HashGrid over x and counting neighbours within reach."""
+    import warp as wp
+    wp.config.quiet = True
+    wp.init()
+
+    @wp.kernel
+    def count(grid: wp.uint64, pts: wp.array(dtype=wp.vec3), r: float,
+              out: wp.array(dtype=int)):
+        tid = wp.tid()
+        i = wp.hash_grid_point_id(grid, tid)
+        p = pts[i]
+        n = int(0)
+        for j in wp.hash_grid_query(grid, p, r):
+            if wp.length(p - pts[j]) <= r and j != i:
+                n += 1
+        out[i] = n
+
+    pts = wp.array(x.astype(np.float32), dtype=wp.vec3, device="cpu")
+    out = wp.zeros(len(x), dtype=int, device="cpu")
+    grid = wp.HashGrid(128, 128, 128, device="cpu")
+    times = []
+    for _ in range(repeats + 1):
+        t = time.perf_counter()
+        grid.build(pts, reach)
+        wp.launch(count, dim=len(x), inputs=[grid.id, pts, reach, out], device="cpu")
+        wp.synchronize()
+        times.append((time.perf_counter() - t) * 1e3)
+    return float(np.median(times[1:]))
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", default="64,128,256")
+    ap.add_argument("--steps", type=int, default=300)
+    ap.add_argument("--arch", default="cpu")
+    ap.add_argument("--out", default="docs")
+    ap.add_argument("--no-warp", action="store_true")
+    ap.add_argument("--skin", type=float, default=None,
+                    help="the broad phase's skin, m (default: the scene's)")
+    args = ap.parse_args()
+    tcloth.init(arch=args.arch)
+    module = fold_module()
+    x40, v40 = folded_state(module)
+    rows = []
+    for n in (int(s) for s in args.sizes.split(",")):
+        x, v = resample(x40, n), resample(v40, n)
+        # the springs' axial damping bounds explicit steps at dt < 2 m / sum k_d
+        dt = min(1.5e-4 * 40 / n, 0.5 * 2.0 * (0.2 / n ** 2) / DAMPING_SUM)
+        result = {"size": n, "particles": n * n, "dt": dt}
+        for mode in ("off", "on"):
+            scene = module.build(resolution=(n, n), thickness=0.006 * 40 / n)
+            if mode == "off":
+                scene.self_collision = None
+            elif args.skin is not None:
+                scene.self_collision["skin"] = args.skin
+            sim = tcloth.Simulator(scene, dt=dt)
+            sim.set_state(positions=x, velocities=v)
+            sim.step(200)
+            if mode == "on":
+                term = sim.integrator.forces.terms[-1]
+                first = term.rebuilds
+            ms = time_steps(sim, args.steps)
+            result[f"{mode}_ms_per_substep"] = ms
+            if mode == "on":
+                result["rebuilds_per_100"] = 100.0 * (term.rebuilds - first) / (args.steps + 20)
+                result["candidates"] = term.count
+                result["contacts"] = sum(sim.self_contacts().values())
+                settings = sim.model.self_collision.settings
+                reach = settings["thickness"] + settings["skin"]
+        result["ratio"] = result["on_ms_per_substep"] / result["off_ms_per_substep"]
+        result["ns_per_particle"] = (result["on_ms_per_substep"] - result["off_ms_per_substep"]) \
+            * 1e6 / (n * n)
+        if not args.no_warp:
+            result["warp_hashgrid_cpu_ms"] = warp_hashgrid_ms(x, reach)
+        rows.append(result)
+        for key, value in result.items():
+            if key != "size":
+                print(f"self_collision.{n}x{n}.{key}: {value:.6g}")
+    write_csv(os.path.join(args.out, f"self_collision_{args.arch}.csv"), rows)
+
+
+if __name__ == "__main__":
+    main()
