@@ -11,14 +11,15 @@ from .mesh import export_mesh, write_obj, write_ply
 from .camera import Camera
 from .render import Renderer, render
 from .runtime import init
-from .builders import Cloth, Rope
+from .builders import Cloth, MeshCloth, Rope
+from .objfile import load_obj
 from .scene import Scene
 from .simulator import Simulator
 from .video import record, write_png
 
 __version__ = "0.1.0"
 
-__all__ = ["cli", "init", "Scene", "Cloth", "Rope", "Simulator", "SceneError", "InstabilityError",
+__all__ = ["cli", "init", "Scene", "Cloth", "MeshCloth", "Rope", "load_obj", "Simulator", "SceneError", "InstabilityError",
            "StaleSimulatorError", "Camera", "Renderer", "render", "record", "write_png",
            "export_mesh", "write_obj", "write_ply",
            "__version__"]

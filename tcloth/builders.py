@@ -1,12 +1,17 @@
-"""Builders: Provot cloth grids and ropes, added to a Scene as particles and springs."""
+"""Builders: Provot cloth grids, cloth from meshes and ropes, added to a Scene as particles
+and springs."""
+import os
+
 import numpy as np
 
 from .errors import SceneError
-from .validate import (as_int, as_rotation, as_scalar, as_spring_params, as_vec3, fmt)
+from .objfile import load_obj
+from .validate import (as_int, as_points, as_rotation, as_scalar, as_spring_params, as_vec3,
+                       fmt)
 
 
 class Cloth:
-    """A Provot cloth on a regular grid, as added by ``Scene.add_cloth``.
+    """A Provot cloth on a regular grid, as added by ``Scene.add_cloth`` (``is_grid``).
 
     Attributes:
         particles: (ny, nx) int array of particle ids; row j, column i.
@@ -15,6 +20,8 @@ class Cloth:
         resolution: (nx, ny); spacing: (dx, dy) in metres; offset: id of particle (0, 0).
         params: dict family -> (k_s, k_d) or None.
     """
+
+    is_grid = True
 
     def __init__(self, offset, resolution, spacing, params, plane):
         self.offset = offset
@@ -43,6 +50,128 @@ class Cloth:
         else:
             raise SceneError(f"family must be structural, shear or flexion (got {family!r})")
         return np.concatenate([np.stack([u.ravel(), v.ravel()], 1) for u, v in parts])
+
+
+class MeshCloth:
+    """A cloth made from a triangle or polygon mesh, as added by ``Scene.add_mesh_cloth``.
+
+    Attributes:
+        particles: (V,) particle ids in vertex order; offset: the first of them.
+        triangles: (T, 3) particle ids, the faces fanned into triangles (v0, vi, vi+1),
+            counter-clockwise seen from the front as in the file.
+        springs: dict family -> (M_family,) spring ids. params: family -> (k_s, k_d) or None.
+    """
+    is_grid = False
+
+    def __init__(self, offset, count, triangles, params):
+        self.offset = offset
+        self.particles = offset + np.arange(count)
+        self.triangles = offset + np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+        self.params = params
+        self.springs = {}
+
+
+def fan(faces):
+    """(T, 3) triangles of polygons fanned from their first vertex, and for each the
+    face it came from."""
+    tris, owner = [], []
+    for k, face in enumerate(faces):
+        for i in range(1, len(face) - 1):
+            tris.append((face[0], face[i], face[i + 1]))
+            owner.append(k)
+    return np.array(tris, dtype=np.int64).reshape(-1, 3), np.array(owner, dtype=np.int64)
+
+
+def _pairs(pairs):
+    """Unique unordered pairs, each (low, high), sorted."""
+    pairs = np.sort(np.asarray(pairs, dtype=np.int64).reshape(-1, 2), axis=1)
+    return np.unique(pairs, axis=0)
+
+
+def mesh_springs(faces, triangles):
+    """dict family -> (M, 2) vertex pairs of a mesh (see ``Scene.add_mesh_cloth``):
+    structural on the faces' edges, shear across the diagonals of quads, flexion between
+    the two vertices opposite each interior edge (the fanned triangles on its two sides),
+    leaving out pairs already joined by a structural or shear spring."""
+    edges = [(f[i], f[(i + 1) % len(f)]) for f in faces for i in range(len(f))]
+    key = np.sort(np.array(edges, dtype=np.int64), axis=1)
+    unique, counts = np.unique(key, axis=0, return_counts=True)
+    if counts.max() > 2:
+        a, b = unique[np.argmax(counts)]
+        raise SceneError(f"the mesh is not manifold: edge ({a}, {b}) is shared by "
+                         f"{counts.max()} faces (at most 2)")
+    structural = unique
+    shear = _pairs([(f[0], f[2]) for f in faces if len(f) == 4]
+                   + [(f[1], f[3]) for f in faces if len(f) == 4])
+    opposite = {}
+    for tri in triangles:
+        for i in range(3):
+            a, b = sorted((tri[i], tri[(i + 1) % 3]))
+            opposite.setdefault((a, b), []).append(tri[(i + 2) % 3])
+    interior = [tuple(e) for e, c in zip(unique, counts) if c == 2]
+    flexion = _pairs([opposite[e] for e in interior if len(opposite[e]) == 2])
+    taken = {tuple(p) for p in structural} | {tuple(p) for p in shear}
+    flexion = np.array([p for p in flexion if tuple(p) not in taken and p[0] != p[1]],
+                       dtype=np.int64).reshape(-1, 2)
+    return {"structural": structural, "shear": shear, "flexion": flexion}
+
+
+def add_mesh_cloth(scene, vertices, faces, mass, structural, shear, flexion, pinned):
+    """``Scene.add_mesh_cloth``: particles at the vertices, springs from the faces."""
+    if isinstance(vertices, (str, os.PathLike)):
+        if faces is not None:
+            raise SceneError("give either a path or vertices and faces (got a path and faces)")
+        vertices, faces = load_obj(vertices)
+    x = as_points("vertices", vertices)
+    if faces is None or len(faces) == 0:
+        raise SceneError("faces must list at least one face (got none)")
+    n = len(x)
+    checked = []
+    for k, face in enumerate(faces):
+        f = np.asarray(face)
+        if f.ndim != 1 or len(f) < 3 or f.dtype.kind not in "iu":
+            raise SceneError(f"faces[{k}] must be 3 or more vertex ids (got {fmt(face)})")
+        if f.min() < 0 or f.max() >= n:
+            raise SceneError(f"faces[{k}] = {f.tolist()} has a vertex id outside [0, {n})")
+        if len(set(f.tolist())) != len(f):
+            raise SceneError(f"faces[{k}] = {f.tolist()} repeats a vertex")
+        checked.append(tuple(int(i) for i in f))
+    triangles, owner = fan(checked)
+    e1, e2 = x[triangles[:, 1]] - x[triangles[:, 0]], x[triangles[:, 2]] - x[triangles[:, 0]]
+    area = 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
+    scale = np.ptp(x, axis=0).max() ** 2
+    bad = np.flatnonzero(area <= 1e-12 * scale)
+    if len(bad):
+        raise SceneError(f"faces[{owner[bad[0]]}] = {list(checked[owner[bad[0]]])} is "
+                         f"degenerate (zero area)")
+    face_area = np.bincount(owner, weights=area, minlength=len(checked))
+    vertex_area = np.zeros(n)
+    for face, a in zip(checked, face_area):
+        vertex_area[list(face)] += a / len(face)
+    lonely = np.flatnonzero(vertex_area == 0.0)
+    if len(lonely):
+        raise SceneError(f"vertex {lonely[0]} is in no face (every vertex must be)")
+    springs = mesh_springs(checked, triangles)
+    total = as_scalar("mass", mass, minimum=0.0, strict=True)
+    params = {"structural": as_spring_params("structural", structural),
+              "shear": as_spring_params("shear", shear),
+              "flexion": as_spring_params("flexion", flexion)}
+    pin = np.zeros(n, dtype=bool)
+    ids = np.asarray(list(pinned) if pinned is not None else [], dtype=np.int64)
+    if ids.ndim != 1 or (len(ids) and (ids.min() < 0 or ids.max() >= n)):
+        raise SceneError(f"pinned must be vertex ids in [0, {n}) (got {fmt(pinned)})")
+    pin[ids] = True
+    cloth = MeshCloth(scene.num_particles, n, triangles, params)
+    scene.add_particles(x, mass=total * vertex_area / vertex_area.sum(), pinned=pin)
+    for family, pairs in springs.items():
+        kskd = params[family]
+        if kskd is None or len(pairs) == 0:
+            cloth.springs[family] = np.zeros(0, dtype=np.int64)
+            continue
+        cloth.springs[family] = scene.add_springs(pairs + cloth.offset, kskd[0], kskd[1],
+                                                  kind=family)
+    scene.cloths.append(cloth)
+    return cloth
 
 
 class Rope:

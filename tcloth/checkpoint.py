@@ -12,13 +12,14 @@ import zipfile
 import numpy as np
 
 from .errors import SceneError
-from .builders import Cloth, Rope
+from .builders import Cloth, MeshCloth, Rope
 from .scene import KIND_CODE, SPRING_KINDS, Scene
 
 FORMAT = "tcloth-checkpoint"
 VERSION = 1
 _COLLIDER_SHAPE = {"sphere": ("center", "radius"), "plane": ("center", "normal"),
-                   "box": ("center", "half_extents", "rotation")}
+                   "box": ("center", "half_extents", "rotation"),
+                   "cylinder": ("center", "radius", "half_height", "rotation")}
 _COLLIDER_COMMON = ("friction", "velocity", "thickness", "stiffness", "damping",
                     "stick_velocity")
 
@@ -41,9 +42,14 @@ def scene_to_arrays(scene):
             "cloths": [], "ropes": [], "colliders": [], "wind": None, "attraction": None,
             "strain_limit": None}
     for k, c in enumerate(scene.cloths):
-        desc["cloths"].append({"offset": int(c.offset), "resolution": list(c.resolution),
-                               "spacing": list(c.spacing), "params": c.params,
-                               "plane": c.plane})
+        if c.is_grid:
+            desc["cloths"].append({"offset": int(c.offset), "resolution": list(c.resolution),
+                                   "spacing": list(c.spacing), "params": c.params,
+                                   "plane": c.plane})
+        else:
+            desc["cloths"].append({"mesh": True, "offset": int(c.offset),
+                                   "count": len(c.particles), "params": c.params})
+            arrays[f"cloth{k}_triangles"] = c.triangles - c.offset
         for family, ids in c.springs.items():
             arrays[f"cloth{k}_{family}"] = ids
     for k, r in enumerate(scene.ropes):
@@ -91,8 +97,11 @@ def scene_from_arrays(desc, arrays):
                           kind=SPRING_KINDS[kinds[a]])
     for k, c in enumerate(desc["cloths"]):
         params = {f: (tuple(p) if p is not None else None) for f, p in c["params"].items()}
-        cloth = Cloth(c["offset"], tuple(c["resolution"]), tuple(c["spacing"]), params,
-                      c["plane"])
+        if c.get("mesh"):
+            cloth = MeshCloth(c["offset"], c["count"], arrays[f"cloth{k}_triangles"], params)
+        else:
+            cloth = Cloth(c["offset"], tuple(c["resolution"]), tuple(c["spacing"]), params,
+                          c["plane"])
         if cloth.particles.max() >= scene.num_particles:
             raise SceneError(f"checkpoint cloth {k} refers to particles beyond the "
                              f"{scene.num_particles} stored")

@@ -20,10 +20,11 @@ def cloth_mesh(sim):
 
 
 def write_obj(path, vertices, faces):
-    """Wavefront OBJ: ``v x y z`` lines then 1-based ``f a b c`` lines."""
+    """Wavefront OBJ: ``v x y z`` lines (17 significant digits: ``load_obj`` reads the
+    same numbers back) then 1-based ``f a b c`` lines."""
     with open(path, "w") as f:
         f.write("# tcloth cloth mesh\n")
-        np.savetxt(f, vertices, fmt="v %.9g %.9g %.9g")
+        np.savetxt(f, vertices, fmt="v %.17g %.17g %.17g")
         np.savetxt(f, faces + 1, fmt="f %d %d %d")
 
 

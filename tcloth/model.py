@@ -82,7 +82,7 @@ class Model:
         in_grid = np.zeros(scene.num_springs, dtype=bool)
         self.grids = []
         if grid_stencil:
-            for cloth in scene.cloths:
+            for cloth in (c for c in scene.cloths if c.is_grid):
                 for sids in cloth.springs.values():
                     in_grid[sids] = True
                 p = cloth.params

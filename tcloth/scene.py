@@ -164,6 +164,32 @@ class Scene:
         return builders.add_cloth(self, resolution, size, center, plane, mass, structural,
                                   shear, flexion, pinned, rotation)
 
+    def add_mesh_cloth(self, vertices, faces=None, mass=0.2, structural=(1000.0, 0.05),
+                       shear=None, flexion=(50.0, 0.01), pinned=()):
+        """Add a cloth made from a mesh: a particle at each vertex, springs from the faces.
+
+        Springs: structural on every face edge; shear across both diagonals of each quad
+        face (a triangle mesh has none); flexion between the two vertices opposite each
+        interior edge (the usual mass-spring bending of triangle meshes; polygons are
+        fanned into triangles from their first vertex for this), leaving out pairs that a
+        structural or shear spring already joins. Rest lengths are the mesh's.
+        Mass: ``mass`` spread by vertex area: each vertex gets an equal share of each
+        adjacent face's area (a third of a triangle's, a quarter of a quad's).
+
+        Args:
+            vertices: (V,3) metres, or the path of an OBJ file (``tcloth.load_obj``) with
+                faces None. faces: a list of faces, each 3 or more vertex ids (0-based).
+            mass: total kg. structural, shear, flexion: (k_s, k_d) or None (absent).
+            pinned: vertex ids to pin.
+        A face repeating a vertex or of zero area, an edge shared by more than two faces
+        (not manifold), or a vertex in no face raises SceneError; duplicate vertices are
+        separate particles (a seam); a face joining two coincident ones has zero area.
+        Returns:
+            MeshCloth (particles (V,) in vertex order, triangles (T,3)).
+        """
+        return builders.add_mesh_cloth(self, vertices, faces, mass, structural, shear,
+                                       flexion, pinned)
+
     def add_rope(self, start, end, segments, mass, stiffness, damping=0.0, pinned=("start",)):
         """Add a straight rope of ``segments`` springs from ``start`` to ``end``.
 
@@ -238,6 +264,22 @@ class Scene:
         return self._add_collider("box", friction, velocity, thickness, stiffness, damping,
                                   stick_velocity, center=as_vec3("center", center),
                                   half_extents=h, rotation=r)
+
+    def add_cylinder(self, center, radius, half_height, rotation=None, friction=0.0,
+                     velocity=(0.0, 0.0, 0.0), thickness=0.005, stiffness=1000.0, damping=0.5,
+                     stick_velocity=1e-3):
+        """Add a capped cylinder: ``radius`` and ``half_height`` (m, > 0) along its local
+        y axis, the second column of ``rotation`` (None: vertical), centred at ``center``.
+
+        Other arguments as for add_sphere.
+        """
+        r = as_rotation("rotation", rotation)
+        return self._add_collider("cylinder", friction, velocity, thickness, stiffness,
+                                  damping, stick_velocity, center=as_vec3("center", center),
+                                  radius=as_scalar("radius", radius, minimum=0.0, strict=True),
+                                  half_height=as_scalar("half_height", half_height,
+                                                        minimum=0.0, strict=True),
+                                  rotation=r)
 
     # -- wind, attraction, strain limiting ------------------------------------------------
     def set_wind(self, velocity=(0.0, 0.0, 0.0), drag=0.5, lift=0.0, tangential=0.0,

@@ -123,12 +123,77 @@ def _box_normal(col, p, t):
     return rot @ _face_normal(q, ti.abs(q) - ti.cast(col.extent, ti.f32))
 
 
+@ti.func
+def _cylinder_local(q, radius, half):
+    """(phi, local outward normal) of a capped cylinder along local y: radius, half
+    height; inside, the nearest of the side and the caps."""
+    r = ti.sqrt(q[0] * q[0] + q[2] * q[2])
+    radial = ti.Vector([1.0, 0.0, 0.0])
+    if r > 0.0:
+        radial = ti.Vector([q[0] / r, 0.0, q[2] / r])
+    axial = ti.Vector([0.0, 1.0 if q[1] >= 0.0 else -1.0, 0.0])
+    dr, dy = r - radius, ti.abs(q[1]) - half
+    phi = 0.0
+    n = radial
+    if dr > 0.0 or dy > 0.0:
+        a, b = ti.max(dr, 0.0), ti.max(dy, 0.0)
+        phi = ti.sqrt(a * a + b * b)
+        n = (a * radial + b * axial) / phi
+    elif dy > dr:
+        phi = dy
+        n = axial
+    else:
+        phi = dr
+    return phi, n
+
+
+@ti.func
+def _cylinder_distance(col, x, t):
+    rot = col.rotation
+    phi, nl = _cylinder_local(rot.transpose() @ (x - _centre(col, t)), col.extent[0],
+                              col.extent[1])
+    return phi, rot @ nl
+
+
+@ti.func
+def _cylinder_hit(col, o, d, t):
+    """Entry of a ray into the capped cylinder (side or caps), or -1."""
+    rot = ti.cast(col.rotation, ti.f32)
+    radius, half = ti.cast(col.extent[0], ti.f32), ti.cast(col.extent[1], ti.f32)
+    ol = rot.transpose() @ (o - ti.cast(_centre(col, t), ti.f32))
+    dl = rot.transpose() @ d
+    best = 1e30
+    a = dl[0] * dl[0] + dl[2] * dl[2]
+    b = ol[0] * dl[0] + ol[2] * dl[2]
+    c = ol[0] * ol[0] + ol[2] * ol[2] - radius * radius
+    disc = b * b - a * c
+    if a > 1e-12 and disc >= 0.0:
+        side = (-b - ti.sqrt(disc)) / a
+        if side > 0.0 and ti.abs(ol[1] + side * dl[1]) <= half:
+            best = side
+    if ti.abs(dl[1]) > 1e-12:
+        for sign in ti.static((-1.0, 1.0)):
+            cap = (sign * half - ol[1]) / dl[1]
+            px, pz = ol[0] + cap * dl[0], ol[2] + cap * dl[2]
+            if cap > 0.0 and px * px + pz * pz <= radius * radius:
+                best = ti.min(best, cap)
+    return best if best < 1e30 else -1.0
+
+
+@ti.func
+def _cylinder_normal(col, p, t):
+    rot = ti.cast(col.rotation, ti.f32)
+    q = rot.transpose() @ (p - ti.cast(_centre(col, t), ti.f32))
+    _, nl = _cylinder_local(q, ti.cast(col.extent[0], ti.f32), ti.cast(col.extent[1], ti.f32))
+    return rot @ nl
+
+
 @dataclass(frozen=True)
 class Shape:
     """One collider shape.
 
     name: the scene's ``kind``. extent: collider dict -> 3 numbers (radius | normal |
-    half extents). signed_distance(col, x, t) -> (phi, outward unit normal): ti.func.
+    half extents | radius, half height, 0). signed_distance(col, x, t) -> (phi, outward unit normal): ti.func.
     ray_hit(col, o, d, t) -> ray parameter or -1, and normal(col, p, t) -> shading normal:
     ti.funcs in float32 for the renderer. checkered: drawn with the ground's squares.
     """
@@ -146,6 +211,8 @@ SHAPES = (
     Shape("plane", lambda c: c["normal"], _plane_distance, _plane_hit, _plane_normal,
           checkered=True),
     Shape("box", lambda c: c["half_extents"], _box_distance, _box_hit, _box_normal),
+    Shape("cylinder", lambda c: (c["radius"], c["half_height"], 0.0), _cylinder_distance,
+          _cylinder_hit, _cylinder_normal),
 )
 SHAPE_NAMES = tuple(s.name for s in SHAPES)
 

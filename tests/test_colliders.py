@@ -74,6 +74,17 @@ def numpy_sdf(collider, x):
     if collider["kind"] == "plane":
         n = collider["normal"]
         return (x - c) @ n, n
+    if collider["kind"] == "cylinder":
+        r = collider["rotation"]
+        q = r.T @ (x - c)
+        axis = np.array([0.0, np.sign(q[1]) or 1.0, 0.0])
+        rho = np.hypot(q[0], q[2])
+        out = np.array([q[0], 0.0, q[2]]) / rho
+        side, cap = rho - collider["radius"], abs(q[1]) - collider["half_height"]
+        if side > 0 or cap > 0:
+            a, b = max(side, 0.0), max(cap, 0.0)
+            return np.hypot(a, b), r @ ((a * out + b * axis) / np.hypot(a, b))
+        return (cap, r @ axis) if cap > side else (side, r @ out)
     r, h = collider["rotation"], collider["half_extents"]
     q = r.T @ (x - c)
     d = np.abs(q) - h
@@ -86,7 +97,7 @@ def numpy_sdf(collider, x):
     return d[axis], r @ nl
 
 
-@pytest.mark.parametrize("kind", ["sphere", "plane", "box"])
+@pytest.mark.parametrize("kind", ["sphere", "plane", "box", "cylinder"])
 def test_friction_bounded_by_mu_normal_and_never_accelerates(f64, kind):
     rng = np.random.default_rng(1)
     mu, n = 0.4, 300
@@ -97,7 +108,10 @@ def test_friction_bounded_by_mu_normal_and_never_accelerates(f64, kind):
                                                  thickness=0.02),
                 "box": lambda: scene.add_box((0, 0, 0), (0.5, 0.3, 0.4), box_rotation(),
                                              friction=mu, velocity=(0, 0.2, -0.1),
-                                             thickness=0.02)}[kind]()
+                                             thickness=0.02),
+                "cylinder": lambda: scene.add_cylinder((0, 0, 0), 0.4, 0.3, box_rotation(5),
+                                                       friction=mu, velocity=(0.1, 0, 0.2),
+                                                       thickness=0.02)}[kind]()
     # particles scattered around the surface, some inside, with random velocities
     dirs = rng.normal(size=(n, 3))
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
@@ -144,12 +158,15 @@ def test_sliding_particle_loses_kinetic_energy_monotonically(f64):
     assert slid == pytest.approx(1.25 / (2 * 0.3 * G), rel=0.01)
 
 
-@pytest.mark.parametrize("shape", ["sphere", "box"])
+@pytest.mark.parametrize("shape", ["sphere", "box", "cylinder"])
 def test_dropped_particles_never_sink_deeper_than_energy_bound(f64, shape):
     m, k, thick, fall = 0.01, 5000.0, 0.005, 1.2      # fall: above any drop height here, m
     scene = tcloth.Scene(gravity=(0, -G, 0))
     if shape == "sphere":
         c = scene.add_sphere((0, 0, 0), 0.5, thickness=thick, stiffness=k, damping=0.2)
+    elif shape == "cylinder":
+        c = scene.add_cylinder((0, 0, 0), 0.5, 0.3, box_rotation(6), thickness=thick,
+                               stiffness=k, damping=0.2)
     else:
         c = scene.add_box((0, 0, 0), (0.5, 0.4, 0.6), box_rotation(2) @ np.diag([1, 1, 1]),
                           thickness=thick, stiffness=k, damping=0.2)
