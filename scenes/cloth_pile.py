@@ -1,5 +1,6 @@
-"""Three square cloths dropped onto each other on the ground, each turned against the one
-below: self-collision keeps the layers apart (and the pile folds without crossing)."""
+"""Three cloths dropped onto a box and each other: self-collision keeps the layers apart.
+
+Each cloth is turned and tilted against the one below; the pile folds without crossing."""
 import numpy as np
 
 import tcloth

@@ -1,6 +1,7 @@
-"""A curtain read from an irregular OBJ mesh (scenes/assets/curtain.obj: a jittered grid,
-each quad split along a random diagonal, so no two triangles are alike), hung from its
-top edge and blown by a gusty wind."""
+"""A curtain read from an irregular OBJ mesh, hung from its top edge, billows in gusty wind.
+
+The mesh, scenes/assets/curtain.obj, is a jittered grid with each quad split along a random
+diagonal, so no two triangles are alike."""
 import os
 
 import numpy as np

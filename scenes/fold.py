@@ -1,5 +1,6 @@
-"""A cloth dropped upright onto a thin rod lying on the floor: its lower edge catches,
-it buckles and folds over onto itself, the layers kept apart by self-collision."""
+"""A cloth dropped upright onto a rod on the floor folds over onto itself (self-collision).
+
+Its lower edge catches on the rod, it buckles and folds; the layers are kept apart."""
 import numpy as np
 
 import tcloth

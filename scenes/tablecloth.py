@@ -1,5 +1,6 @@
-"""A round tablecloth, read from an OBJ mesh (scenes/assets/round_tablecloth.obj: rings of
-vertices, finer towards the rim), dropped onto a round table: it drapes into folds."""
+"""A round tablecloth read from an OBJ mesh drapes over a round table into folds.
+
+The mesh, scenes/assets/round_tablecloth.obj, has rings of vertices, finer towards the rim."""
 import os
 
 import numpy as np
