@@ -6,8 +6,8 @@ import numpy as np
 
 from .errors import SceneError
 from .objfile import load_obj
-from .validate import (as_int, as_points, as_rotation, as_scalar, as_spring_params, as_vec3,
-                       fmt)
+from .validate import (as_int, as_per_item, as_points, as_rotation, as_scalar,
+                       as_spring_params, as_vec3, fmt)
 
 
 class Cloth:
@@ -152,7 +152,11 @@ def add_mesh_cloth(scene, vertices, faces, mass, structural, shear, flexion, pin
     if len(lonely):
         raise SceneError(f"vertex {lonely[0]} is in no face (every vertex must be)")
     springs = mesh_springs(checked, triangles)
-    total = as_scalar("mass", mass, minimum=0.0, strict=True)
+    if np.ndim(mass) == 0:
+        masses = as_scalar("mass", mass, minimum=0.0, strict=True) * vertex_area \
+            / vertex_area.sum()
+    else:
+        masses = as_per_item("mass", mass, n, minimum=0.0, strict=True)
     params = {"structural": as_spring_params("structural", structural),
               "shear": as_spring_params("shear", shear),
               "flexion": as_spring_params("flexion", flexion)}
@@ -162,7 +166,7 @@ def add_mesh_cloth(scene, vertices, faces, mass, structural, shear, flexion, pin
         raise SceneError(f"pinned must be vertex ids in [0, {n}) (got {fmt(pinned)})")
     pin[ids] = True
     cloth = MeshCloth(scene.num_particles, n, triangles, params)
-    scene.add_particles(x, mass=total * vertex_area / vertex_area.sum(), pinned=pin)
+    scene.add_particles(x, mass=masses, pinned=pin)
     for family, pairs in springs.items():
         kskd = params[family]
         if kskd is None or len(pairs) == 0:

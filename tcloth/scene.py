@@ -179,7 +179,8 @@ class Scene:
         Args:
             vertices: (V,3) metres, or the path of an OBJ file (``tcloth.load_obj``) with
                 faces None. faces: a list of faces, each 3 or more vertex ids (0-based).
-            mass: total kg. structural, shear, flexion: (k_s, k_d) or None (absent).
+            mass: total kg, spread by vertex area; or (V,) kg per vertex.
+            structural, shear, flexion: (k_s, k_d) or None (absent).
             pinned: vertex ids to pin.
         A face repeating a vertex or of zero area, an edge shared by more than two faces
         (not manifold), or a vertex in no face raises SceneError; duplicate vertices are

@@ -143,17 +143,17 @@ def test_quad_grid_mesh_has_add_cloths_springs_and_moves_like_it(f64):
     m = mesh.masses.reshape(6, 6)
     np.testing.assert_allclose(m[2, 2] / m[0, 0], 4.0)
     np.testing.assert_allclose(mesh.masses.sum(), 0.2)
-    # the same springs and masses by hand: the same motion
-    same = tcloth.Scene()
-    same.add_particles(grid.positions, mass=mesh.masses, pinned=mesh.pinned)
-    sp = grid.springs
-    same.add_springs(sp["pairs"], sp["stiffness"], sp["damping"], sp["rest_length"])
+    # with add_cloth's masses (even) given per vertex: add_cloth's motion
+    even = tcloth.Scene()
+    even.add_mesh_cloth(grid.positions, faces, mass=grid.masses, structural=(400.0, 0.05),
+                        shear=(80.0, 0.02), flexion=None,
+                        pinned=[cloth.particles[0, 0], cloth.particles[0, -1]])
     runs = []
-    for scene in (mesh, same):
+    for scene in (even, grid):
         sim = tcloth.Simulator(scene, dt=1e-3)
         sim.step(400)
         runs.append(sim.positions())
-    # the same forces summed in another order: equal to rounding
+    # the same forces summed in another order (spring list against grid stencil)
     np.testing.assert_allclose(runs[0], runs[1], atol=1e-8)
     assert len(mc.triangles) == 2 * 25
 
