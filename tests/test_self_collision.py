@@ -289,7 +289,7 @@ def test_folding_cloth_never_crosses_itself(integrator, dt):
 
 def test_checkpoint_with_self_collision_continues_the_run(tmp_path):
     tcloth.init()
-    scene = load_scene("cloth_pile").build(resolution=(8, 8))
+    scene = load_scene("cloth_pile").build(resolution=(6, 6))
     sim = tcloth.Simulator(scene, dt=5e-4)
     sim.step(250)
     sim.save(tmp_path / "pile.npz")
