@@ -15,7 +15,7 @@ def cloth_mesh(sim):
     ids = np.concatenate([c.particles.ravel() for c in scene.cloths])
     remap = np.full(scene.num_particles, -1, dtype=np.int64)
     remap[ids] = np.arange(len(ids))
-    faces = remap[np.concatenate([c.triangles for c in scene.cloths])]
+    faces = remap[scene.triangles]
     return sim.positions()[ids].astype(np.float64), faces
 
 

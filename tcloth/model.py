@@ -102,10 +102,9 @@ class Model:
             self.spring_ks.from_numpy(springs["stiffness"][order].astype(npr))
             self.spring_kd.from_numpy(springs["damping"][order].astype(npr))
 
-        tris = [c.triangles for c in scene.cloths]
-        self.wind = scene.wind if scene.wind is not None and tris else None
+        t = scene.triangles
+        self.wind = scene.wind if scene.wind is not None and len(t) else None
         if self.wind is not None:
-            t = np.concatenate(tris)
             self.triangle_count = len(t)
             self.triangles = ti.Vector.field(3, ti.i32, shape=len(t))
             self.triangles.from_numpy(t.astype(np.int32))

@@ -442,6 +442,11 @@ class Scene:
                 "rest_length": self._cat(self._rest, (0,), np.float64),
                 "kind": self._cat(self._kind, (0,), np.int32)}
 
+    @property
+    def triangles(self):
+        """(T,3) particle ids of every cloth triangle, cloth by cloth."""
+        return self._cat([c.triangles for c in self.cloths], (0, 3), np.int64)
+
     def spring_counts(self):
         """dict kind -> number of springs of that kind."""
         kinds = self.springs["kind"]

@@ -24,8 +24,7 @@ def contact_topology(scene):
     """dict of int arrays: points (P,), triangles (T,3), edges (E,2) with edges[:, 0] <
     edges[:, 1], and the neighbour lists as CSR: neighbours[start[i]:start[i + 1]] are
     particle i's mesh neighbours (start has num_particles + 1 entries)."""
-    tris = [c.triangles for c in scene.cloths]
-    triangles = np.concatenate(tris) if tris else np.zeros((0, 3), dtype=np.int64)
+    triangles = scene.triangles
     pieces = [triangles[:, [a, b]] for a, b in ((0, 1), (1, 2), (2, 0))]
     pieces += [np.stack([r.particles[:-1], r.particles[1:]], 1) for r in scene.ropes]
     edges = np.sort(np.concatenate(pieces), axis=1) if pieces else np.zeros((0, 2), np.int64)

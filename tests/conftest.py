@@ -1,7 +1,12 @@
+import os
+
 import numpy as np
 import pytest
 
 import tcloth
+from tcloth.cli import load_script
+
+SCENES = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "scenes")
 
 
 @pytest.fixture(scope="module")
@@ -9,6 +14,11 @@ def f64():
     """Taichi on the CPU in float64, for accuracy tests."""
     tcloth.init(arch="cpu", precision="f64")
     yield
+
+
+def scene_module(name):
+    """The scene script scenes/NAME.py as a module."""
+    return load_script(os.path.join(SCENES, name + ".py"))[0]
 
 
 def random_network(n=7, seed=0, k=(50.0, 200.0), kd=0.0, pin=None, gravity=(0.0, 0.0, 0.0),

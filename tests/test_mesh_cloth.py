@@ -7,6 +7,8 @@ import tcloth
 from tcloth import SceneError
 from tcloth.builders import fan, mesh_springs
 
+from conftest import scene_module
+
 FORMS = """# every accepted line form
 mtllib cloth.mtl
 o panel
@@ -170,13 +172,7 @@ def test_wind_on_a_face_on_triangle_is_drag_area_u_abs_u_in_thirds(f64):
 
 def disc(rings=6, radius=0.4):
     """scenes/tablecloth.py's irregular disc mesh: rings of 6 k vertices."""
-    import importlib.util
-    import pathlib
-    path = pathlib.Path(__file__).resolve().parents[1] / "scenes" / "tablecloth.py"
-    spec = importlib.util.spec_from_file_location("tablecloth", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module.disc_mesh(rings=rings, radius=radius)
+    return scene_module("tablecloth").disc_mesh(rings=rings, radius=radius)
 
 
 def test_hanging_mesh_cloth_reaches_equilibrium_where_springs_balance_gravity(f64):

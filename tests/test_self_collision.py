@@ -8,7 +8,7 @@ import tcloth
 from tcloth import SceneError
 from tcloth.topology import contact_topology
 
-from conftest import energy_gradient
+from conftest import energy_gradient, scene_module
 
 CLOTH = {"mass": 0.1, "structural": (400.0, 0.05), "shear": (80.0, 0.02),
          "flexion": (10.0, 0.005), "pinned": []}
@@ -256,16 +256,6 @@ def test_bad_self_collision_input_names_the_argument():
         tcloth.Simulator(scene)
 
 
-def load_scene(name):
-    import importlib.util
-    import pathlib
-    path = pathlib.Path(__file__).resolve().parents[1] / "scenes" / f"{name}.py"
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 @pytest.mark.parametrize("integrator,dt", [("symplectic_euler", 2.5e-4),
                                            ("backward_euler", 1e-3)])
 def test_folding_cloth_never_crosses_itself(integrator, dt):
@@ -274,7 +264,7 @@ def test_folding_cloth_never_crosses_itself(integrator, dt):
     what comes within the thickness at the end of a step: dt keeps the motion of a step
     (about 2 m/s x dt) below the thickness."""
     tcloth.init()
-    scene = load_scene("fold").build(resolution=(16, 16))
+    scene = scene_module("fold").build(resolution=(16, 16))
     topo = contact_topology(scene)
     sim = tcloth.Simulator(scene, integrator, dt=dt)
     hits, contacts = [], []
@@ -289,7 +279,7 @@ def test_folding_cloth_never_crosses_itself(integrator, dt):
 
 def test_checkpoint_with_self_collision_continues_the_run(tmp_path):
     tcloth.init()
-    scene = load_scene("cloth_pile").build(resolution=(6, 6))
+    scene = scene_module("cloth_pile").build(resolution=(6, 6))
     sim = tcloth.Simulator(scene, dt=5e-4)
     sim.step(250)
     sim.save(tmp_path / "pile.npz")

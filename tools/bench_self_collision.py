@@ -24,26 +24,18 @@ Usage: python tools/bench_self_collision.py [--sizes 64,128,256,512] [--steps 30
                                             [--arch cpu|cuda] [--out docs]
 """
 import argparse
-import importlib.util
 import os
 import time
 
 import numpy as np
 
 import tcloth
+from tcloth.cli import load_script
 from benchcsv import write_csv
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 # a particle's springs' k_d in scenes/fold.py: 4 structural, 4 shear, 4 flexion
 DAMPING_SUM = 4 * (0.05 + 0.02 + 0.005)
-
-
-def fold_module():
-    spec = importlib.util.spec_from_file_location(
-        "fold", os.path.join(HERE, "..", "scenes", "fold.py"))
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def folded_state(module, base=40, seconds=0.9):
@@ -117,7 +109,7 @@ def main():
                     help="the broad phase's skin, m (default: the scene's)")
     args = ap.parse_args()
     tcloth.init(arch=args.arch)
-    module = fold_module()
+    module = load_script(os.path.join(HERE, "..", "scenes", "fold.py"))[0]
     x40, v40 = folded_state(module)
     rows = []
     for n in (int(s) for s in args.sizes.split(",")):

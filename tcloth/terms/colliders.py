@@ -30,6 +30,47 @@ from ..runtime import serial
 from .base import Term, particle_energy
 
 
+@ti.func
+def contact_force(depth, v_rel, n, k, cd, mu, eps):
+    """The contact law at penetration depth > 0 along the unit normal n, for the relative
+    velocity v_rel against the surface: f_n = max(k depth - cd v_n, 0) along n plus Coulomb
+    friction -mu f_n v_t / max(|v_t|, eps), with the damping coefficient cd = 2 zeta
+    sqrt(k m) for the damping ratio zeta and the effective mass m. Self-contact uses it
+    between two moving surfaces."""
+    vn = v_rel.dot(n)
+    fn = ti.max(k * depth - cd * vn, 0.0)
+    vt = v_rel - vn * n
+    speed = vt.norm()
+    return fn * n - mu * fn / ti.max(speed, eps) * vt
+
+
+@ti.func
+def add_dissipation(e, g, block, v, n0, fn0, cd, mu, eps, h):
+    """(e, g, block) plus backward Euler's normal damping and friction of a contact as convex
+    potentials of the end velocity v, with the start of the step's normal n0 and normal
+    force fn0 > 0 and the damping coefficient cd: energy, gradient with respect to the
+    position, and its Hessian block."""
+    vn = v.dot(n0)
+    nn = n0.outer_product(n0)
+    if vn < 0.0:
+        e += 0.5 * cd * h * vn * vn
+        g += cd * vn * n0
+        block += cd / h * nn
+    vt = v - vn * n0
+    s = vt.norm()
+    tangent = ti.Matrix.identity(float, 3) - nn
+    if s < eps:
+        e += mu * fn0 * h * s * s / (2.0 * eps)
+        g += mu * fn0 / eps * vt
+        block += mu * fn0 / (eps * h) * tangent
+    else:
+        e += mu * fn0 * h * (s - 0.5 * eps)
+        g += mu * fn0 / s * vt
+        that = vt / s
+        block += mu * fn0 / (s * h) * (tangent - that.outer_product(that))
+    return e, g, block
+
+
 @ti.data_oriented
 class Colliders(Term):
     """Penalty contact and Coulomb friction against the scene's colliders; skipped for
@@ -57,12 +98,8 @@ class Colliders(Term):
         depth = col.thickness - phi
         if depth > 0.0:
             k = col.stiffness
-            v_rel = v - col.velocity
-            vn = v_rel.dot(n)
-            fn = ti.max(k * depth - 2.0 * col.damping * ti.sqrt(k * m) * vn, 0.0)
-            vt = v_rel - vn * n
-            speed = vt.norm()
-            f = fn * n - col.friction * fn / ti.max(speed, col.stick_velocity) * vt
+            f = contact_force(depth, v - col.velocity, n, k, 2.0 * col.damping * ti.sqrt(k * m),
+                              col.friction, col.stick_velocity)
         return f
 
     @ti.func
@@ -118,37 +155,32 @@ class Colliders(Term):
         self.table.for_each_contact(x0, p, t0, self._begin_body, 0, 0)
 
     @ti.func
-    def _incremental_body(self, col, c, x, p, phi, n, ctx):
-        """(energy, gradient) of one contact in the step's incremental potential: penalty
-        k/2 depth^2 at x, normal damping and friction with the start-of-step normal and
-        force as convex potentials of the end velocity."""
-        x0p, h = ctx
-        xp, m = x[p], self.mass[p]
+    def _incremental_parts(self, col, c, x, p, phi, n, x0p, h):
+        """(energy, gradient, Hessian block) of one contact in the step's incremental
+        potential: penalty k/2 depth^2 at x (its block k n n^T without the curvature
+        term), normal damping and friction with the start-of-step normal and force as
+        convex potentials of the end velocity."""
         depth = col.thickness - phi
         e = 0.0
         g = ti.Vector.zero(float, 3)
+        block = ti.Matrix.zero(float, 3, 3)
         k = col.stiffness
         if depth > 0.0:
             e += 0.5 * k * depth * depth
             g -= k * depth * n
+            block += k * n.outer_product(n)
         fn0 = self._lagged[0][p, c]
         if fn0 > 0.0:
-            n0 = self._lagged[1][p, c]
-            v = (xp - x0p) / h - col.velocity
-            vn = v.dot(n0)
-            if vn < 0.0:
-                cd = 2.0 * col.damping * ti.sqrt(k * m)
-                e += 0.5 * cd * h * vn * vn
-                g += cd * vn * n0
-            vt = v - vn * n0
-            s = vt.norm()
-            mu, eps = col.friction, col.stick_velocity
-            if s < eps:
-                e += mu * fn0 * h * s * s / (2.0 * eps)
-                g += mu * fn0 / eps * vt
-            else:
-                e += mu * fn0 * h * (s - 0.5 * eps)
-                g += mu * fn0 / s * vt
+            cd = 2.0 * col.damping * ti.sqrt(k * self.mass[p])
+            e, g, block = add_dissipation(e, g, block, (x[p] - x0p) / h - col.velocity,
+                                          self._lagged[1][p, c], fn0, cd, col.friction,
+                                          col.stick_velocity, h)
+        return e, g, block
+
+    @ti.func
+    def _incremental_body(self, col, c, x, p, phi, n, ctx):
+        x0p, h = ctx
+        e, g, _ = self._incremental_parts(col, c, x, p, phi, n, x0p, h)
         return ti.Vector([e, g[0], g[1], g[2]])
 
     @ti.func
@@ -162,31 +194,8 @@ class Colliders(Term):
 
     @ti.func
     def _block_body(self, col, c, x, p, phi, n, ctx):
-        """3x3 Hessian block of one contact (penalty k n n^T without the curvature term,
-        normal damping, friction)."""
         x0p, h = ctx
-        xp = x[p]
-        block = ti.Matrix.zero(float, 3, 3)
-        k = col.stiffness
-        if col.thickness - phi > 0.0:
-            block += k * n.outer_product(n)
-        fn0 = self._lagged[0][p, c]
-        if fn0 > 0.0:
-            n0 = self._lagged[1][p, c]
-            nn = n0.outer_product(n0)
-            v = (xp - x0p) / h - col.velocity
-            vn = v.dot(n0)
-            if vn < 0.0:
-                block += 2.0 * col.damping * ti.sqrt(k * self.mass[p]) / h * nn
-            vt = v - vn * n0
-            s = vt.norm()
-            mu, eps = col.friction, col.stick_velocity
-            tangent = ti.Matrix.identity(float, 3) - nn
-            if s < eps:
-                block += mu * fn0 / (eps * h) * tangent
-            else:
-                that = vt / s
-                block += mu * fn0 / (s * h) * (tangent - that.outer_product(that))
+        _, _, block = self._incremental_parts(col, c, x, p, phi, n, x0p, h)
         return block
 
     @ti.func

@@ -58,6 +58,7 @@ from ..hashgrid import HashGrid
 from ..proximity import contact_weights
 from ..runtime import serial, serial_count
 from .base import Term
+from .colliders import add_dissipation, contact_force
 
 POINT_TRIANGLE, EDGE_EDGE = 0, 1
 PROJECTION_PASSES = 4
@@ -68,9 +69,9 @@ class ContactList:
     """Candidate contacts (ids (4,) and kind per row) of capacity ``capacity``, the broad
     phase that fills them and backward Euler's lagged values per row."""
 
-    def __init__(self, table, mass, inv_mass, capacity, grids, x_ref):
+    def __init__(self, table, inv_mass, capacity, grids, x_ref):
         real = runtime.real()
-        self.table, self.mass, self.inv_mass = table, mass, inv_mass
+        self.table, self.inv_mass = table, inv_mass
         self.points_grid, self.edges_grid = grids
         self.x_ref = x_ref
         self.capacity = capacity
@@ -224,12 +225,10 @@ def self_contact_forces(
             v_rel = ti.Vector.zero(float, 3)
             for j in ti.static(range(4)):
                 v_rel += alpha[j] * v[ids[j]]
-            vn = v_rel.dot(n)
             w = cl.inverse_mass(ids, alpha)
             if w > 0.0:
-                fn = ti.max(k * (thickness - d) - 2.0 * prm[3] * ti.sqrt(k / w) * vn, 0.0)
-                vt = v_rel - vn * n
-                f = fn * n - prm[2] * fn / ti.max(vt.norm(), prm[4]) * vt
+                f = contact_force(thickness - d, v_rel, n, k, 2.0 * prm[3] * ti.sqrt(k / w),
+                                  prm[2], prm[4])
                 for j in ti.static(range(4)):
                     f_out[ids[j]] += alpha[j] * f
 
@@ -285,38 +284,23 @@ def _lag(cl: ti.template(), count: ti.i32, x0: ti.template()):
 def _dissipation(cl, c, x, x0, h):
     """(energy, gradient, Hessian) in the relative motion sum_k alpha0_k x_k of contact c's
     normal damping and friction as convex potentials of the end velocity (the colliders'
-    ``_incremental_body``, between two moving sides)."""
+    ``add_dissipation`` between two moving sides; no damping where every particle of the
+    contact is pinned)."""
     prm = ti.static(cl.table.params)
     ids, fn0 = cl.ids[c], cl.lag_fn[c]
     e = 0.0
     g = ti.Vector.zero(float, 3)
     block = ti.Matrix.zero(float, 3, 3)
     if fn0 > 0.0:
-        n0, alpha0 = cl.lag_n[c], cl.lag_alpha[c]
+        alpha0 = cl.lag_alpha[c]
         w = cl.inverse_mass(ids, alpha0)
         v = ti.Vector.zero(float, 3)
         for j in ti.static(range(4)):
             v += alpha0[j] * (x[ids[j]] - x0[ids[j]]) / h
-        vn = v.dot(n0)
-        nn = n0.outer_product(n0)
-        if vn < 0.0 and w > 0.0:
+        cd = 0.0
+        if w > 0.0:
             cd = 2.0 * prm[3] * ti.sqrt(prm[1] / w)
-            e += 0.5 * cd * h * vn * vn
-            g += cd * vn * n0
-            block += cd / h * nn
-        vt = v - vn * n0
-        s = vt.norm()
-        mu, eps = prm[2], prm[4]
-        tangent = ti.Matrix.identity(float, 3) - nn
-        if s < eps:
-            e += mu * fn0 * h * s * s / (2.0 * eps)
-            g += mu * fn0 / eps * vt
-            block += mu * fn0 / (eps * h) * tangent
-        else:
-            e += mu * fn0 * h * (s - 0.5 * eps)
-            g += mu * fn0 / s * vt
-            that = vt / s
-            block += mu * fn0 / (s * h) * (tangent - that.outer_product(that))
+        e, g, block = add_dissipation(e, g, block, v, cl.lag_n[c], fn0, cd, prm[2], prm[4], h)
     return e, g, block
 
 
@@ -469,7 +453,7 @@ class SelfContact(Term):
     def __init__(self, model):
         table = self.table = model.self_collision
         real = runtime.real()
-        self.mass, self.inv_mass = model.mass, model.inv_mass
+        self.inv_mass = model.inv_mass
         self.x_ref = ti.Vector.field(3, real, shape=model.particle_count)
         self.grids = (HashGrid(table.point_count), HashGrid(table.edge_count))
         self.candidates = self._list(8 * (table.point_count + table.edge_count))
@@ -480,8 +464,7 @@ class SelfContact(Term):
         self._scratch = {}
 
     def _list(self, capacity):
-        return ContactList(self.table, self.mass, self.inv_mass, capacity, self.grids,
-                           self.x_ref)
+        return ContactList(self.table, self.inv_mass, capacity, self.grids, self.x_ref)
 
     def _field(self, key, make):
         if key not in self._scratch:
