@@ -1,4 +1,5 @@
-"""The ``tcloth`` command line: ``tcloth render SCRIPT --out PATH``, ``tcloth list``.
+"""The ``tcloth`` command line: ``tcloth render SCRIPT --out PATH``, ``tcloth list``,
+``tcloth sweep SPEC.toml --out DIR``.
 
 A scene script defines ``build(**params) -> tcloth.Scene`` and a dict ``CONFIG`` with any
 of: description, integrator, dt, steps_per_frame, frames, fps, camera, width, height,
@@ -103,9 +104,39 @@ def render_script(path, args):
                          progress=not args.quiet, mesh_dir=args.meshes, **cfg["render"])
 
 
+def sweep_command(args):
+    """``tcloth sweep``: run the spec, then one summary line per outcome."""
+    from .sweep import run_sweep
+    from .sweep.engine import FAILED
+    try:
+        rows = run_sweep(args.spec, args.out, workers=args.workers, scheduler=args.scheduler,
+                         threads=args.threads, progress=not args.quiet)
+    except KeyboardInterrupt:
+        raise SweepFailed(f"interrupted; the finished cases are kept in {args.out!r}: run "
+                          f"the same command again to resume") from None
+    stable = sum(1 for r in rows if r["stable"])
+    raised = sum(1 for r in rows if r["status"].startswith("error"))
+    failed = sum(1 for r in rows if r["status"].startswith(FAILED))
+    reused = sum(1 for r in rows if r["reused"])
+    print(f"{len(rows)} cases ({len(rows) - reused} run now, {reused} from earlier runs): "
+          f"{stable} stable, {len(rows) - stable - raised - failed} unstable, {raised} "
+          f"raised, {failed} did not finish (see the status column); wrote "
+          f"{os.path.join(args.out, 'results.csv')}")
+    if failed:
+        raise SweepFailed(f"{failed} of {len(rows)} cases did not finish; run the same "
+                          f"command again to run them")
+
+
+class SweepFailed(Exception):
+    """Some cases of a sweep did not run to their end (exit code 4)."""
+
+
 def _guarded(fn, verbose):
     try:
         fn()
+    except SweepFailed as e:
+        print(f"tcloth: {e}", file=sys.stderr)
+        return 4
     except (ScriptError, SceneError, InstabilityError) as e:
         if verbose:
             traceback.print_exc()
@@ -123,7 +154,20 @@ def main(argv=None):
     _render_parser(p_render)
     p_list = sub.add_parser("list", help="list scene scripts with a one-line description")
     p_list.add_argument("folder", nargs="?", default="scenes")
+    p_sweep = sub.add_parser("sweep", help="run a parameter sweep (a TOML spec) on a process "
+                                           "pool or a Dask cluster")
+    p_sweep.add_argument("spec", help="the sweep spec, e.g. docs/sweeps/hanging_cloth.toml")
+    p_sweep.add_argument("--out", required=True, help="output folder (rerun to resume)")
+    p_sweep.add_argument("--workers", type=int, help="local worker processes "
+                                                     "(default: one per core; 1: serial)")
+    p_sweep.add_argument("--scheduler", help="a Dask scheduler address, tcp://HOST:PORT")
+    p_sweep.add_argument("--threads", type=int, help="Taichi threads per worker "
+                                                     "(default: cores / workers)")
+    p_sweep.add_argument("--quiet", action="store_true", help="no progress bar")
+    p_sweep.add_argument("--verbose", action="store_true", help="tracebacks on errors")
     args = parser.parse_args(argv)
+    if args.command == "sweep":
+        return _guarded(lambda: sweep_command(args), args.verbose)
     if args.command == "list":
         scripts = sorted(glob.glob(os.path.join(args.folder, "*.py")))
         if not scripts:

@@ -34,10 +34,12 @@ def write_png(path, image):
 
 
 class Progress:
-    """A one-line progress bar on stderr (a line per 10 % when stderr is not a terminal)."""
+    """A one-line progress bar with the rate and the time left on stderr (a line per 10 %
+    when stderr is not a terminal)."""
 
-    def __init__(self, total, label, enabled=True):
-        self.total, self.label, self.enabled = total, label, enabled
+    def __init__(self, total, label, enabled=True, unit="frames", rate_unit="fps"):
+        self.total, self.label, self.enabled = max(total, 1), label, enabled
+        self.unit, self.rate_unit = unit, rate_unit
         self.tty = sys.stderr.isatty()
         self.start = time.perf_counter()
         self._last_decile = -1
@@ -45,12 +47,16 @@ class Progress:
     def update(self, done):
         if not self.enabled:
             return
-        frac = done / self.total
-        rate = done / max(time.perf_counter() - self.start, 1e-9)
+        frac = min(done / self.total, 1.0)
+        elapsed = max(time.perf_counter() - self.start, 1e-9)
+        rate = done / elapsed
+        left = elapsed * (self.total - done) / done if done else float("nan")
+        eta = "?" if left != left else f"{int(left) // 60}:{int(left) % 60:02d}"
         bar = "#" * int(30 * frac) + "-" * (30 - int(30 * frac))
-        line = f"{self.label} [{bar}] {done}/{self.total} frames, {rate:.1f} fps"
+        line = (f"{self.label} [{bar}] {done}/{self.total} {self.unit}, "
+                f"{rate:.1f} {self.rate_unit}, {eta} left")
         if self.tty:
-            sys.stderr.write("\r" + line + ("\n" if done == self.total else ""))
+            sys.stderr.write("\r" + line + ("\n" if done >= self.total else ""))
         elif int(10 * frac) != self._last_decile:
             self._last_decile = int(10 * frac)
             sys.stderr.write(line + "\n")

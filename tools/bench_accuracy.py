@@ -6,22 +6,26 @@ orders (least-squares slope of log error against log dt over the runs below 10 %
 go into the legend, and the cheapest method at a few error levels is printed.
 
 Error: RMS over particles of |x - x_ref| at t = --time, m. Wall time: the run alone
-(each simulator is compiled by two untimed first steps and reset).
+(each simulator is compiled by two untimed first steps and reset). Orders are fitted
+over the stable runs with an error below 10 % of the scene's size.
+
+Every scene is one sweep of the sweep engine (``tcloth.sweep``), run in parallel on
+--workers processes; finished runs are kept in --work, so an interrupted study resumes.
 
 Prints greppable lines ``accuracy.<scene>.<integrator>.<metric>: value``; writes
 <out>/accuracy.csv and <out>/img/accuracy_<scene>.png (matplotlib).
 
-Usage: python tools/bench_accuracy.py [--time 0.5] [--out docs]
+Usage: python tools/bench_accuracy.py [--time 0.5] [--out docs] [--workers N]
+       [--work out/bench_accuracy]
 """
 import argparse
 import os
-import time
 
-import numpy as np
-
-import tcloth
 from benchcsv import write_csv
+from tcloth.sweep import Runner, load_spec
+from tcloth.sweep.plots import order, scene_size, work_precision
 
+HERE = os.path.dirname(os.path.abspath(__file__))
 # label -> (integrator, options); backward Euler also with its Newton and CG tolerances
 # tightened, so that its own time-discretisation error shows (the defaults stop Newton at
 # a velocity change of 1e-4 m/s, an error floor)
@@ -34,102 +38,46 @@ METHODS = {"forward_euler": ("forward_euler", {}),
            "projective": ("projective", {})}
 STEPS = [25, 50, 100, 200, 400, 800, 1600, 3200]
 REFERENCE_STEPS = 25600
+# name -> (scene script in tools/sweeps, build parameters)
+SCENES = {"swinging_k300": ("swinging_cloth.py", {"k": 300.0}),
+          "swinging_k3000": ("swinging_cloth.py", {"k": 3000.0}),
+          "cloth_on_sphere": ("cloth_on_sphere.py", {})}
 
 
-def swinging(k):
-    def build():
-        s = tcloth.Scene()
-        s.add_cloth(resolution=(12, 12), size=(0.5, 0.5), plane="xz", mass=0.2,
-                    structural=(k, 0.01 * k ** 0.5), shear=(k / 5, 0.005 * k ** 0.5),
-                    flexion=(k / 20, 0.002 * k ** 0.5))
-        return s
-    return build
+def study_spec(name, final_time):
+    script, build = SCENES[name]
+    return load_spec({
+        "scene": os.path.join(HERE, "sweeps", script), "duration": final_time,
+        "precision": "f64", "build": build,
+        "vary": {"method": [{"label": label, "integrator": integrator, "options": options}
+                            for label, (integrator, options) in METHODS.items()],
+                 "dt": [final_time / steps for steps in STEPS]},
+        "reference": {"integrator": "rk4", "dt": final_time / REFERENCE_STEPS,
+                      "precision": "f64"}})
 
 
-def on_sphere():
-    s = tcloth.Scene()
-    s.add_cloth(resolution=(12, 12), size=(0.6, 0.6), center=(0.0, 0.35, 0.0), mass=0.2,
-                pinned=[], structural=(300.0, 0.2), shear=(60.0, 0.1), flexion=(15.0, 0.02))
-    s.add_sphere((0.0, 0.0, 0.0), 0.2, friction=0.3, thickness=0.01, stiffness=3e3)
-    return s
-
-
-SCENES = {"swinging_k300": swinging(300.0), "swinging_k3000": swinging(3000.0),
-          "cloth_on_sphere": on_sphere}
-
-
-def run(sim, dt, steps):
-    sim.reset(dt)
-    t0 = time.perf_counter()
-    try:
-        sim.step(steps)
-    except tcloth.InstabilityError:
-        return None, time.perf_counter() - t0
-    return sim.positions(), time.perf_counter() - t0
-
-
-def order(points):
-    """Slope of log error against log dt over the points below 10 % error."""
-    pts = [(dt, err) for dt, err, _ in points if err is not None and 0 < err < 0.1 * 0.5]
-    if len(pts) < 2:
-        return float("nan")
-    dt, err = np.log(np.array(pts)).T
-    return float(np.polyfit(dt, err, 1)[0])
-
-
-def study(name, build, final_time):
-    scene = build()
-    reference = tcloth.Simulator(scene, "rk4", dt=final_time / REFERENCE_STEPS)
-    reference.step(REFERENCE_STEPS)
-    x_ref = reference.positions()
-    results, rows = {}, []
-    for integrator, (kind, options) in METHODS.items():
-        sim = tcloth.Simulator(scene, kind, dt=final_time / STEPS[-1], **options)
-        sim.step(2)                              # compiles both state orders
-        points = []
-        for steps in STEPS:
-            x, wall = run(sim, final_time / steps, steps)
-            err = None if x is None else float(np.sqrt(np.mean(np.sum((x - x_ref) ** 2, 1))))
-            points.append((final_time / steps, err, wall))
-            rows.append({"scene": name, "integrator": integrator, "dt": final_time / steps,
-                         "steps": steps, "error_m": "unstable" if err is None else err,
-                         "wall_s": wall})
-        results[integrator] = points
-        p = order(points)
-        print(f"accuracy.{name}.{integrator}.order: {p:.2f}", flush=True)
-        for dt, err, wall in points:
-            print(f"accuracy.{name}.{integrator}.dt{dt:.3g}.error_m: "
-                  f"{'unstable' if err is None else f'{err:.3g}'} wall_s: {wall:.3g}")
+def report(name, spec, rows):
+    """Print the orders, errors and the cheapest method at a few error levels; the
+    rows of accuracy.csv."""
+    size = scene_size(spec)
+    out = []
+    for label in METHODS:
+        runs = [r for r in rows if r["method"] == label]
+        stable = [(r["dt"], r["error"]) for r in runs if r["stable"]]
+        print(f"accuracy.{name}.{label}.order: {order(stable, size):.2f}", flush=True)
+        for r in runs:
+            wall = r["ms_per_step"] * r["steps"] / 1e3
+            err = f"{r['error']:.3g}" if r["stable"] else "unstable"
+            print(f"accuracy.{name}.{label}.dt{r['dt']:.3g}.error_m: {err} wall_s: {wall:.3g}")
+            out.append({"scene": name, "integrator": label, "dt": r["dt"], "steps": r["steps"],
+                        "error_m": r["error"] if r["stable"] else "unstable",
+                        "wall_s": wall})
     for level in (1e-2, 1e-3, 1e-4):
-        best = min(((wall, integrator) for integrator, pts in results.items()
-                    for _, err, wall in pts if err is not None and err <= level),
-                   default=None)
+        best = min(((r["wall_s"], r["integrator"]) for r in out
+                    if r["error_m"] != "unstable" and r["error_m"] <= level), default=None)
         print(f"accuracy.{name}.cheapest_at_{level:g}: "
               f"{'none' if best is None else f'{best[1]} ({best[0] * 1e3:.1f} ms)'}")
-    return rows, results
-
-
-def plot(name, results, path):
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    fig, (ax_t, ax_dt) = plt.subplots(1, 2, figsize=(12, 4.5))
-    for integrator, points in results.items():
-        pts = [(dt, err, wall) for dt, err, wall in points if err is not None and err > 0]
-        if not pts:
-            continue
-        dt, err, wall = np.array(pts).T
-        label = f"{integrator} (order {order(points):.2f})"
-        ax_t.plot(wall, err, "o-", label=label)
-        ax_dt.plot(dt, err, "o-", label=label)
-    ax_t.set(xscale="log", yscale="log", xlabel="wall time (s)", ylabel="RMS error (m)",
-             title=f"{name}: error against run time")
-    ax_dt.set(xscale="log", yscale="log", xlabel="dt (s)", ylabel="RMS error (m)",
-              title="error against dt (missing points: unstable)")
-    ax_t.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    print(f"# wrote {path}")
+    return out
 
 
 def main(argv=None):
@@ -137,14 +85,20 @@ def main(argv=None):
     ap.add_argument("--time", type=float, default=0.5)
     ap.add_argument("--scenes", default=",".join(SCENES))
     ap.add_argument("--out", default="docs")
+    ap.add_argument("--workers", type=int, help="worker processes (default: one per core)")
+    ap.add_argument("--work", default=os.path.join("out", "bench_accuracy"),
+                    help="the sweeps' folder (finished runs are reused)")
     args = ap.parse_args(argv)
-    tcloth.init(precision="f64")
     os.makedirs(os.path.join(args.out, "img"), exist_ok=True)
     all_rows = []
-    for name in args.scenes.split(","):
-        rows, results = study(name, SCENES[name], args.time)
-        all_rows += rows
-        plot(name, results, os.path.join(args.out, "img", f"accuracy_{name}.png"))
+    with Runner(workers=args.workers) as runner:
+        for name in args.scenes.split(","):
+            spec = study_spec(name, args.time)
+            rows = runner.run(spec, os.path.join(args.work, name))
+            all_rows += report(name, spec, rows)
+            path = os.path.join(args.out, "img", f"accuracy_{name}.png")
+            work_precision(spec, rows, path)
+            print(f"# wrote {path}")
     write_csv(os.path.join(args.out, "accuracy.csv"), all_rows)
 
 

@@ -1,0 +1,170 @@
+"""tcloth sweep: spec validation, the same table serially and on a Dask LocalCluster, a
+worker killed mid-sweep, an interrupted sweep resumed. Sweeps run through the command line
+in subprocesses (each with its own Taichi runtime, as the sweep's workers have)."""
+import csv
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from tcloth.sweep import SpecError, load_spec
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SCENE = os.path.join(ROOT, "tests", "data", "sweep_scene.py")
+
+
+def sweep(spec_text, tmp_path, out, *options):
+    """Write the spec, run ``tcloth sweep`` on it; (return code, output, rows)."""
+    spec = tmp_path / "spec.toml"
+    spec.write_text(f'scene = "{SCENE}"\n' + spec_text)
+    proc = subprocess.run([sys.executable, "-m", "tcloth", "sweep", str(spec), "--out",
+                           str(out), "--quiet", *options], capture_output=True, text=True,
+                          timeout=600)
+    path = out / "results.csv"
+    rows = list(csv.DictReader(open(path))) if path.exists() else []
+    return proc.returncode, proc.stdout + proc.stderr, rows
+
+
+def test_example_spec_expands_as_written():
+    """The issue's example: 2 integrators x 3 dt x 2 stiffnesses = 12 cases; dt = 4e-3
+    does not divide 0.25 s, so those cases end at the nearest whole step."""
+    spec = load_spec(os.path.join(ROOT, "docs", "sweeps", "hanging_cloth.toml"))
+    cases = spec.cases()
+    assert len(cases) == 12 and len({c["id"] for c in cases}) == 12
+    assert {(c["settings"]["integrator"], c["settings"]["dt"], tuple(c["build"]["structural"]))
+            for c in cases} == {(i, dt, (k, 0.05)) for i in ("symplectic_euler", "backward_euler")
+                                for dt in (1e-4, 1e-3, 4e-3) for k in (400.0, 4000.0)}
+    assert all(c["build"]["resolution"] == [12, 12] for c in cases)
+    ends = {c["settings"]["dt"]: (c["steps"], c["t_end"]) for c in cases}
+    assert ends[1e-4] == (2500, pytest.approx(0.25)) and ends[4e-3] == (62, pytest.approx(0.248))
+    assert spec.reference == {"integrator": "rk4", "dt": 1e-5, "precision": "f64",
+                              "options": {}}
+    assert len({c["reference_id"] for c in cases}) == 2        # one per stiffness
+
+
+BAD_SPECS = [
+    ({"duration": 1.0, "colour": 1}, "unknown key 'colour'"),
+    ({"duration": -0.5}, "duration must be a positive finite number (got -0.5)"),
+    ({"duration": 1.0, "vary": {"integrator": ["rk5"]}},
+     "vary.integrator[0]: unknown integrator 'rk5'"),
+    ({"duration": 1.0, "vary": {"dt": [1e-3, -1e-3]}},
+     "vary.dt[1] must be a positive finite number (got -0.001)"),
+    ({"duration": 1.0, "vary": {"dt": 1e-3}}, "vary.dt must be a non-empty list of values"),
+    ({"duration": 1.0, "vary": {"stiffness": [1.0]}},
+     "vary.stiffness: the scene's build() takes no parameter 'stiffness'"),
+    ({"duration": 1.0, "build": {"mass": 1.0}},
+     "build.mass: the scene's build() takes no parameter 'mass'"),
+    ({"duration": 1.0, "vary": {"pair": [{"integrator": "verlet", "dt": 0.0}]}},
+     "vary.pair[0].dt must be a positive finite number (got 0.0)"),
+    ({"duration": 1.0, "reference": {"integrator": "rk4"}}, "reference needs dt"),
+    ({"duration": 1.0, "reference": {"dt": 1e-5, "steps": 3}},
+     "unknown key 'steps' in reference"),
+    ({"duration": 1.0, "precision": "f16"}, "precision must be 'f32' or 'f64' (got 'f16')"),
+    ({"duration": 1.0, "max_steps": 0}, "max_steps must be an integer >= 1 (got 0)"),
+]
+
+
+@pytest.mark.parametrize("data, message", BAD_SPECS)
+def test_bad_spec_names_key_and_value(data, message):
+    with pytest.raises(SpecError) as e:
+        load_spec({"scene": SCENE, **data})
+    assert message in str(e.value)
+
+
+def test_missing_scene_and_spec_are_one_line_errors(tmp_path):
+    with pytest.raises(SpecError, match="no such scene script"):
+        load_spec({"scene": "scenes/nothere.py", "duration": 1.0})
+    spec = tmp_path / "s.toml"
+    spec.write_text('scene = "scenes/nothere.py"\nduration = 1.0\n')
+    proc = subprocess.run([sys.executable, "-m", "tcloth", "sweep", str(spec), "--out",
+                           str(tmp_path / "o")], capture_output=True, text=True)
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines() == [
+        f"tcloth: error: scene 'scenes/nothere.py': no such scene script (looked in "
+        f"{os.getcwd()!r} and {str(tmp_path)!r})"]
+    assert not (tmp_path / "o").exists()
+
+
+SMALL = """duration = 0.05
+energy_limit = 0.05
+[vary]
+integrator = ["symplectic_euler", "forward_euler"]
+dt = [2e-3, 5e-3]
+k = [400.0, 4000.0]
+[reference]
+integrator = "rk4"
+dt = 2.5e-4
+"""
+
+
+def test_pool_gives_the_serial_table(tmp_path):
+    """Two worker processes on a Dask LocalCluster against one process: the same verdicts,
+    first bad steps and errors (to float32 rounding); a case that is unstable is unstable
+    in both (and the table holds at least one of each). Forward Euler's growth stays finite
+    within 0.05 s at some settings: ``energy_limit`` calls it unstable."""
+    rc1, out1, serial = sweep(SMALL, tmp_path, tmp_path / "serial", "--workers", "1")
+    rc2, out2, pool = sweep(SMALL, tmp_path, tmp_path / "pool", "--workers", "2")
+    assert rc1 == 0 and rc2 == 0, out1 + out2
+    assert len(serial) == len(pool) == 8
+    assert {r["stable"] for r in serial} == {"True", "False"}
+    for a, b in zip(serial, pool):
+        assert (a["id"], a["stable"], a["first_bad_step"]) == (b["id"], b["stable"],
+                                                               b["first_bad_step"])
+        assert a["status"] == b["status"]
+        if a["stable"] == "True":
+            assert float(a["error"]) == pytest.approx(float(b["error"]), rel=1e-4, abs=1e-7)
+            assert 0 < float(a["error"]) < 0.01
+    assert (tmp_path / "pool" / "stability_map.png").exists()
+    assert (tmp_path / "pool" / "work_precision.png").exists()
+
+
+def _finished(out):
+    folder = out / "cases"
+    return {p.name: p.stat().st_mtime_ns for p in folder.iterdir()} if folder.exists() else {}
+
+
+def test_killed_worker_loses_nothing_and_rerun_completes(tmp_path):
+    """A case whose build ends its worker process (os._exit) is recorded as such, the
+    other cases finish and stay on disk untouched; the rerun runs only what is missing."""
+    marker = tmp_path / "crashed"
+    spec = (f'duration = 0.02\n[build]\nmarker = "{marker}"\n[vary]\ncrash = [false, true]\n'
+            f'dt = [2e-3, 1e-3]\n')
+    rc, out, rows = sweep(spec, tmp_path, tmp_path / "o", "--workers", "2")
+    assert rc == 4, out
+    assert marker.exists()
+    status = {(r["crash"], r["dt"]): r["status"] for r in rows}
+    assert status[("False", "0.002")] == status[("False", "0.001")] == "ok"
+    assert status[("True", "0.002")] == "worker died while running it"
+    assert status[("True", "0.001")].startswith("not run")
+    before = _finished(tmp_path / "o")
+    assert len(before) == 2
+    rc, out, rows = sweep(spec, tmp_path, tmp_path / "o", "--workers", "2")
+    assert rc == 0, out
+    assert "4 cases (2 run now, 2 from earlier runs)" in out
+    after = _finished(tmp_path / "o")
+    assert len(after) == 4 and all(after[name] == t for name, t in before.items())
+    assert all(r["status"] == "ok" for r in rows)
+
+
+def test_interrupted_sweep_resumes_computing_each_case_once(tmp_path):
+    """SIGINT in the middle of a serial sweep: exit 4 with the resume hint, the finished
+    cases kept; the rerun computes only the others, and rerunning again computes none."""
+    marker = tmp_path / "interrupted"
+    spec = (f'duration = 0.02\n[build]\nmarker = "{marker}"\n[vary]\n'
+            f'interrupt = [false, true]\ndt = [2e-3, 1e-3]\n')
+    rc, out, rows = sweep(spec, tmp_path, tmp_path / "o", "--workers", "1")
+    assert rc == 4 and "interrupted" in out and "run the same command again" in out, out
+    before = _finished(tmp_path / "o")
+    assert len(before) == 2
+    rc, out, rows = sweep(spec, tmp_path, tmp_path / "o", "--workers", "1")
+    assert rc == 0 and "4 cases (2 run now, 2 from earlier runs)" in out, out
+    after = _finished(tmp_path / "o")
+    assert all(after[name] == t for name, t in before.items())
+    rc, out, again = sweep(spec, tmp_path, tmp_path / "o", "--workers", "1")
+    assert rc == 0 and "4 cases (0 run now, 4 from earlier runs)" in out
+    assert _finished(tmp_path / "o") == after
+    for a, b in zip(rows, again):
+        assert np.isclose(float(a["error"] or "nan"), float(b["error"] or "nan"),
+                          equal_nan=True) and a["stable"] == b["stable"]
