@@ -132,9 +132,11 @@ class Runner:
             self.backend = f"Dask cluster at {scheduler}"
         info = self.client.scheduler_info()["workers"]
         if not info:
+            self.close()
             raise SweepError(f"the Dask cluster at {scheduler!r} has no workers")
         for address, w in info.items():
             if w["nthreads"] != 1:
+                self.close()
                 raise SweepError(f"Dask worker {address} runs {w['nthreads']} threads; tcloth "
                                  "sweep needs one per worker process (dask worker ADDRESS "
                                  "--nthreads 1 --nworkers K)")
