@@ -92,7 +92,7 @@ energy_limit = 0.05
 [vary]
 integrator = ["symplectic_euler", "forward_euler"]
 dt = [2e-3, 5e-3]
-k = [400.0, 4000.0]
+k = [400.0]
 [reference]
 integrator = "rk4"
 dt = 2.5e-4
@@ -107,7 +107,7 @@ def test_pool_gives_the_serial_table(tmp_path):
     rc1, out1, serial = sweep(SMALL, tmp_path, tmp_path / "serial", "--workers", "1")
     rc2, out2, pool = sweep(SMALL, tmp_path, tmp_path / "pool", "--workers", "2")
     assert rc1 == 0 and rc2 == 0, out1 + out2
-    assert len(serial) == len(pool) == 8
+    assert len(serial) == len(pool) == 4
     assert {r["stable"] for r in serial} == {"True", "False"}
     for a, b in zip(serial, pool):
         assert (a["id"], a["stable"], a["first_bad_step"]) == (b["id"], b["stable"],
