@@ -63,6 +63,8 @@ BAD_SPECS = [
      "unknown key 'steps' in reference"),
     ({"duration": 1.0, "precision": "f16"}, "precision must be 'f32' or 'f64' (got 'f16')"),
     ({"duration": 1.0, "max_steps": 0}, "max_steps must be an integer >= 1 (got 0)"),
+    ({"duration": 1.0, "build": "k=3"}, "build must be a table of build parameters (got 'k=3')"),
+    ({"duration": 1.0, "arch": "tpu"}, "arch must be one of"),
 ]
 
 

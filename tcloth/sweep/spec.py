@@ -132,9 +132,9 @@ class Spec:
         for name in SETTINGS:
             if name in data:
                 self.settings[name] = _check_setting(name, name, data[name])
-        self.build = dict(data.get("build", {}))
         if not isinstance(data.get("build", {}), dict):
             raise SpecError(f"build must be a table of build parameters (got {data['build']!r})")
+        self.build = dict(data.get("build", {}))
         for name in self.build:
             self._check_parameter(f"build.{name}", name)
         self.vary = self._vary(data.get("vary", {}))
