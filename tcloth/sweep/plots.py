@@ -124,7 +124,8 @@ def stability_map(spec, rows, x_key, path):
 def work_precision(spec, rows, path):
     import matplotlib.pyplot as plt
     size = scene_size(spec)
-    fig, (ax_t, ax_dt) = plt.subplots(1, 2, figsize=(12, 4.5))
+    lines = len(_panels(rows, [k for k in spec.vary if k != "dt"]))
+    fig, (ax_t, ax_dt) = plt.subplots(1, 2, figsize=(12, 4.5 + 0.25 * ((lines + 1) // 2)))
     for title, members in _panels(rows, [k for k in spec.vary if k != "dt"]):
         pts = sorted((r["dt"], r["error"], r["ms_per_step"] * r["steps"] / 1e3)
                      for r in members if r["stable"] and _finite(r["error"])
@@ -139,10 +140,12 @@ def work_precision(spec, rows, path):
              title="error against run time")
     ax_dt.set(xscale="log", yscale="log", xlabel="dt (s)", ylabel="RMS error (m)",
               title="error against dt (missing points: unstable)")
-    ax_t.legend(fontsize=7)
+    handles, labels = ax_t.get_legend_handles_labels()
+    legend_rows = (len(labels) + 1) // 2
     fig.suptitle(f"{os.path.basename(spec.scene)}: work-precision against "
                  f"{spec.reference['integrator']} at dt = {spec.reference['dt']:g}")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.045 * legend_rows + 0.02, 1, 1))
+    fig.legend(handles, labels, loc="lower center", ncol=2, fontsize=8, frameon=False)
     fig.savefig(path, dpi=90)
     plt.close(fig)
     return path
