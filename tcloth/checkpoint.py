@@ -156,13 +156,25 @@ def save(sim, path):
     folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder):
         raise SceneError(f"cannot save checkpoint: folder {folder!r} does not exist")
+    atomic_write(path, lambda f: np.savez(f, **payload))
+
+
+def atomic_write(path, write, mode="wb"):
+    """``write(f)`` into ``PATH.partial``, flushed to disk, then renamed to ``path``: a
+    reader sees the old file or the whole new one, never part of it (the partial file is
+    removed if ``write`` fails)."""
     path = os.fspath(path)
     tmp = path + ".partial"
-    with open(tmp, "wb") as f:
-        np.savez(f, **payload)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
+    try:
+        with open(tmp, mode) as f:
+            write(f)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
 
 
 def read(path):

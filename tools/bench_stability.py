@@ -51,6 +51,15 @@ def spec(args, vary, **extra):
                       "vary": vary, **extra})
 
 
+def stability_map_spec(args):
+    """The map: every integrator x 5 stiffnesses x 11 dt from 1e-4 to 1/30 s, k_d =
+    --kd."""
+    return spec(args, {"integrator": INTEGRATORS,
+                       "k": [float(k) for k in np.logspace(1, 5, 5)],
+                       "dt": [float(dt) for dt in np.logspace(-4, np.log10(1 / 30), 11)]},
+                build={"kd": args.kd})
+
+
 def points(runner, args, name, settings):
     """Stable or not for each dict of settings (integrator, k, kd, dt), one sweep."""
     rows = runner.run(spec(args, {"point": [dict(s, label=str(i))
@@ -89,11 +98,9 @@ def main(argv=None):
     ap.add_argument("--work", default=os.path.join("out", "bench_stability"),
                     help="the sweeps' folder (finished runs are reused)")
     args = ap.parse_args(argv)
-    ks = [float(k) for k in np.logspace(1, 5, 5)]
-    dts = [float(dt) for dt in np.logspace(-4, np.log10(1 / 30), 11)]
+    map_spec = stability_map_spec(args)
+    ks = map_spec.data["vary"]["k"]
     with Runner(workers=args.workers) as runner:
-        map_spec = spec(args, {"integrator": INTEGRATORS, "k": ks, "dt": dts},
-                        build={"kd": args.kd})
         map_rows = runner.run(map_spec, os.path.join(args.work, "map"))
         rows = [{"integrator": r["integrator"], "k_s": float(r["k"]), "k_d": args.kd,
                  "dt": r["dt"], "stable": int(bool(r["stable"]))} for r in map_rows]

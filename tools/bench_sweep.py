@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 
-from bench_stability import INTEGRATORS, spec
+from bench_stability import stability_map_spec
 from tcloth.sweep import run_sweep
 
 
@@ -37,11 +37,9 @@ def main(argv=None):
     ap.add_argument("--repeats", type=int, default=1)
     ap.add_argument("--seconds", type=float, default=1.0)
     ap.add_argument("--max-steps", type=int, default=3000)
+    ap.add_argument("--kd", type=float, default=0.0)
     args = ap.parse_args(argv)
-    map_spec = spec(args, {"integrator": INTEGRATORS,
-                           "k": [float(k) for k in np.logspace(1, 5, 5)],
-                           "dt": [float(dt) for dt in np.logspace(-4, np.log10(1 / 30), 11)]},
-                    build={"kd": 0.0})
+    map_spec = stability_map_spec(args)
     serial, pool = [], []
     for _ in range(args.repeats):
         serial.append(timed(map_spec, 1))

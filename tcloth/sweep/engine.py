@@ -11,15 +11,15 @@ import datetime
 import json
 import math
 import os
-import tempfile
 import uuid
 
 import numpy as np
 
+from ..checkpoint import atomic_write
 from ..errors import SceneError
 from ..video import Progress
 from . import worker
-from .spec import Spec, load_spec
+from .spec import Spec, count, load_spec
 
 COLUMNS = ("stable", "first_bad_step", "error", "ms_per_step", "energy_drift", "max_strain",
            "steps", "t_end", "status", "reused", "id")
@@ -34,16 +34,8 @@ class SweepError(SceneError):
 
 
 def _atomic_write(path, write, mode="w"):
-    folder = os.path.dirname(path)
-    os.makedirs(folder, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=folder, prefix=".tmp-")
-    try:
-        with os.fdopen(fd, mode) as f:
-            write(f)
-        os.replace(tmp, path)
-    except BaseException:
-        os.unlink(tmp)
-        raise
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    atomic_write(path, write, mode)
 
 
 class Store:
@@ -97,12 +89,9 @@ class Runner:
     ``close()``."""
 
     def __init__(self, workers=None, scheduler=None, threads=None, progress=True):
-        if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int)
-                                    or workers < 1):
-            raise SweepError(f"workers must be an integer >= 1 (got {workers!r})")
-        if threads is not None and (isinstance(threads, bool) or not isinstance(threads, int)
-                                    or threads < 1):
-            raise SweepError(f"threads must be an integer >= 1 (got {threads!r})")
+        for key, value in (("workers", workers), ("threads", threads)):
+            if value is not None:
+                count(key, value, SweepError)
         self.progress = progress
         self.client = self.cluster = None
         if scheduler is None and (workers or _cores()) == 1:
@@ -256,7 +245,7 @@ class Runner:
                 reference_done(ref_id, times, result)
             else:
                 finish(what[0], fut.result() if fut.status == "finished"
-                       else _failed_record(_failure(fut)))
+                       else worker.record_of(_failure(fut)))
 
 
 def _failure(fut):
@@ -272,12 +261,6 @@ def _failure(fut):
     return f"not run: {type(exc).__name__}: {exc}"
 
 
-def _failed_record(status):
-    return {"stable": False, "first_bad_step": None, "error": math.nan,
-            "ms_per_step": math.nan, "energy_drift": math.nan, "max_strain": math.nan,
-            "status": status}
-
-
 def _by_group(cases):
     """The cases with each group's (one simulator's) together, groups in the order of
     their first case, cases in spec order."""
@@ -291,7 +274,7 @@ def _row(case, record, reused):
     row = {k: (json.dumps(v) if isinstance(v, (list, dict)) else v)
            for k, v in case["values"].items()}
     if record is None:
-        record = _failed_record("not run")
+        record = worker.record_of("not run")
     row.update({k: record.get(k) for k in COLUMNS[:6]})
     row.update(steps=case["steps"], t_end=case["t_end"], status=record["status"],
                reused=reused, id=case["id"])

@@ -124,9 +124,9 @@ def stability_map(spec, rows, x_key, path):
 def work_precision(spec, rows, path):
     import matplotlib.pyplot as plt
     size = scene_size(spec)
-    lines = len(_panels(rows, [k for k in spec.vary if k != "dt"]))
-    fig, (ax_t, ax_dt) = plt.subplots(1, 2, figsize=(12, 4.5 + 0.25 * ((lines + 1) // 2)))
-    for title, members in _panels(rows, [k for k in spec.vary if k != "dt"]):
+    panels = _panels(rows, [k for k in spec.vary if k != "dt"])
+    fig, (ax_t, ax_dt) = plt.subplots(1, 2, figsize=(12, 4.5 + 0.25 * ((len(panels) + 1) // 2)))
+    for title, members in panels:
         pts = sorted((r["dt"], r["error"], r["ms_per_step"] * r["steps"] / 1e3)
                      for r in members if r["stable"] and _finite(r["error"])
                      and r["error"] > 0)
@@ -156,4 +156,3 @@ def scene_size(spec):
     module, _ = load_script(spec.scene)
     x = module.build(**spec.cases()[0]["build"]).positions
     return float(np.linalg.norm(x.max(axis=0) - x.min(axis=0)))
-

@@ -70,6 +70,13 @@ def _number(key, value, positive=True):
     return float(value)
 
 
+def count(key, value, error=SpecError):
+    """``value`` if it is an integer >= 1, else ``error`` naming ``key``."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        raise error(f"{key} must be an integer >= 1 (got {value!r})")
+    return value
+
+
 def _check_setting(key, name, value):
     """A simulator setting's value in canonical form, or SpecError naming ``key``."""
     if name == "integrator":
@@ -119,13 +126,9 @@ class Spec:
         self.energy_limit = (None if data.get("energy_limit") is None
                              else _number("energy_limit", data["energy_limit"], False))
         self.max_steps = data.get("max_steps")
-        if self.max_steps is not None and (isinstance(self.max_steps, bool) or not
-                                           isinstance(self.max_steps, int) or self.max_steps < 1):
-            raise SpecError(f"max_steps must be an integer >= 1 (got {self.max_steps!r})")
-        self.samples = data.get("samples", 20)
-        if isinstance(self.samples, bool) or not isinstance(self.samples, int) \
-                or self.samples < 1:
-            raise SpecError(f"samples must be an integer >= 1 (got {self.samples!r})")
+        if self.max_steps is not None:
+            count("max_steps", self.max_steps)
+        self.samples = count("samples", data.get("samples", 20))
         self._parameters = self._build_parameters(module)
         self.settings = {"integrator": config["integrator"], "dt": config["dt"],
                          "precision": "f32", "options": dict(config["options"])}

@@ -75,14 +75,19 @@ def run_reference(key, scene_path, arch, build, settings, times):
         return {"error": f"reference failed: {type(e).__name__}: {e}"}
 
 
+def record_of(status):
+    """A case's record before anything is known of it: not stable, no numbers."""
+    return {"stable": False, "first_bad_step": None, "error": math.nan,
+            "ms_per_step": math.nan, "energy_drift": math.nan, "max_strain": math.nan,
+            "status": status}
+
+
 def run_case(case, reference=None, after=None):
     """One case's record: stable, first_bad_step, error (m), ms_per_step, energy_drift (J),
     max_strain, status. ``reference`` is run_reference's result. ``after`` is not read:
     on Dask it is the previous case of the group, a dependency that runs the group in
     order on the worker that holds its simulator."""
-    record = {"stable": False, "first_bad_step": None, "error": math.nan,
-              "ms_per_step": math.nan, "energy_drift": math.nan, "max_strain": math.nan,
-              "status": "ok"}
+    record = record_of("ok")
     try:
         sim = _simulator(case["scene"], case["arch"], case["build"], case["settings"],
                          case["group"])
