@@ -28,6 +28,10 @@ def _plain(value):
     return value.tolist() if isinstance(value, np.ndarray) else value
 
 
+def _plain_dict(d):
+    return None if d is None else {k: _plain(v) for k, v in d.items()}
+
+
 def scene_to_arrays(scene):
     """(JSON-able description, dict of arrays) of a Scene."""
     if scene.wind is not None and scene.wind["callable"] is not None:
@@ -57,7 +61,7 @@ def scene_to_arrays(scene):
         arrays[f"rope{k}_springs"] = r.springs
     desc["ropes"] = len(scene.ropes)
     for c in scene.colliders:
-        desc["colliders"].append({key: _plain(val) for key, val in c.items()})
+        desc["colliders"].append(_plain_dict(c))
     if scene.wind is not None:
         desc["wind"] = {k: _plain(v) for k, v in scene.wind.items() if k != "callable"}
     if scene.attraction is not None:
@@ -148,7 +152,9 @@ def save(sim, path):
     meta = {"format": FORMAT, "version": VERSION, "scene": desc,
             "integrator": sim.integrator_name, "dt": sim.dt, "options": sim.integrator.options,
             "settings": sim.settings, "precision": sim.precision,
-            "num_steps": sim.num_steps, "forces_valid": sim.integrator.holds_forces(sim.state)}
+            "num_steps": sim.num_steps, "time_base": sim._time_base,
+            "step_base": sim._step_base, "grabbed": _plain_dict(sim.grabbed),
+            "forces_valid": sim.integrator.holds_forces(sim.state)}
     state = sim.state
     payload = {f"scene_{k}": v for k, v in arrays.items()}
     payload.update(meta=np.array(json.dumps(meta)), state_x=state.x.to_numpy(),

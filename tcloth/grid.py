@@ -64,6 +64,11 @@ class GridTable:
         if grids:
             self.ints.from_numpy(np.array([(g.offset, g.nx, g.ny) for g in grids],
                                           dtype=np.int32))
+        self.upload(grids)
+
+    def upload(self, grids):
+        """Write the grids' spacings and spring parameters into ``reals``."""
+        if grids:
             self.reals.from_numpy(np.array(
                 [[g.dx, g.dy] + [0.0 if p is None else p[c] for c in (0, 1)
                                  for p in (g.structural, g.shear, g.flexion)]

@@ -6,8 +6,11 @@ ordered so that the springs the force kernels walk one by one come first
 are only read by diagnostics and the implicit solvers. Cloth grids are described by
 ``grid.GridBlock`` records, colliders by a ``ColliderTable``.
 
-Nothing in a Model changes after it is built: scratch buffers belong to the terms and
-integrators that use them.
+A Model's layout never changes after it is built: scratch buffers belong to the terms and
+integrators that use them. Its values may: ``refresh`` uploads the scene's current
+gravity, drag, spring parameters, wind and colliders into the same fields (nothing is
+recompiled), and the ``grab`` spring (when built) is moved at run time. These are what
+``Simulator``'s live setters change.
 """
 import numpy as np
 import taichi as ti
@@ -16,6 +19,8 @@ from . import runtime
 from .errors import SceneError
 from .grid import GridBlock, GridTable
 from .shapes import ColliderTable
+from .terms import wind as wind_term
+from .terms.grab import GrabSpring
 from .topology import SelfCollisionTable
 
 
@@ -53,14 +58,22 @@ class Model:
             numbers as fields (``grid.GridTable``).
         wind: the scene's wind dict or None (None too without cloth triangles);
             triangles: shape (triangle_count,) of 3 x i32 particle ids when set.
+        wind_params: shape (11,): (velocity (3), gust amplitude (3), frequency, phase,
+            drag, lift, tangential) when wind is set.
         attraction: (G, softening) or None.
         strain_limit: dict or None; limit_index: shape (limit_count,), the model rows
             of the limited springs.
         colliders: ``ColliderTable``.
         self_collision: ``topology.SelfCollisionTable`` or None.
+        grab: ``terms.grab.GrabSpring`` (the mouse spring of the viewer) or None.
+
+    Args:
+        scene: the Scene. grid_stencil: see ``Simulator``.
+        colliders_off: scene indices of colliders switched off (stiffness 0).
+        grab: build the grab spring.
     """
 
-    def __init__(self, scene, grid_stencil=True):
+    def __init__(self, scene, grid_stencil=True, colliders_off=(), grab=False):
         self.generation = runtime.ensure_init()
         self.scene = scene
         self.particle_count = n = scene.num_particles
@@ -70,7 +83,6 @@ class Model:
         real = runtime.real()
         # kernel parameters live in fields: vector kernel arguments cost Python time a launch
         self.params = ti.field(real, shape=4)
-        self.params.from_numpy(np.array([*scene.gravity, scene.air_drag], dtype=npr))
 
         self.mass = ti.field(real, shape=n)
         self.inv_mass = ti.field(real, shape=n)
@@ -85,11 +97,9 @@ class Model:
             for cloth in (c for c in scene.cloths if c.is_grid):
                 for sids in cloth.springs.values():
                     in_grid[sids] = True
-                p = cloth.params
-                self.grids.append(GridBlock(cloth.offset, *cloth.resolution, *cloth.spacing,
-                                            p["structural"], p["shear"], p["flexion"]))
+                self.grids.append(self._grid_block(cloth))
         self.grid_table = GridTable(self.grids)
-        order = np.argsort(in_grid, kind="stable")
+        self._order = order = np.argsort(in_grid, kind="stable")
         self.spring_count = ns = scene.num_springs
         self.list_spring_count = int((~in_grid).sum())
         self.spring_pairs = ti.Vector.field(2, ti.i32, shape=max(ns, 1))
@@ -99,8 +109,6 @@ class Model:
         if ns:
             self.spring_pairs.from_numpy(springs["pairs"][order].astype(np.int32))
             self.spring_rest.from_numpy(springs["rest_length"][order].astype(npr))
-            self.spring_ks.from_numpy(springs["stiffness"][order].astype(npr))
-            self.spring_kd.from_numpy(springs["damping"][order].astype(npr))
 
         t = scene.triangles
         self.wind = scene.wind if scene.wind is not None and len(t) else None
@@ -108,6 +116,7 @@ class Model:
             self.triangle_count = len(t)
             self.triangles = ti.Vector.field(3, ti.i32, shape=len(t))
             self.triangles.from_numpy(t.astype(np.int32))
+            self.wind_params = ti.field(real, shape=11)
         self.attraction = scene.attraction
         self.strain_limit = scene.strain_limit
         if self.strain_limit is not None:
@@ -118,9 +127,37 @@ class Model:
             self.limit_index = ti.field(ti.i32, shape=max(len(idx), 1))
             if len(idx):
                 self.limit_index.from_numpy(idx)
-        self.colliders = ColliderTable(scene.colliders)
+        self.colliders = ColliderTable(scene.colliders, colliders_off)
         self.self_collision = (SelfCollisionTable(scene) if scene.self_collision is not None
                                else None)
+        self.grab = GrabSpring() if grab else None
+        self.refresh(colliders_off)
+
+    @staticmethod
+    def _grid_block(cloth):
+        p = cloth.params
+        return GridBlock(cloth.offset, *cloth.resolution, *cloth.spacing,
+                         p["structural"], p["shear"], p["flexion"])
+
+    def refresh(self, colliders_off=()):
+        """Upload the scene's current gravity and drag, spring stiffness and damping, wind
+        and colliders (those in ``colliders_off`` switched off) into the model's fields.
+        The scene's layout (particles, springs, cloths, which terms exist) must be the one
+        the model was built from."""
+        scene, npr = self.scene, runtime.numpy_real()
+        self.params.from_numpy(np.array([*scene.gravity, scene.air_drag], dtype=npr))
+        if self.spring_count:
+            springs = scene.springs
+            self.spring_ks.from_numpy(springs["stiffness"][self._order].astype(npr))
+            self.spring_kd.from_numpy(springs["damping"][self._order].astype(npr))
+        if self.grids:
+            grid_cloths = [c for c in scene.cloths if c.is_grid]
+            self.grids = [self._grid_block(c) for c in grid_cloths]
+            self.grid_table.upload(self.grids)
+        if self.wind is not None:
+            self.wind = scene.wind
+            self.wind_params.from_numpy(wind_term.pack(scene.wind, scene.wind["velocity"]))
+        self.colliders.upload(scene.colliders, colliders_off)
 
     def single_grid(self):
         """The GridBlock when the scene is one cloth grid and nothing else (no other

@@ -143,6 +143,29 @@ class Scene:
         self.num_springs += m
         return sids
 
+    def set_spring_parameters(self, kind, stiffness=None, damping=None):
+        """Set the stiffness k_s (N/m, >= 0) and/or damping k_d (N s/m, >= 0) of every spring
+        of one kind, and the cloths' family parameters with them (None: unchanged)."""
+        if kind not in KIND_CODE:
+            raise SceneError(f"kind must be one of {SPRING_KINDS} (got {kind!r})")
+        code = KIND_CODE[kind]
+        if not any((k == code).any() for k in self._kind):
+            raise SceneError(f"the scene has no {kind} springs (kind={kind!r})")
+        values = {}
+        if stiffness is not None:
+            values["stiffness"] = as_scalar("stiffness", stiffness, minimum=0.0)
+        if damping is not None:
+            values["damping"] = as_scalar("damping", damping, minimum=0.0)
+        for key, parts in (("stiffness", self._ks), ("damping", self._kd)):
+            if key in values:
+                parts[:] = [np.where(kinds == code, values[key], part)
+                            for kinds, part in zip(self._kind, parts)]
+        for cloth in self.cloths:
+            old = cloth.params.get(kind)
+            if old is not None:
+                cloth.params[kind] = (values.get("stiffness", old[0]),
+                                      values.get("damping", old[1]))
+
     # -- builders --------------------------------------------------------------------------
     def add_cloth(self, resolution=(32, 32), size=(1.0, 1.0), center=(0.0, 1.0, 0.0),
                   plane="xz", mass=0.2, structural=(1000.0, 0.05), shear=(200.0, 0.02),

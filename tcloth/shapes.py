@@ -246,29 +246,41 @@ class ColliderTable:
         count: number of colliders; kinds: (count,) shape index per row (NumPy).
     """
 
-    def __init__(self, colliders):
+    def __init__(self, colliders, off=()):
         for c in colliders:
             if c["kind"] not in SHAPE_NAMES:
                 raise ValueError(f"unknown collider kind {c['kind']!r} (known: {SHAPE_NAMES})")
-        ordered = sorted(colliders, key=lambda c: SHAPE_NAMES.index(c["kind"]))
-        self.count = len(ordered)
-        self.kinds = np.array([SHAPE_NAMES.index(c["kind"]) for c in ordered], dtype=np.int32)
+        # rows sorted by shape; rows[k] is the scene index of row k
+        self.rows = sorted(range(len(colliders)),
+                           key=lambda i: SHAPE_NAMES.index(colliders[i]["kind"]))
+        self.count = len(self.rows)
+        self.kinds = np.array([SHAPE_NAMES.index(colliders[i]["kind"]) for i in self.rows],
+                              dtype=np.int32)
         self.groups = tuple(Group(s, int(np.searchsorted(self.kinds, s)),
                                   int((self.kinds == s).sum()))
                             for s in range(len(SHAPES)) if (self.kinds == s).any())
         self.data = collider_struct().field(shape=max(self.count, 1))
-        if self.count:
-            npr = runtime.numpy_real()
+        self.upload(colliders, off)
 
-            def column(fn):
-                return np.array([fn(c) for c in ordered], dtype=npr)
-            self.data.from_numpy({
-                "center": column(lambda c: c["center"]),
-                "velocity": column(lambda c: c["velocity"]),
-                "extent": column(lambda c: SHAPES[SHAPE_NAMES.index(c["kind"])].extent(c)),
-                "rotation": column(lambda c: c.get("rotation", np.eye(3))),
-                **{key: column(lambda c, k=key: c[k]) for key in
-                   ("thickness", "stiffness", "damping", "friction", "stick_velocity")}})
+    def upload(self, colliders, off=()):
+        """Write the colliders' current values into ``data``; the colliders whose scene
+        indices are in ``off`` get stiffness 0, which switches them off (no force, energy,
+        friction or projection; a scene's collider always has stiffness > 0)."""
+        if not self.count:
+            return
+        npr = runtime.numpy_real()
+        ordered = [colliders[i] for i in self.rows]
+
+        def column(fn):
+            return np.array([fn(c) for c in ordered], dtype=npr)
+        values = {"center": column(lambda c: c["center"]),
+                  "velocity": column(lambda c: c["velocity"]),
+                  "extent": column(lambda c: SHAPES[SHAPE_NAMES.index(c["kind"])].extent(c)),
+                  "rotation": column(lambda c: c.get("rotation", np.eye(3))),
+                  **{key: column(lambda c, k=key: c[k]) for key in
+                     ("thickness", "stiffness", "damping", "friction", "stick_velocity")}}
+        values["stiffness"][np.isin(self.rows, list(off))] = 0.0
+        self.data.from_numpy(values)
 
     @ti.func
     def for_each_contact(self, x, p, t, body: ti.template(), zero, ctx):

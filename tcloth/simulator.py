@@ -9,8 +9,8 @@ from .errors import InstabilityError, SceneError
 from .integrators import INTEGRATORS
 from .model import Model
 from .runtime import serial
-from .scene import Scene
-from .validate import as_points, as_scalar
+from .scene import KIND_CODE, Scene
+from .validate import as_int, as_points, as_scalar, as_vec3
 
 _HINTS = {
     "forward_euler": "forward Euler gains energy at every dt on undamped springs: use "
@@ -36,6 +36,23 @@ def _first_bad_particle(x: ti.template(), v: ti.template(), x_bound: float,
     return -1 if bad == 2147483647 else bad
 
 
+def _collider_index(scene, index):
+    n = len(scene.colliders)
+    i = as_int("collider index", index, 0)
+    if i >= n:
+        raise SceneError(f"collider index must be in [0, {n}) (got {index!r})")
+    return i
+
+
+def _default_grab_stiffness(scene):
+    springs = scene.springs
+    if not scene.num_springs:
+        return 100.0
+    structural = springs["kind"] == KIND_CODE["structural"]
+    ks = springs["stiffness"][structural] if structural.any() else springs["stiffness"]
+    return float(ks.mean())
+
+
 class Simulator:
     """Advance a scene in time.
 
@@ -48,11 +65,24 @@ class Simulator:
         position_bound, velocity_bound: a step that leaves |x_k| <= position_bound (m,
             default 1e6) or |v_k| <= velocity_bound (m/s, default 1e8) in any coordinate
             raises InstabilityError, as does any non-finite value.
+        strain_limiting: apply the scene's strain limit (default True; see
+            ``set_strain_limiting``).
+        colliders_off: indices into ``scene.colliders`` of colliders switched off
+            (see ``set_collider_enabled``).
+        grab: build the grab spring (``grab``/``release``: the viewer's mouse drag);
+            without it nothing of it is compiled or launched.
         **options: the integrator's own options.
+
+    Live changes (the viewer's controls) keep the state and recompile nothing, except a
+    new integrator: ``set_integrator``, ``set_dt``, ``set_gravity``, ``set_air_drag``,
+    ``set_springs``, ``set_wind``, ``set_collider_enabled``, ``set_strain_limiting``,
+    ``grab``/``release``. Scene values they change are changed in ``scene`` too, and the
+    switches are settings, so a checkpoint saved afterwards continues the changed run.
     """
 
     def __init__(self, scene, integrator="symplectic_euler", dt=1e-3, grid_stencil=True,
-                 position_bound=1e6, velocity_bound=1e8, **options):
+                 position_bound=1e6, velocity_bound=1e8, strain_limiting=True,
+                 colliders_off=(), grab=False, **options):
         if not isinstance(scene, Scene):
             raise SceneError(f"scene must be a tcloth.Scene (got {type(scene).__name__})")
         if integrator not in INTEGRATORS:
@@ -62,10 +92,14 @@ class Simulator:
         self.position_bound = as_scalar("position_bound", position_bound, 0.0, strict=True)
         self.velocity_bound = as_scalar("velocity_bound", velocity_bound, 0.0, strict=True)
         self.integrator_name = integrator
+        off = sorted({_collider_index(scene, i) for i in colliders_off})
         self.settings = {"grid_stencil": bool(grid_stencil),
                          "position_bound": self.position_bound,
-                         "velocity_bound": self.velocity_bound}
-        self.model = Model(scene, grid_stencil=bool(grid_stencil))
+                         "velocity_bound": self.velocity_bound,
+                         "strain_limiting": bool(strain_limiting), "colliders_off": off,
+                         "grab": bool(grab)}
+        self.model = Model(scene, grid_stencil=bool(grid_stencil), colliders_off=off,
+                           grab=bool(grab))
         self.precision = runtime.precision()
         self.integrator = INTEGRATORS[integrator](self.model, **options)
         self._generation = self.model.generation
@@ -75,6 +109,7 @@ class Simulator:
                          else None)
         self._diag = Diagnostics(self.model)
         self.num_steps = 0
+        self._time_base, self._step_base = 0.0, 0      # the time at step _step_base
 
     @property
     def scene(self):
@@ -87,8 +122,8 @@ class Simulator:
 
     @property
     def time(self):
-        """Simulated time, s."""
-        return self.num_steps * self.dt
+        """Simulated time, s (dt may have changed along the way: ``set_dt``)."""
+        return self._time_base + (self.num_steps - self._step_base) * self.dt
 
     def _check(self):
         runtime.check_generation(self._generation)
@@ -99,10 +134,11 @@ class Simulator:
         self._check()
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
             raise SceneError(f"n must be an integer >= 0 (got {n!r})")
+        limiter = self._limiter if self.settings["strain_limiting"] else None
         for _ in range(int(n)):
             s_in, s_out = self._states
             self.integrator.simulate(self.model, s_in, s_out, self.dt)
-            if self._limiter is not None:
+            if limiter is not None:
                 self._limiter.apply(s_out, self.dt)
                 self.integrator.invalidate()
             bad = _first_bad_particle(s_out.x, s_out.v, self.position_bound,
@@ -115,7 +151,7 @@ class Simulator:
 
     def _raise_instability(self, particle):
         step = self.num_steps + 1
-        t = step * self.dt
+        t = self.time + self.dt
         hint = _HINTS.get(self.integrator_name, _DEFAULT_HINT)
         raise InstabilityError(
             f"step {step} (t = {t:.6g} s, dt = {self.dt:.3g} s) of integrator "
@@ -164,7 +200,106 @@ class Simulator:
             self.dt = as_scalar("dt", dt, minimum=0.0, strict=True)
         self.set_state(self.scene.positions, self.scene.velocities)
         self.num_steps = 0
+        self._time_base, self._step_base = 0.0, 0
         self.state.t = 0.0
+
+    # -- live changes ------------------------------------------------------------------------
+    def set_integrator(self, integrator, **options):
+        """Continue with another integrator (and options) from the current state, on the
+        same model (its kernels compile on first use)."""
+        self._check()
+        if integrator not in INTEGRATORS:
+            raise SceneError(f"integrator must be one of {sorted(INTEGRATORS)} "
+                             f"(got {integrator!r})")
+        self.integrator = INTEGRATORS[integrator](self.model, **options)
+        self.integrator_name = integrator
+
+    def set_dt(self, dt):
+        """Continue with time step dt (s, > 0); the time so far is kept."""
+        self._check()
+        dt = as_scalar("dt", dt, minimum=0.0, strict=True)
+        self._time_base, self._step_base = self.time, self.num_steps
+        self.dt = dt
+
+    def set_gravity(self, gravity):
+        """Gravity (3,), m/s^2, from now on."""
+        self.scene.gravity = as_vec3("gravity", gravity)
+        self._parameters_changed()
+
+    def set_air_drag(self, air_drag):
+        """The viscous air drag c >= 0 (N s/m) from now on."""
+        self.scene.air_drag = as_scalar("air_drag", air_drag, minimum=0.0)
+        self._parameters_changed()
+
+    def set_springs(self, kind, stiffness=None, damping=None):
+        """Stiffness k_s (N/m) and/or damping k_d (N s/m) of every spring of one kind
+        ("structural", "shear", "flexion", "custom") from now on."""
+        self.scene.set_spring_parameters(kind, stiffness, damping)
+        self._parameters_changed()
+
+    def set_wind(self, velocity):
+        """The mean wind velocity (3,), m/s, of a scene with wind, from now on."""
+        if self.model.wind is None:
+            raise SceneError("the scene has no wind (Scene.set_wind before the Simulator is "
+                             "made: tcloth view --wind adds a still one)")
+        self.scene.wind["velocity"] = as_vec3("velocity", velocity)
+        self._parameters_changed()
+
+    def set_collider_enabled(self, index, enabled):
+        """Switch collider ``scene.colliders[index]`` on or off (off: no force, energy or
+        friction; the viewer hides it)."""
+        index = _collider_index(self.scene, index)
+        off = set(self.settings["colliders_off"]) - {index}
+        if not enabled:
+            off.add(index)
+        self.settings["colliders_off"] = sorted(off)
+        self._parameters_changed()
+
+    def set_strain_limiting(self, enabled):
+        """Apply the scene's strain limit after each step (True) or not."""
+        self.settings["strain_limiting"] = bool(enabled)
+
+    def _parameters_changed(self):
+        self._check()
+        self.model.refresh(self.settings["colliders_off"])
+        self.integrator.parameters_changed()
+
+    def grab(self, particle, target, stiffness=None, damping=None):
+        """Pull particle ``particle`` towards ``target`` (3,) m with a zero-rest-length
+        spring (``terms/grab.py``) until ``release``; the simulator must be made with
+        grab=True. stiffness (N/m) defaults to the mean structural spring stiffness (the
+        mean of all springs without structural ones, 100 N/m without springs); damping
+        (N s/m) to critical for the particle, 2 sqrt(k m)."""
+        self._check()
+        if self.model.grab is None:
+            raise SceneError("this simulator has no grab spring: make it with "
+                             "Simulator(..., grab=True)")
+        n = self.model.particle_count
+        if isinstance(particle, bool) or not isinstance(particle, (int, np.integer)) \
+                or not 0 <= particle < n:
+            raise SceneError(f"particle must be a particle id in [0, {n}) (got {particle!r})")
+        if self.scene.pinned[particle]:
+            raise SceneError(f"particle {particle} is pinned and cannot be grabbed")
+        target = as_vec3("target", target)
+        k = _default_grab_stiffness(self.scene) if stiffness is None else \
+            as_scalar("stiffness", stiffness, minimum=0.0)
+        c = 2.0 * np.sqrt(k * self.scene.masses[particle]) if damping is None else \
+            as_scalar("damping", damping, minimum=0.0)
+        self.model.grab.hold(particle, target, k, c)
+        self.integrator.invalidate()
+
+    def release(self):
+        """Let go of the grabbed particle (nothing happens when none is held)."""
+        self._check()
+        if self.model.grab is not None:
+            self.model.grab.release()
+            self.integrator.invalidate()
+
+    @property
+    def grabbed(self):
+        """None, or dict(particle, target, stiffness, damping) of the grab spring."""
+        self._check()
+        return None if self.model.grab is None else self.model.grab.held()
 
     def save(self, path):
         """Write scene, settings and state to ``path`` (.npz), atomically."""
@@ -193,7 +328,12 @@ class Simulator:
         if meta["forces_valid"]:
             sim.integrator.adopt_forces(state)
         sim.num_steps = int(meta["num_steps"])
+        sim._time_base = float(meta.get("time_base", 0.0))
+        sim._step_base = int(meta.get("step_base", 0))
         state.t = sim.time
+        if meta.get("grabbed"):
+            held = meta["grabbed"]
+            sim.grab(held["particle"], held["target"], held["stiffness"], held["damping"])
         return sim
 
     def energy(self):

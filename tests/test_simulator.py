@@ -112,10 +112,11 @@ FEATURE_KERNELS = {"springs": ("terms.springs", "eval_springs"),
                    "attraction": ("terms.attraction", "eval_attraction"),
                    "colliders": ("terms.colliders", "collide"),
                    "strain": ("constraints", "_limit_pass"),
-                   "self_contact": ("terms.self_contact", "self_contact_forces")}
+                   "self_contact": ("terms.self_contact", "self_contact_forces"),
+                   "grab": ("terms.grab", "add_grab")}
 
 
-def launches(monkeypatch, scene, steps=3):
+def launches(monkeypatch, scene, steps=3, **settings):
     """Count the launches of each feature kernel over a few steps."""
     import importlib
     counts = dict.fromkeys(FEATURE_KERNELS, 0)
@@ -127,7 +128,7 @@ def launches(monkeypatch, scene, steps=3):
             counts[_f] += 1
             return _k(*args)
         monkeypatch.setattr(mod, name, counted)
-    tcloth.Simulator(scene, dt=1e-4).step(steps)
+    tcloth.Simulator(scene, dt=1e-4, **settings).step(steps)
     return counts
 
 
@@ -135,7 +136,8 @@ def test_absent_features_launch_nothing(f64, monkeypatch):
     plain = tcloth.Scene()
     plain.add_cloth(resolution=(4, 4), flexion=None)
     assert launches(monkeypatch, plain) == {"springs": 0, "grid": 3, "wind": 0, "attraction": 0,
-                                            "colliders": 0, "strain": 0, "self_contact": 0}
+                                            "colliders": 0, "strain": 0, "self_contact": 0,
+                                            "grab": 0}
     full = tcloth.Scene()
     cloth = full.add_cloth(resolution=(4, 4))
     full.add_springs([cloth.particles[[0, 3], [0, 3]]], stiffness=1.0)
@@ -144,5 +146,5 @@ def test_absent_features_launch_nothing(f64, monkeypatch):
     full.add_sphere((0, 0, 0), 0.1)
     full.limit_strain(0.1)
     full.set_self_collision()
-    counts = launches(monkeypatch, full)
+    counts = launches(monkeypatch, full, grab=True)
     assert all(counts[f] >= 3 for f in FEATURE_KERNELS), counts

@@ -31,6 +31,11 @@ class Integrator:
         """The simulator changed a state outside ``simulate`` (strain limiting, set_state):
         forget anything cached about it."""
 
+    def parameters_changed(self):
+        """The model's values changed (``Model.refresh``): forget anything built from
+        them."""
+        self.invalidate()
+
     def holds_forces(self, state):
         """True when ``state.f`` holds forces this integrator will reuse (checkpoints)."""
         return False

@@ -94,6 +94,11 @@ class Projective(Integrator):
         self.stats = {}
         self._h = None
 
+    def parameters_changed(self):
+        """Spring parameters or drag changed: the constant matrix is rebuilt."""
+        super().parameters_changed()
+        self._h = None
+
     def simulate(self, model, state_in, state_out, dt):
         h, t1 = dt, state_in.t + dt
         if self._h != h:

@@ -6,12 +6,13 @@ scene has, for one consumer (an integrator's workspace, the diagnostics).
 from .attraction import Attraction
 from .base import Term
 from .colliders import Colliders
+from .grab import Grab
 from .gravity_drag import GravityDrag
 from .self_contact import SelfContact
 from .springs import Springs
 from .wind import Wind
 
-TERMS = (GravityDrag, Springs, Wind, Attraction, Colliders, SelfContact)
+TERMS = (GravityDrag, Springs, Wind, Attraction, Colliders, SelfContact, Grab)
 
 
 def build(model, select=None):
@@ -26,4 +27,4 @@ def find(terms, cls):
 
 
 __all__ = ["TERMS", "Term", "build", "find", "GravityDrag", "Springs", "Wind", "Attraction",
-           "Colliders", "SelfContact"]
+           "Colliders", "SelfContact", "Grab"]

@@ -210,7 +210,7 @@ class Colliders(Term):
     @ti.func
     def _project_body(self, col, c, x, p, phi, n, v):
         depth = col.thickness - phi
-        if depth > 0.0:
+        if depth > 0.0 and col.stiffness > 0.0:
             x[p] += depth * n
             v_rel = v[p] - col.velocity
             vn = v_rel.dot(n)

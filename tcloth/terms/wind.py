@@ -6,8 +6,9 @@ its particles), u = v_rel . n and v_t = v_rel - u n:
     f = A (drag u |u| n + tangential |v_t| v_t + lift |u| v_t),
 
 split equally onto its three particles (``Scene.set_wind``). The wind velocity is the
-mean plus a sinusoidal gust evaluated in the kernel, or a Python callable of t evaluated
-once per force evaluation and uploaded. No potential; backward Euler and projective take
+mean plus a sinusoidal gust evaluated in the kernel (its numbers in the model's
+``wind_params``), or a Python callable of t evaluated once per force evaluation and
+uploaded. No potential; backward Euler and projective take
 it at the start of the step.
 """
 import numpy as np
@@ -51,6 +52,13 @@ def eval_wind(
                 f_out[triangles[k][q]] += force / 3.0
 
 
+def pack(wind, velocity):
+    """The ``Model.wind_params`` values of a ``Scene.wind`` dict with this mean velocity."""
+    return np.array([*velocity, *wind["amplitude"], wind["frequency"], wind["phase"],
+                     wind["drag"], wind["lift"], wind["tangential"]],
+                    dtype=runtime.numpy_real())
+
+
 class Wind(Term):
     """The scene's wind on its cloth triangles (absent without cloth)."""
 
@@ -59,16 +67,11 @@ class Wind(Term):
         return model.wind is not None
 
     def __init__(self, model):
-        w = self.wind = model.wind
-        self.triangles = model.triangles
-        self._values = np.array([*w["velocity"], *w["amplitude"], w["frequency"], w["phase"],
-                                 w["drag"], w["lift"], w["tangential"]],
-                                dtype=runtime.numpy_real())
-        self.params = ti.field(runtime.real(), shape=len(self._values))
-        self.params.from_numpy(self._values)
+        self.model = model
+        self.triangles, self.params = model.triangles, model.wind_params
 
     def add_forces(self, x, v, t, f_out):
-        if self.wind["callable"] is not None:
-            self._values[:3] = wind_velocity(self.wind, t)
-            self.params.from_numpy(self._values)
+        wind = self.model.wind
+        if wind["callable"] is not None:
+            self.params.from_numpy(pack(wind, wind_velocity(wind, t)))
         eval_wind(self.triangles, self.params, x, v, t, f_out)
