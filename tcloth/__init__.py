@@ -16,10 +16,11 @@ from .objfile import load_obj
 from .scene import Scene
 from .simulator import Simulator
 from .video import record, write_png
+from .viewer import view
 
 __version__ = "0.1.0"
 
 __all__ = ["cli", "init", "Scene", "Cloth", "MeshCloth", "Rope", "load_obj", "Simulator", "SceneError", "InstabilityError",
            "StaleSimulatorError", "Camera", "Renderer", "render", "record", "write_png",
-           "export_mesh", "write_obj", "write_ply",
+           "export_mesh", "write_obj", "write_ply", "view",
            "__version__"]

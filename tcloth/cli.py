@@ -1,5 +1,5 @@
-"""The ``tcloth`` command line: ``tcloth render SCRIPT --out PATH``, ``tcloth list``,
-``tcloth sweep SPEC.toml --out DIR``.
+"""The ``tcloth`` command line: ``tcloth render SCRIPT --out PATH``, ``tcloth view SCRIPT``,
+``tcloth list``, ``tcloth sweep SPEC.toml --out DIR``.
 
 A scene script defines ``build(**params) -> tcloth.Scene`` and a dict ``CONFIG`` with any
 of: description, integrator, dt, steps_per_frame, frames, fps, camera, width, height,
@@ -48,6 +48,21 @@ def load_script(path):
     return module, {**DEFAULTS, **config}
 
 
+def build_scene(module, path):
+    """The Scene of a loaded script's build(), or ScriptError naming the script."""
+    from .scene import Scene
+    try:
+        scene = module.build()
+    except SceneError:
+        raise
+    except Exception as e:
+        raise ScriptError(f"scene script {path!r}: build() raised {type(e).__name__}: {e}") from e
+    if not isinstance(scene, Scene):
+        raise ScriptError(f"scene script {path!r}: build() must return a tcloth.Scene "
+                          f"(got {type(scene).__name__})")
+    return scene
+
+
 def describe(path):
     """The first line of a script's docstring, read without running it."""
     try:
@@ -88,20 +103,55 @@ def render_script(path, args):
     out = args.out or os.path.join("out", name + ".mp4")
     tcloth.video.check_writable(out)
     tcloth.init(arch=args.arch, precision=cfg["precision"])
-    try:
-        scene = module.build()
-    except SceneError:
-        raise
-    except Exception as e:
-        raise ScriptError(f"scene script {path!r}: build() raised {type(e).__name__}: {e}") from e
-    if not isinstance(scene, tcloth.Scene):
-        raise ScriptError(f"scene script {path!r}: build() must return a tcloth.Scene "
-                          f"(got {type(scene).__name__})")
+    scene = build_scene(module, path)
     sim = tcloth.Simulator(scene, cfg["integrator"], dt=cfg["dt"], **cfg["options"])
     return tcloth.record(sim, out, frames=cfg["frames"], steps_per_frame=cfg["steps_per_frame"],
                          fps=cfg["fps"], width=cfg["width"], height=cfg["height"],
                          camera=cfg["camera"], supersample=cfg["supersample"],
                          progress=not args.quiet, mesh_dir=args.meshes, **cfg["render"])
+
+
+def view_script(path, args):
+    """``tcloth view``: the scene in the live sandbox window."""
+    import tcloth
+    from .viewer import DisplayError, Viewer, check_display
+
+    module, cfg = load_script(path)
+    for key in ("integrator", "dt", "precision"):
+        if getattr(args, key) is not None:
+            cfg[key] = getattr(args, key)
+    if args.screenshot is not None:
+        tcloth.video.check_writable(args.screenshot)
+        if args.frames is None:
+            raise ScriptError("--screenshot needs --frames N (the frame to save)")
+    try:
+        check_display()
+    except DisplayError as e:
+        raise ViewerUnavailable(str(e)) from None
+    tcloth.init(arch=args.arch, precision=cfg["precision"])
+    scene = build_scene(module, path)
+    if args.wind and scene.wind is None:
+        scene.set_wind((0.0, 0.0, 0.0))
+    sim = tcloth.Simulator(scene, cfg["integrator"], dt=cfg["dt"], grab=True, **cfg["options"])
+    render = cfg["render"]
+    try:
+        viewer = Viewer(sim, substeps=args.substeps or cfg["steps_per_frame"],
+                        camera=cfg["camera"], width=args.width, height=args.height,
+                        ground=render.get("ground"), cloth_colours=render.get("cloth_colours"),
+                        title=f"tcloth: {os.path.basename(path)}")
+    except DisplayError as e:
+        raise ViewerUnavailable(str(e)) from None
+    shown = viewer.run(frames=args.frames, screenshot=args.screenshot)
+    stats = viewer.controls.stats()
+    print(f"{shown} frames of {viewer.controls.values['substeps']} substeps: "
+          f"{stats['fps']:.1f} frames/s, {stats['ms_per_substep']:.3f} ms per substep "
+          f"(medians of the last 30 frames)")
+    if args.screenshot is not None:
+        print(f"wrote {args.screenshot}")
+
+
+class ViewerUnavailable(Exception):
+    """No window can open here (exit code 2, one line)."""
 
 
 def sweep_command(args):
@@ -137,6 +187,9 @@ def _guarded(fn, verbose):
     except SweepFailed as e:
         print(f"tcloth: {e}", file=sys.stderr)
         return 4
+    except ViewerUnavailable as e:
+        print(f"tcloth: cannot open the viewer: {e}", file=sys.stderr)
+        return 2
     except (ScriptError, SceneError, InstabilityError) as e:
         if verbose:
             traceback.print_exc()
@@ -165,7 +218,26 @@ def main(argv=None):
                                                      "(default: cores / workers)")
     p_sweep.add_argument("--quiet", action="store_true", help="no progress bar")
     p_sweep.add_argument("--verbose", action="store_true", help="tracebacks on errors")
+    p_view = sub.add_parser("view", help="the live sandbox: simulate a scene in a window and "
+                                         "play with it")
+    p_view.add_argument("script", help="path of a scene script, e.g. scenes/hanging_cloth.py")
+    p_view.add_argument("--integrator", help="integrator name (switchable in the window)")
+    p_view.add_argument("--dt", type=float, help="time step, s")
+    p_view.add_argument("--substeps", type=int, help="simulator steps per frame "
+                                                     "(default: the script's steps_per_frame)")
+    p_view.add_argument("--arch", default="cpu", help="cpu | gpu | cuda | vulkan | metal | auto")
+    p_view.add_argument("--precision", choices=["f32", "f64"], help="float precision")
+    p_view.add_argument("--width", type=int, default=1280, help="window width, pixels")
+    p_view.add_argument("--height", type=int, default=800, help="window height, pixels")
+    p_view.add_argument("--wind", action="store_true",
+                        help="add a still wind to a scene without one, to turn up live")
+    p_view.add_argument("--frames", type=int, help="stop after N frames")
+    p_view.add_argument("--screenshot", help="save the window's image (PNG) at the last "
+                                             "frame; needs --frames (no screen: xvfb-run -a)")
+    p_view.add_argument("--verbose", action="store_true", help="tracebacks on errors")
     args = parser.parse_args(argv)
+    if args.command == "view":
+        return _guarded(lambda: view_script(args.script, args), args.verbose)
     if args.command == "sweep":
         return _guarded(lambda: sweep_command(args), args.verbose)
     if args.command == "list":
