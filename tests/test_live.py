@@ -228,4 +228,5 @@ def test_controls_apply_reset_and_instability(f64):
     assert sim.scene.cloths[0].params["structural"] == (300.0, 0.05)
     assert sim.settings["strain_limiting"] and sim.scene.gravity[1] == -9.81
     stats = controls.stats()
-    assert stats["integrator"] == "backward_euler" and stats["max_strain"] == pytest.approx(0.0, abs=1e-9)
+    assert stats["integrator"] == "backward_euler"
+    assert stats["max_strain"] == pytest.approx(0.0, abs=1e-9)
