@@ -27,10 +27,10 @@ from .camera import Camera
 from .drawables import cloth_palette, particle_spheres
 from .errors import InstabilityError, SceneError
 from .render import COLLIDER_COLOUR, PARTICLE_COLOUR
+from .scene import KIND_CODE, SPRING_KINDS
 
 INTEGRATORS = ("forward_euler", "symplectic_euler", "verlet", "rk4", "backward_euler",
                "projective")
-FAMILIES = ("structural", "shear", "flexion", "custom")
 BACKGROUND = (0.93, 0.94, 0.96)
 PANEL_WIDTH = 0.27          # of the window's width, at its left edge
 SIDE_OFFSET = 2e-4          # of the scene's extent: how far each cloth side is drawn off it
@@ -138,7 +138,8 @@ class Controls:
     ``values`` holds what the panel shows and edits: dt (s), substeps (per frame),
     gravity (m/s^2, downwards along -y), springs {kind: [k_s, k_d]} for the kinds the
     scene has, wind_speed (m/s) and wind_direction (degrees about y, 0 = +x) when the scene
-    has wind, colliders (one bool each), strain_limiting (when the scene has a limit).
+    has wind (not a Python-callable gust, which sets the velocity itself), colliders (one
+    bool each), strain_limiting (when the scene has a limit).
     ``apply()`` hands every changed value to the simulator's live setters.
     """
 
@@ -146,15 +147,15 @@ class Controls:
         self.sim = sim
         scene = sim.scene
         springs = scene.springs
-        self.kinds = [k for c, k in enumerate(FAMILIES) if (springs["kind"] == c).any()]
+        kinds = {k: springs["kind"] == KIND_CODE[k] for k in SPRING_KINDS}
         self.values = {"dt": sim.dt, "substeps": int(substeps),
                        "gravity": float(-scene.gravity[1]),
-                       "springs": {k: [_typical(springs[q][springs["kind"] == c])
+                       "springs": {k: [_typical(springs[q][mask])
                                        for q in ("stiffness", "damping")]
-                                   for c, k in enumerate(FAMILIES) if k in self.kinds},
+                                   for k, mask in kinds.items() if mask.any()},
                        "colliders": [i not in sim.settings["colliders_off"]
                                      for i in range(len(scene.colliders))]}
-        if sim.model.wind is not None:
+        if sim.model.wind is not None and scene.wind["callable"] is None:
             w = scene.wind["velocity"]
             self.values["wind_speed"] = float(np.hypot(w[0], w[2]))
             self.values["wind_direction"] = float(np.degrees(np.arctan2(w[2], w[0])))
