@@ -68,11 +68,14 @@ def check_vulkan():
         if ctypes.util.find_library("vulkan") is None:
             raise DisplayError("no Vulkan loader (libvulkan.so.1): apt-get install libvulkan1 "
                                "mesa-vulkan-drivers (a software driver) or your GPU's driver")
-        icds = [p for d in ("/usr/share/vulkan/icd.d", "/etc/vulkan/icd.d",
-                            "/usr/local/share/vulkan/icd.d")
-                for p in glob.glob(os.path.join(d, "*.json"))]
-        if not icds and not os.environ.get("VK_ICD_FILENAMES") \
-                and not os.environ.get("VK_DRIVER_FILES"):
+        listed = os.environ.get("VK_DRIVER_FILES") or os.environ.get("VK_ICD_FILENAMES")
+        if listed:      # the loader reads only these
+            icds = [p for p in listed.split(os.pathsep) if os.path.isfile(p)]
+        else:
+            icds = [p for d in ("/usr/share/vulkan/icd.d", "/etc/vulkan/icd.d",
+                                "/usr/local/share/vulkan/icd.d")
+                    for p in glob.glob(os.path.join(d, "*.json"))]
+        if not icds:
             raise DisplayError("no Vulkan driver: apt-get install mesa-vulkan-drivers (lavapipe, "
                                "a software driver) or your GPU's Vulkan driver")
 

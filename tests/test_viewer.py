@@ -1,5 +1,6 @@
 """The sandbox window: a screenshot under Xvfb with a software Vulkan driver against the
 off-screen renderer's image of the same state, and the one-line error without a display."""
+import ctypes.util
 import os
 import shutil
 import subprocess
@@ -67,3 +68,13 @@ def test_no_display_is_one_line_and_exit_code_2():
     assert run.returncode == 2
     lines = run.stderr.strip().splitlines()
     assert len(lines) == 1 and "no display" in lines[0] and "xvfb" in lines[0], run.stderr
+
+
+def test_missing_vulkan_driver_is_named(monkeypatch):
+    monkeypatch.delenv("VK_DRIVER_FILES", raising=False)
+    monkeypatch.setenv("VK_ICD_FILENAMES", "/nonexistent/icd.json")
+    missing = ("no Vulkan loader \\(libvulkan.so.1\\): apt-get install libvulkan1"
+               if ctypes.util.find_library("vulkan") is None else
+               "no Vulkan driver: apt-get install mesa-vulkan-drivers")
+    with pytest.raises(DisplayError, match=missing):
+        check_vulkan()
