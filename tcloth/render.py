@@ -20,7 +20,7 @@ from . import raycast, runtime
 from .camera import Camera
 from .drawables import cloth_palette, particle_spheres
 from .errors import SceneError
-from .shapes import SHAPES
+from .shapes import SHAPE_NAMES, SHAPES
 
 SKY_ID = 2147483647
 SKY_KEY = (2147483647 << 32) | SKY_ID
@@ -59,11 +59,7 @@ class Renderer:
         self.camera = Camera.from_config(camera, x0)
         lo, hi = x0.min(0), x0.max(0)
         extent = float(np.linalg.norm(hi - lo)) or 1.0
-        has_planes = any(SHAPES[s].checkered for s in model.colliders.kinds)
-        if ground is None:
-            ground = False if has_planes else float(lo[1]) - 0.5 * extent
-        self.ground = ground
-        self.checker = 10.0 ** math.floor(math.log10(extent)) / 4
+        self.ground, self.checker = ground_and_checker(scene, ground, extent)
         self.colliders = model.colliders
         self.shadows = bool(shadows)
 
@@ -399,6 +395,17 @@ class Renderer:
                 acc += self.colour[r * ss + dr, c * ss + dc]
             v = ti.sqrt(ti.math.clamp(acc / (ss * ss), 0.0, 1.0))
             self.image[r, c] = ti.cast(v * 255.0 + 0.5, ti.u8)
+
+
+def ground_and_checker(scene, ground, extent):
+    """(ground, checker): the height (y, m) of the drawn ground, or False for none, and the
+    side of its tiles (m). ground None puts it half the scene's extent below the scene,
+    unless the scene has checkered colliders (planes: drawn instead)."""
+    if ground is None:
+        has_planes = any(SHAPES[SHAPE_NAMES.index(c["kind"])].checkered
+                         for c in scene.colliders)
+        ground = False if has_planes else float(scene.positions[:, 1].min()) - 0.5 * extent
+    return ground, 10.0 ** math.floor(math.log10(extent)) / 4
 
 
 def render(sim, width=640, height=480, camera=None, supersample=2, **options):

@@ -166,6 +166,14 @@ class Scene:
                 cloth.params[kind] = (values.get("stiffness", old[0]),
                                       values.get("damping", old[1]))
 
+    def mean_stiffness(self, kind=None):
+        """The mean k_s (N/m) of the springs of one kind (None: of all springs), or None
+        when there are none."""
+        springs = self.springs
+        ks = springs["stiffness"] if kind is None else \
+            springs["stiffness"][springs["kind"] == KIND_CODE[kind]]
+        return float(ks.mean()) if len(ks) else None
+
     # -- builders --------------------------------------------------------------------------
     def add_cloth(self, resolution=(32, 32), size=(1.0, 1.0), center=(0.0, 1.0, 0.0),
                   plane="xz", mass=0.2, structural=(1000.0, 0.05), shear=(200.0, 0.02),

@@ -9,7 +9,7 @@ from .errors import InstabilityError, SceneError
 from .integrators import INTEGRATORS
 from .model import Model
 from .runtime import serial
-from .scene import KIND_CODE, Scene
+from .scene import Scene
 from .validate import as_int, as_points, as_scalar, as_vec3
 
 _HINTS = {
@@ -36,6 +36,12 @@ def _first_bad_particle(x: ti.template(), v: ti.template(), x_bound: float,
     return -1 if bad == 2147483647 else bad
 
 
+def _integrator_class(name):
+    if name not in INTEGRATORS:
+        raise SceneError(f"integrator must be one of {sorted(INTEGRATORS)} (got {name!r})")
+    return INTEGRATORS[name]
+
+
 def _collider_index(scene, index):
     n = len(scene.colliders)
     i = as_int("collider index", index, 0)
@@ -45,12 +51,10 @@ def _collider_index(scene, index):
 
 
 def _default_grab_stiffness(scene):
-    springs = scene.springs
-    if not scene.num_springs:
-        return 100.0
-    structural = springs["kind"] == KIND_CODE["structural"]
-    ks = springs["stiffness"][structural] if structural.any() else springs["stiffness"]
-    return float(ks.mean())
+    for k in (scene.mean_stiffness("structural"), scene.mean_stiffness()):
+        if k is not None:
+            return k
+    return 100.0
 
 
 class Simulator:
@@ -85,9 +89,7 @@ class Simulator:
                  colliders_off=(), grab=False, **options):
         if not isinstance(scene, Scene):
             raise SceneError(f"scene must be a tcloth.Scene (got {type(scene).__name__})")
-        if integrator not in INTEGRATORS:
-            raise SceneError(f"integrator must be one of {sorted(INTEGRATORS)} "
-                             f"(got {integrator!r})")
+        integrator_class = _integrator_class(integrator)
         self.dt = as_scalar("dt", dt, minimum=0.0, strict=True)
         self.position_bound = as_scalar("position_bound", position_bound, 0.0, strict=True)
         self.velocity_bound = as_scalar("velocity_bound", velocity_bound, 0.0, strict=True)
@@ -101,7 +103,7 @@ class Simulator:
         self.model = Model(scene, grid_stencil=bool(grid_stencil), colliders_off=off,
                            grab=bool(grab))
         self.precision = runtime.precision()
-        self.integrator = INTEGRATORS[integrator](self.model, **options)
+        self.integrator = integrator_class(self.model, **options)
         self._generation = self.model.generation
         self._states = [self.model.state(), self.model.state()]
         limit = self.model.strain_limit
@@ -139,7 +141,7 @@ class Simulator:
             s_in, s_out = self._states
             self.integrator.simulate(self.model, s_in, s_out, self.dt)
             if limiter is not None:
-                self._limiter.apply(s_out, self.dt)
+                limiter.apply(s_out, self.dt)
                 self.integrator.invalidate()
             bad = _first_bad_particle(s_out.x, s_out.v, self.position_bound,
                                       self.velocity_bound)
@@ -208,10 +210,7 @@ class Simulator:
         """Continue with another integrator (and options) from the current state, on the
         same model (its kernels compile on first use)."""
         self._check()
-        if integrator not in INTEGRATORS:
-            raise SceneError(f"integrator must be one of {sorted(INTEGRATORS)} "
-                             f"(got {integrator!r})")
-        self.integrator = INTEGRATORS[integrator](self.model, **options)
+        self.integrator = _integrator_class(integrator)(self.model, **options)
         self.integrator_name = integrator
 
     def set_dt(self, dt):

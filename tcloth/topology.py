@@ -14,7 +14,6 @@ import taichi as ti
 
 from . import runtime
 from .errors import SceneError
-from .scene import KIND_CODE
 
 # the order of SelfCollisionTable.params
 PARAMS = ("thickness", "stiffness", "friction", "damping", "stick_velocity", "skin")
@@ -43,13 +42,12 @@ def resolve(scene):
     stiffness of its structural springs."""
     settings = dict(scene.self_collision)
     if settings["stiffness"] is None:
-        springs = scene.springs
-        structural = springs["stiffness"][springs["kind"] == KIND_CODE["structural"]]
-        if len(structural) == 0 or structural.mean() <= 0.0:
+        structural = scene.mean_stiffness("structural")
+        if structural is None or structural <= 0.0:
             raise SceneError("set_self_collision(stiffness=None) takes the mean structural "
                              "spring stiffness, and the scene has no structural springs: "
                              "give stiffness= (N/m)")
-        settings["stiffness"] = float(structural.mean())
+        settings["stiffness"] = structural
     return settings
 
 

@@ -26,11 +26,10 @@ import numpy as np
 from .camera import Camera
 from .drawables import cloth_palette, particle_spheres
 from .errors import InstabilityError, SceneError
-from .render import COLLIDER_COLOUR, PARTICLE_COLOUR
+from .integrators import INTEGRATORS
+from .render import COLLIDER_COLOUR, PARTICLE_COLOUR, ground_and_checker
 from .scene import KIND_CODE, SPRING_KINDS
 
-INTEGRATORS = ("forward_euler", "symplectic_euler", "verlet", "rk4", "backward_euler",
-               "projective")
 BACKGROUND = (0.93, 0.94, 0.96)
 PANEL_WIDTH = 0.27          # of the window's width, at its left edge
 SIDE_OFFSET = 2e-4          # of the scene's extent: how far each cloth side is drawn off it
@@ -478,12 +477,8 @@ class Viewer:
             self.scene3d.mesh(v, indices=idx, normals=normals, color=COLLIDER_COLOUR)
 
     def _build_static(self, scene, ground):
-        has_planes = any(c["kind"] == "plane" for c in scene.colliders)
-        lo = scene.positions.min(0)
-        if ground is None:
-            ground = False if has_planes else float(lo[1]) - 0.5 * self.extent
+        ground, size = ground_and_checker(scene, ground, self.extent)
         self.ground = None
-        size = 10.0 ** math.floor(math.log10(self.extent)) / 4
         half = 3 * self.extent
         if ground is not False:
             self.ground = self._mesh_fields(*tiles((self.centre[0], ground, self.centre[2]),
