@@ -4,8 +4,9 @@ Items (points) are binned by the cell that holds them; the cells are hashed into
 of ``size`` buckets (a power of two, at least twice the number of items), counted, the
 counts turned into bucket starts by a blocked prefix sum (per-block sums in parallel, a
 serial scan over the blocks, per-block scans in parallel) and the items scattered into
-``order``. ``for_each_in_box`` visits the items of every cell a box overlaps, each item
-once: a bucket shared by two cells (a hash collision) is filtered by the item's own cell.
+``order`` in increasing order per bucket. ``for_each_in_box`` visits the items in a box,
+each once: it scans the cells the box overlaps, and a bucket shared by two cells (a hash
+collision) is filtered by the item's own cell.
 
 The cost of a build is O(items + size); of a query, the cells the box covers times the
 items per cell, which the caller bounds by choosing the cell size (``set_cell``).
@@ -15,6 +16,42 @@ import taichi as ti
 from . import runtime
 
 BLOCK = 256
+
+
+def blocks_for(n):
+    """The number of blocks ``exclusive_scan`` needs for n entries."""
+    return max((n + BLOCK - 1) // BLOCK, 1)
+
+
+@ti.func
+def exclusive_scan(count: ti.template(), start: ti.template(), blocks: ti.template(),
+                   n: ti.template(), serial: ti.template(), reset: ti.template()):
+    """start[k] = count[0] + ... + count[k - 1] for k = 0..n (start has n + 1 entries,
+    blocks ``blocks_for(n)``): per-block sums, a serial scan over the blocks, per-block
+    scans; the block loops run on one thread where ``serial``. reset: count = 0 after.
+    Call at a kernel's top level (it has top-level loops)."""
+    ti.loop_config(serialize=serial)
+    for blk in range(ti.static(blocks_for(n))):
+        total = 0
+        for k in range(blk * BLOCK, ti.min((blk + 1) * BLOCK, n)):
+            total += count[k]
+        blocks[blk] = total
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        running = 0
+        for blk in range(ti.static(blocks_for(n))):
+            part = blocks[blk]
+            blocks[blk] = running
+            running += part
+        start[n] = running
+    ti.loop_config(serialize=serial)
+    for blk in range(ti.static(blocks_for(n))):
+        running = blocks[blk]
+        for k in range(blk * BLOCK, ti.min((blk + 1) * BLOCK, n)):
+            start[k] = running
+            running += count[k]
+            if ti.static(reset):
+                count[k] = 0
 
 
 @ti.data_oriented
@@ -32,7 +69,7 @@ class HashGrid:
         self.order = ti.field(ti.i32, shape=self.n)
         self.count = ti.field(ti.i32, shape=size)
         self.start = ti.field(ti.i32, shape=size + 1)
-        self.blocks = ti.field(ti.i32, shape=size // BLOCK)
+        self.blocks = ti.field(ti.i32, shape=blocks_for(size))
         self.inv_cell = ti.field(runtime.real(), shape=())
 
     @ti.func
@@ -60,41 +97,26 @@ class HashGrid:
             c = self.cell_of(self.pos[i])
             self.cell[i] = c
             ti.atomic_add(self.count[self.bucket(c)], 1)
-        ti.loop_config(serialize=serial)
-        for blk in range(self.size // BLOCK):
-            total = 0
-            for k in range(blk * BLOCK, (blk + 1) * BLOCK):
-                total += self.count[k]
-            self.blocks[blk] = total
+        exclusive_scan(self.count, self.start, self.blocks, self.size, serial, True)
+        # one thread: each bucket then lists its items in increasing order, so a query
+        # visits them in the same order whatever the threads
         ti.loop_config(serialize=True)
-        for _ in range(1):
-            running = 0
-            for blk in range(self.size // BLOCK):
-                part = self.blocks[blk]
-                self.blocks[blk] = running
-                running += part
-            self.start[self.size] = running
-        ti.loop_config(serialize=serial)
-        for blk in range(self.size // BLOCK):
-            running = self.blocks[blk]
-            for k in range(blk * BLOCK, (blk + 1) * BLOCK):
-                self.start[k] = running
-                running += self.count[k]
-                self.count[k] = 0
-        ti.loop_config(serialize=serial)
         for i in range(count):
             b = self.bucket(self.cell[i])
             self.order[self.start[b] + ti.atomic_add(self.count[b], 1)] = i
 
     @ti.func
-    def for_each_in_box(self, lo, hi, body: ti.template(), ctx):
-        """body(item, ctx) for every item whose cell overlaps the box [lo, hi]."""
+    def for_each_in_box(self, lo, hi, after, body: ti.template(), ctx):
+        """body(item, ctx) for every item above ``after`` (-1: all) whose position lies in
+        the box [lo, hi]."""
         a, b = self.cell_of(lo), self.cell_of(hi)
         for i, j, k in ti.ndrange((a[0], b[0] + 1), (a[1], b[1] + 1), (a[2], b[2] + 1)):
             c = ti.Vector([i, j, k])
             bk = self.bucket(c)
             for s in range(self.start[bk], self.start[bk + 1]):
                 item = self.order[s]
-                d = self.cell[item]
-                if d[0] == i and d[1] == j and d[2] == k:
-                    body(item, ctx)
+                if item > after:
+                    d, p = self.cell[item], self.pos[item]
+                    if d[0] == i and d[1] == j and d[2] == k and (lo <= p).all() \
+                            and (p <= hi).all():
+                        body(item, ctx)

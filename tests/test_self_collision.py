@@ -289,3 +289,27 @@ def test_checkpoint_with_self_collision_continues_the_run(tmp_path):
     sim.step(100)
     loaded.step(100)
     np.testing.assert_allclose(loaded.positions(), sim.positions(), atol=1e-4)
+
+
+def test_kept_candidate_list_misses_no_contact(f64):
+    """Between rebuilds the candidate list is reused while no two particles can have
+    moved relative to each other by more than the skin. While a cloth folds onto itself,
+    the forces from the kept list equal, every 20 steps, those from a list rebuilt at that
+    state (the skin set to ~0 for one evaluation)."""
+    sim = tcloth.Simulator(scene_module("fold").build(resolution=(12, 12)), dt=2.5e-4)
+    settings = sim.model.self_collision.settings
+    term = next(t for t in sim.integrator.forces.terms if t.name == "self_contact")
+    sim.step(2800)
+    stepping_rebuilds, contacts = 0, []
+    for _ in range(40):
+        before = term.rebuilds
+        sim.step(20)
+        stepping_rebuilds += term.rebuilds - before
+        kept = sim.forces()
+        skin, settings["skin"] = settings["skin"], 1e-12
+        fresh = sim.forces()
+        settings["skin"] = skin
+        contacts.append(sum(sim.self_contacts().values()))
+        np.testing.assert_allclose(kept, fresh, rtol=0, atol=1e-12 * np.abs(fresh).max())
+    assert max(contacts) > 10, contacts
+    assert stepping_rebuilds < 0.5 * 800, stepping_rebuilds

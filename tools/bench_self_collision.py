@@ -105,6 +105,9 @@ def main():
     ap.add_argument("--arch", default="cpu")
     ap.add_argument("--out", default="docs")
     ap.add_argument("--no-warp", action="store_true")
+    ap.add_argument("--settle", type=float, default=0.04,
+                    help="simulated seconds stepped before the timing (the resampled state "
+                         "rings at first)")
     ap.add_argument("--skin", type=float, default=None,
                     help="the broad phase's skin, m (default: the scene's)")
     args = ap.parse_args()
@@ -125,7 +128,7 @@ def main():
                 scene.self_collision["skin"] = args.skin
             sim = tcloth.Simulator(scene, dt=dt)
             sim.set_state(positions=x, velocities=v)
-            sim.step(200)
+            sim.step(max(200, int(round(args.settle / dt))))
             if mode == "on":
                 term = sim.integrator.forces.terms[-1]
                 first = term.rebuilds

@@ -26,18 +26,23 @@ smooth, slightly stronger repulsion there); the force is minus the gradient of t
 (the closest points minimise d, so their own change does not enter). A contact with d = 0
 exactly has no direction and exerts nothing.
 
-Broad phase (``hashgrid.py``): particles and edge midpoints are binned in hashed uniform
-cells of size max(longest edge, T + skin), sorted by counting sort; each triangle visits
-the particles in the cells its box (grown by T + skin) covers, each edge the edges in the
-cells its box (grown by T + skin + half the longest edge) covers, and pairs closer than
-T + skin become the candidate list. The list is rebuilt only when the bounding box of the
-particles' displacements since the last build has a diagonal longer than the skin: no
-two particles have then moved by more than the skin relative to each other, so no pair
-left out can be closer than T, and a motion the particles share (a cloth falling) costs
-no rebuild. Most evaluations only walk the candidates. A build costs O(particles + edges + table)
-plus, per triangle or edge, the cells its box covers (at most 4 and 5 per axis with this
-cell size) times the items per cell, which is bounded by how many layers of cloth lie
-within a cell of each other.
+Broad phase (``hashgrid.py``, ``Search``): particles and edge midpoints are binned in
+hashed uniform cells of size max(longest edge, T + skin), sorted by counting sort; each
+triangle visits the particles in its box grown by T + skin, each edge the edges of higher
+index whose midpoints lie in its box grown by T + skin + half the longest edge (box tests
+that every pair within T + skin passes), a shared particle is skipped before the exact
+distance and the exclusion rule, and pairs closer than T + skin become the candidate
+list. The queries run in parallel blocks that write to their own slots, laid out by a
+prefix sum, so the list's order is that of a serial search whatever the threads. The list
+is rebuilt only when twice the largest distance of a displacement since the last build
+from a centre c exceeds the skin (c: the middle of the displacements' bounding box at
+the previous check; |d_i - d_j| <= |d_i - c| + |d_j - c| for any c): no two particles
+have then moved relative to each other by more than the skin, so no pair left out can be
+closer than T, and a motion the particles share (a cloth falling) costs no rebuild. Most
+evaluations only walk the candidates. A build costs O(particles + edges + table) plus,
+per triangle or edge, the cells its box covers (at most 4 and 5 per axis with this cell
+size) times the items per cell, which is bounded by how many layers of cloth lie within
+a cell of each other.
 
 Integrators. Explicit integrators take the force. Backward Euler takes the penalty energy
 at the end positions and, like the colliders, the normal damping and friction as convex
@@ -54,7 +59,7 @@ removing approaching normal velocity and cutting tangential velocity by mu times
 import taichi as ti
 
 from .. import runtime
-from ..hashgrid import HashGrid
+from ..hashgrid import HashGrid, blocks_for, exclusive_scan
 from ..proximity import contact_weights
 from ..runtime import serial, serial_count
 from .base import Term
@@ -62,22 +67,33 @@ from .colliders import add_dissipation, contact_force
 
 POINT_TRIANGLE, EDGE_EDGE = 0, 1
 PROJECTION_PASSES = 4
+# one query of the search costs about as much as this many items of the loops that
+# runtime.SERIAL_BELOW was measured on, so its loop goes parallel from that many / this
+SEARCH_COST = 16
+QUERY_BLOCK = 64
+
+
+@ti.func
+def _gap(ids, kind, x):
+    """(alpha, g) of a contact at positions x."""
+    alpha = contact_weights(kind, x[ids[0]], x[ids[1]], x[ids[2]], x[ids[3]])
+    g = ti.Vector.zero(float, 3)
+    for k in ti.static(range(4)):
+        g += alpha[k] * x[ids[k]]
+    return alpha, g
 
 
 @ti.data_oriented
 class ContactList:
-    """Candidate contacts (ids (4,) and kind per row) of capacity ``capacity``, the broad
-    phase that fills them and backward Euler's lagged values per row."""
+    """Candidate contacts (ids (4,) and kind per row) of capacity ``capacity`` and backward
+    Euler's lagged values per row."""
 
-    def __init__(self, table, inv_mass, capacity, grids, x_ref):
+    def __init__(self, table, inv_mass, capacity):
         real = runtime.real()
         self.table, self.inv_mass = table, inv_mass
-        self.points_grid, self.edges_grid = grids
-        self.x_ref = x_ref
         self.capacity = capacity
         self.ids = ti.Vector.field(4, ti.i32, shape=capacity)
         self.kind = ti.field(ti.i32, shape=capacity)
-        self.counter = ti.field(ti.i32, shape=())
         self.lag_fn = ti.field(real, shape=capacity)
         self.lag_n = ti.Vector.field(3, real, shape=capacity)
         self.lag_alpha = ti.Vector.field(4, real, shape=capacity)
@@ -89,11 +105,7 @@ class ContactList:
     @ti.func
     def gap(self, ids, kind, x):
         """(alpha, g) of a contact at positions x."""
-        alpha = contact_weights(kind, x[ids[0]], x[ids[1]], x[ids[2]], x[ids[3]])
-        g = ti.Vector.zero(float, 3)
-        for k in ti.static(range(4)):
-            g += alpha[k] * x[ids[k]]
-        return alpha, g
+        return _gap(ids, kind, x)
 
     @ti.func
     def inverse_mass(self, ids, alpha):
@@ -103,11 +115,36 @@ class ContactList:
             w += alpha[k] * alpha[k] * self.inv_mass[ids[k]]
         return w
 
+
+@ti.data_oriented
+class Search:
+    """The broad phase: the particles' and edge midpoints' hash grids, the positions x_ref
+    of the last build, and what the queries found.
+
+    There is one query per triangle (the particles near it) and one per edge (the edges
+    of higher index near it). Blocks of QUERY_BLOCK consecutive queries run in parallel,
+    each block on one thread appending what its queries find to its own ``block_slots``
+    slots; a prefix sum over the queries' counts lays out the rows. The list's order, and
+    every sum over it, is therefore that of a serial search whatever the threads."""
+
+    def __init__(self, table, inv_mass, grids, x_ref, block_slots):
+        self.table, self.inv_mass = table, inv_mass
+        self.points_grid, self.edges_grid = grids
+        self.x_ref = x_ref
+        self.queries = table.triangle_count + table.edge_count
+        self.blocks = (self.queries + QUERY_BLOCK - 1) // QUERY_BLOCK
+        self.block_slots = block_slots
+        self.found = ti.field(ti.i32, shape=self.blocks * block_slots)
+        self.fill = ti.field(ti.i32, shape=self.blocks)
+        self.found_count = ti.field(ti.i32, shape=self.queries)
+        self.found_start = ti.field(ti.i32, shape=self.queries + 1)
+        self.scan_blocks = ti.field(ti.i32, shape=blocks_for(self.queries))
+
     @ti.func
-    def _consider(self, ids, kind, n_a):
-        """Append the contact if it is not excluded, not between pinned particles only,
-        and its gap at x_ref is within thickness + skin."""
-        alpha, g = self.gap(ids, kind, self.x_ref)
+    def _consider(self, ids, kind, n_a, query, item):
+        """Record ``item`` for the query if the contact ids is not excluded, not between
+        pinned particles only, and its gap at x_ref is within thickness + skin."""
+        alpha, g = _gap(ids, kind, self.x_ref)
         reach = self.table.params[0] + self.table.params[5]
         if g.norm() <= reach:
             free = False
@@ -115,88 +152,124 @@ class ContactList:
                 if self.inv_mass[ids[k]] > 0.0:
                     free = True
             if free and not self.table.excluded(ids, n_a):
-                row = ti.atomic_add(self.counter[None], 1)
-                if row < self.capacity:
-                    self.ids[row] = ids
-                    self.kind[row] = kind
+                blk = query // QUERY_BLOCK
+                k = self.fill[blk]
+                if k < self.block_slots:
+                    self.found[blk * self.block_slots + k] = item
+                self.fill[blk] = k + 1
+                self.found_count[query] += 1
         return 0
 
     @ti.func
-    def _near(self, a, b):
-        """A cheap bound first: two primitives within thickness + skin have centres (a
-        triangle's centroid, an edge's midpoint) within that plus the longest edge, and
-        the cell size is at least the longest edge."""
-        reach = self.table.params[0] + self.table.params[5]
-        bound = reach + 1.0 / self.points_grid.inv_cell[None]
-        return (a - b).norm_sqr() <= bound * bound
-
-    @ti.func
     def _point_triangle(self, item, t):
-        tri = self.table.triangles[t]
-        centroid = (self.x_ref[tri[0]] + self.x_ref[tri[1]] + self.x_ref[tri[2]]) / 3.0
-        if self._near(self.points_grid.pos[item], centroid):
-            self._consider(ti.Vector([self.table.points[item], tri[0], tri[1], tri[2]]),
-                           POINT_TRIANGLE, 1)
+        tri, p = self.table.triangles[t], self.table.points[item]
+        if p != tri[0] and p != tri[1] and p != tri[2]:
+            self._consider(ti.Vector([p, tri[0], tri[1], tri[2]]), POINT_TRIANGLE, 1, t, item)
 
     @ti.func
     def _edge_edge(self, item, e):
-        if item > e and self._near(self.edges_grid.pos[item], self.edges_grid.pos[e]):
-            a, b = self.table.edges[e], self.table.edges[item]
-            self._consider(ti.Vector([a[0], a[1], b[0], b[1]]), EDGE_EDGE, 2)
+        a, b = self.table.edges[e], self.table.edges[item]
+        if a[0] != b[0] and a[0] != b[1] and a[1] != b[0] and a[1] != b[1]:
+            self._consider(ti.Vector([a[0], a[1], b[0], b[1]]), EDGE_EDGE, 2,
+                           self.table.triangle_count + e, item)
+
+    @ti.func
+    def query(self, q, x, reach, longest):
+        """Run query q (a triangle, then the edges) at positions x."""
+        T = ti.static(self.table.triangle_count)
+        self.found_count[q] = 0
+        if q < T:
+            tri = self.table.triangles[q]
+            a, b, c = x[tri[0]], x[tri[1]], x[tri[2]]
+            self.points_grid.for_each_in_box(ti.min(a, b, c) - reach,
+                                             ti.max(a, b, c) + reach, -1,
+                                             self._point_triangle, q)
+        else:
+            e = q - T
+            a, b = x[self.table.edges[e][0]], x[self.table.edges[e][1]]
+            grow = reach + 0.5 * longest
+            self.edges_grid.for_each_in_box(ti.min(a, b) - grow, ti.max(a, b) + grow, e,
+                                            self._edge_edge, e)
 
 
 @ti.kernel
-def _relative_displacement(cl: ti.template(), x: ti.template()) -> ti.f64:
-    """The diagonal of the bounding box of the displacements x - x_ref: no two particles
-    have moved relative to each other by more (a shared motion does not count)."""
+def _relative_displacement(search: ti.template(), x: ti.template(),
+                           centre: ti.template()) -> ti.f64:
+    """Twice the largest distance of a displacement x - x_ref from ``centre``: no two
+    particles have moved relative to each other by more, whatever the centre, and a motion
+    they share does not count. The centre is then set to the middle of this call's
+    displacements' bounding box, the one the next call measures from."""
     lo = ti.Vector([1e30, 1e30, 1e30], ti.f64)
     hi = ti.Vector([-1e30, -1e30, -1e30], ti.f64)
-    ti.loop_config(serialize=ti.static(serial(cl.table.points)))
-    for i in range(cl.table.point_count):
-        p = cl.table.points[i]
-        d = ti.cast(x[p] - cl.x_ref[p], ti.f64)
-        for c in ti.static(range(3)):
-            ti.atomic_min(lo[c], d[c])
-            ti.atomic_max(hi[c], d[c])
-    return (hi - lo).norm()
+    farthest = ti.cast(0.0, ti.f64)
+    c = centre[None]
+    ti.loop_config(serialize=ti.static(serial(search.table.points)))
+    for i in range(search.table.point_count):
+        p = search.table.points[i]
+        d = ti.cast(x[p] - search.x_ref[p], ti.f64)
+        for k in ti.static(range(3)):
+            ti.atomic_min(lo[k], d[k])
+            ti.atomic_max(hi[k], d[k])
+        ti.atomic_max(farthest, (d - c).norm_sqr())
+    centre[None] = 0.5 * (lo + hi)
+    return 2.0 * ti.sqrt(farthest)
 
 
 @ti.kernel
-def _rebuild(cl: ti.template(), x: ti.template()) -> ti.i32:
+def _rebuild(search: ti.template(), cl: ti.template(), x: ti.template(),
+             centre: ti.template()) -> ti.types.vector(2, ti.i32):
     """Bin the particles and edge midpoints at x and list the candidate contacts; x_ref =
-    x. Returns the number of candidates (more than the capacity: rebuild larger)."""
+    x and the displacements' centre 0. Returns (the number of candidates, the most a block of queries found): more than
+    the list's capacity or the search's block_slots means rebuild larger."""
     P, E, T = ti.static(cl.table.point_count, cl.table.edge_count, cl.table.triangle_count)
+    Q, B, slots = ti.static(search.queries, search.blocks, search.block_slots)
+    centre[None] = ti.Vector.zero(ti.f64, 3)
     ti.loop_config(serialize=ti.static(serial_count(P)))
     for i in range(P):
         p = cl.table.points[i]
-        cl.x_ref[p] = x[p]
-        cl.points_grid.pos[i] = x[p]
+        search.x_ref[p] = x[p]
+        search.points_grid.pos[i] = x[p]
     longest = 0.0
     ti.loop_config(serialize=ti.static(serial_count(E)))
     for e in range(E):
         a, b = x[cl.table.edges[e][0]], x[cl.table.edges[e][1]]
-        cl.edges_grid.pos[e] = 0.5 * (a + b)
+        search.edges_grid.pos[e] = 0.5 * (a + b)
         ti.atomic_max(longest, (a - b).norm())
     reach = cl.table.params[0] + cl.table.params[5]
     cell = ti.max(longest, reach)
-    cl.points_grid.set_cell(cell)
-    cl.edges_grid.set_cell(cell)
-    cl.points_grid.build(P)
-    cl.edges_grid.build(E)
-    cl.counter[None] = 0
-    ti.loop_config(serialize=ti.static(serial_count(T)))
-    for t in range(T):
-        tri = cl.table.triangles[t]
-        a, b, c = x[tri[0]], x[tri[1]], x[tri[2]]
-        lo = ti.min(a, b, c) - reach
-        hi = ti.max(a, b, c) + reach
-        cl.points_grid.for_each_in_box(lo, hi, cl._point_triangle, t)
-    ti.loop_config(serialize=ti.static(serial_count(E)))
-    for e in range(E):
-        a, b = x[cl.table.edges[e][0]], x[cl.table.edges[e][1]]
-        grow = reach + 0.5 * longest
-        cl.edges_grid.for_each_in_box(ti.min(a, b) - grow, ti.max(a, b) + grow, cl._edge_edge, e)
-    return cl.counter[None]
+    search.points_grid.set_cell(cell)
+    search.edges_grid.set_cell(cell)
+    search.points_grid.build(P)
+    search.edges_grid.build(E)
+    ti.loop_config(serialize=ti.static(serial_count(SEARCH_COST * Q)))
+    for blk in range(B):
+        search.fill[blk] = 0
+        for q in range(blk * QUERY_BLOCK, ti.min((blk + 1) * QUERY_BLOCK, Q)):
+            search.query(q, x, reach, longest)
+    exclusive_scan(search.found_count, search.found_start, search.scan_blocks, Q,
+                   ti.static(serial_count(Q)), False)
+    most = 0
+    ti.loop_config(serialize=ti.static(serial_count(Q)))
+    for blk in range(B):
+        ti.atomic_max(most, search.fill[blk])
+        slot = blk * slots
+        for q in range(blk * QUERY_BLOCK, ti.min((blk + 1) * QUERY_BLOCK, Q)):
+            row = search.found_start[q]
+            for _ in range(search.found_count[q]):
+                if slot < (blk + 1) * slots and row < cl.capacity:
+                    item = search.found[slot]
+                    if q < T:
+                        tri = cl.table.triangles[q]
+                        cl.ids[row] = ti.Vector([cl.table.points[item], tri[0], tri[1],
+                                                 tri[2]])
+                        cl.kind[row] = POINT_TRIANGLE
+                    else:
+                        a, b = cl.table.edges[q - T], cl.table.edges[item]
+                        cl.ids[row] = ti.Vector([a[0], a[1], b[0], b[1]])
+                        cl.kind[row] = EDGE_EDGE
+                slot += 1
+                row += 1
+    return ti.Vector([search.found_start[Q], most])
 
 
 @ti.func
@@ -439,6 +512,7 @@ class SelfContact(Term):
 
     Attributes:
         table: the model's ``topology.SelfCollisionTable``.
+        search: the broad phase (``Search``).
         candidates: the current ``ContactList``; count: its rows in use.
         rebuilds: how many times the candidate list was built.
     """
@@ -454,17 +528,20 @@ class SelfContact(Term):
         table = self.table = model.self_collision
         real = runtime.real()
         self.inv_mass = model.inv_mass
-        self.x_ref = ti.Vector.field(3, real, shape=model.particle_count)
-        self.grids = (HashGrid(table.point_count), HashGrid(table.edge_count))
-        self.candidates = self._list(8 * (table.point_count + table.edge_count))
+        self._x_ref = ti.Vector.field(3, real, shape=model.particle_count)
+        self._centre = ti.Vector.field(3, ti.f64, shape=())
+        self._grids = (HashGrid(table.point_count), HashGrid(table.edge_count))
+        self.search = self._search(4 * QUERY_BLOCK)
+        self.candidates = ContactList(table, self.inv_mass,
+                                      8 * (table.point_count + table.edge_count))
         self.count = 0
         self.rebuilds = 0
         self._built = False
         self._x0 = None
         self._scratch = {}
 
-    def _list(self, capacity):
-        return ContactList(self.table, self.inv_mass, capacity, self.grids, self.x_ref)
+    def _search(self, block_slots):
+        return Search(self.table, self.inv_mass, self._grids, self._x_ref, block_slots)
 
     def _field(self, key, make):
         if key not in self._scratch:
@@ -475,13 +552,17 @@ class SelfContact(Term):
         """Rebuild the candidate list at x when two particles may have moved relative to
         each other by more than the skin since the last build (or on first use)."""
         skin = self.table.settings["skin"]
-        if self._built and _relative_displacement(self.candidates, x) <= skin:
+        if self._built and _relative_displacement(self.search, x, self._centre) <= skin:
             return
         while True:
-            count = _rebuild(self.candidates, x)
-            if count <= self.candidates.capacity:
+            count, most = (int(c) for c in _rebuild(self.search, self.candidates, x,
+                                                    self._centre))
+            if most > self.search.block_slots:
+                self.search = self._search(2 * most)
+            elif count > self.candidates.capacity:
+                self.candidates = ContactList(self.table, self.inv_mass, 2 * count)
+            else:
                 break
-            self.candidates = self._list(2 * count)
         self.count, self._built = count, True
         self.rebuilds += 1
         if self._x0 is not None:
