@@ -6,10 +6,10 @@ one run: with self-collision and without (the same scene otherwise). dt is scale
 the spacing (1.5e-4 s x 40 / n, and at most half the bound 2 m / sum k_d that the
 springs' damping sets) so that every size is stable, the contact thickness too
 (6 mm x 40 / n, about a quarter of the spacing: a thickness above sqrt(2) spacings would
-put a flat cloth's own neighbours in contact), and the resampled state settles for 200
-steps before the timing. Per size it prints the
-median ms per substep of each (over chunks of steps), their ratio, the cost per particle
-and how often the candidate list was rebuilt.
+put a flat cloth's own neighbours in contact), and the resampled state settles for
+``--settle`` seconds of simulated time (0.04 s; at least 200 steps) before the timing.
+Per size it prints the median ms per substep of each (over chunks of steps), their
+ratio, the cost per particle and how often the candidate list was rebuilt.
 
 Next to it, the particle-particle neighbour search of warp-lang's ``HashGrid`` (build the
 grid and count every particle's neighbours within the same reach, thickness + skin, in a
@@ -21,6 +21,7 @@ Lines: ``self_collision.<n>x<n>.{off,on}.ms_per_substep``, ``.ratio``,
 ``.ns_per_particle``, ``.rebuilds_per_100``, ``.warp_hashgrid_cpu.ms``; <out>/self_collision.csv.
 
 Usage: python tools/bench_self_collision.py [--sizes 64,128,256,512] [--steps 300]
+                                            [--settle 0.04] [--skin M]
                                             [--arch cpu|cuda] [--out docs]
 """
 import argparse
