@@ -4,9 +4,9 @@ Items (points) are binned by the cell that holds them; the cells are hashed into
 of ``size`` buckets (a power of two, at least twice the number of items), counted, the
 counts turned into bucket starts by a blocked prefix sum (per-block sums in parallel, a
 serial scan over the blocks, per-block scans in parallel) and the items scattered into
-``order`` in increasing order per bucket. ``for_each_in_box`` visits the items in a box,
-each once: it scans the cells the box overlaps, and a bucket shared by two cells (a hash
-collision) is filtered by the item's own cell.
+``order`` (on CPUs in increasing order per bucket). ``for_each_in_box`` visits the
+items in a box, each once: it scans the cells the box overlaps, and a bucket shared by
+two cells (a hash collision) is filtered by the item's own cell.
 
 The cost of a build is O(items + size); of a query, the cells the box covers times the
 items per cell, which the caller bounds by choosing the cell size (``set_cell``).
@@ -98,9 +98,10 @@ class HashGrid:
             self.cell[i] = c
             ti.atomic_add(self.count[self.bucket(c)], 1)
         exclusive_scan(self.count, self.start, self.blocks, self.size, serial, True)
-        # one thread: each bucket then lists its items in increasing order, so a query
-        # visits them in the same order whatever the threads
-        ti.loop_config(serialize=True)
+        # on CPUs one thread: each bucket then lists its items in increasing order, so a
+        # query visits them in the same order whatever the threads (on GPUs a serial loop
+        # would cost more than the whole search; the order within a bucket may vary)
+        ti.loop_config(serialize=ti.static(runtime.cpu()))
         for i in range(count):
             b = self.bucket(self.cell[i])
             self.order[self.start[b] + ti.atomic_add(self.count[b], 1)] = i

@@ -33,8 +33,8 @@ index whose midpoints lie in its box grown by T + skin + half the longest edge (
 that every pair within T + skin passes), a shared particle is skipped before the exact
 distance and the exclusion rule, and pairs closer than T + skin become the candidate
 list. The queries run in parallel blocks that write to their own slots, laid out by a
-prefix sum, so the list's order is that of a serial search whatever the threads. The list
-is rebuilt only when twice the largest distance of a displacement since the last build
+prefix sum, so on CPUs the list's order is that of a serial search whatever the threads.
+The list is rebuilt only when twice the largest distance of a displacement since the last build
 from a centre c exceeds the skin (c: the middle of the displacements' bounding box at
 the previous check; |d_i - d_j| <= |d_i - c| + |d_j - c| for any c): no two particles
 have then moved relative to each other by more than the skin, so no pair left out can be
@@ -124,8 +124,9 @@ class Search:
     There is one query per triangle (the particles near it) and one per edge (the edges
     of higher index near it). Blocks of QUERY_BLOCK consecutive queries run in parallel,
     each block on one thread appending what its queries find to its own ``block_slots``
-    slots; a prefix sum over the queries' counts lays out the rows. The list's order, and
-    every sum over it, is therefore that of a serial search whatever the threads."""
+    slots; a prefix sum over the queries' counts lays out the rows. On CPUs the list's
+    order, and every sum over it, is therefore that of a serial search whatever the
+    threads (on GPUs the order of a query's finds within one cell may vary)."""
 
     def __init__(self, table, inv_mass, grids, x_ref, block_slots):
         self.table, self.inv_mass = table, inv_mass
@@ -219,8 +220,9 @@ def _relative_displacement(search: ti.template(), x: ti.template(),
 def _rebuild(search: ti.template(), cl: ti.template(), x: ti.template(),
              centre: ti.template()) -> ti.types.vector(2, ti.i32):
     """Bin the particles and edge midpoints at x and list the candidate contacts; x_ref =
-    x and the displacements' centre 0. Returns (the number of candidates, the most a block of queries found): more than
-    the list's capacity or the search's block_slots means rebuild larger."""
+    x and the displacements' centre 0. Returns (the number of candidates, the most a
+    block of queries found): more than the list's capacity or the search's block_slots
+    means rebuild larger."""
     P, E, T = ti.static(cl.table.point_count, cl.table.edge_count, cl.table.triangle_count)
     Q, B, slots = ti.static(search.queries, search.blocks, search.block_slots)
     centre[None] = ti.Vector.zero(ti.f64, 3)
