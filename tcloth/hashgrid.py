@@ -18,9 +18,10 @@ from . import runtime
 BLOCK = 256
 
 
-def blocks_for(n):
-    """The number of blocks ``exclusive_scan`` needs for n entries."""
-    return max((n + BLOCK - 1) // BLOCK, 1)
+def blocks_for(n, block=BLOCK):
+    """How many blocks of ``block`` cover n entries (at least one; with the default,
+    what ``exclusive_scan`` needs)."""
+    return max((n + block - 1) // block, 1)
 
 
 @ti.func

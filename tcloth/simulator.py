@@ -42,11 +42,11 @@ def _integrator_class(name):
     return INTEGRATORS[name]
 
 
-def _collider_index(scene, index):
-    n = len(scene.colliders)
-    i = as_int("collider index", index, 0)
+def _index(name, value, n):
+    """value as an int in [0, n), or SceneError naming ``name``."""
+    i = as_int(name, value, 0)
     if i >= n:
-        raise SceneError(f"collider index must be in [0, {n}) (got {index!r})")
+        raise SceneError(f"{name} must be in [0, {n}) (got {value!r})")
     return i
 
 
@@ -94,7 +94,7 @@ class Simulator:
         self.position_bound = as_scalar("position_bound", position_bound, 0.0, strict=True)
         self.velocity_bound = as_scalar("velocity_bound", velocity_bound, 0.0, strict=True)
         self.integrator_name = integrator
-        off = sorted({_collider_index(scene, i) for i in colliders_off})
+        off = sorted({_index("collider index", i, len(scene.colliders)) for i in colliders_off})
         self.settings = {"grid_stencil": bool(grid_stencil),
                          "position_bound": self.position_bound,
                          "velocity_bound": self.velocity_bound,
@@ -247,7 +247,7 @@ class Simulator:
     def set_collider_enabled(self, index, enabled):
         """Switch collider ``scene.colliders[index]`` on or off (off: no force, energy or
         friction; the viewer hides it)."""
-        index = _collider_index(self.scene, index)
+        index = _index("collider index", index, len(self.scene.colliders))
         off = set(self.settings["colliders_off"]) - {index}
         if not enabled:
             off.add(index)
@@ -273,10 +273,7 @@ class Simulator:
         if self.model.grab is None:
             raise SceneError("this simulator has no grab spring: make it with "
                              "Simulator(..., grab=True)")
-        n = self.model.particle_count
-        if isinstance(particle, bool) or not isinstance(particle, (int, np.integer)) \
-                or not 0 <= particle < n:
-            raise SceneError(f"particle must be a particle id in [0, {n}) (got {particle!r})")
+        particle = _index("particle", particle, self.model.particle_count)
         if self.scene.pinned[particle]:
             raise SceneError(f"particle {particle} is pinned and cannot be grabbed")
         target = as_vec3("target", target)

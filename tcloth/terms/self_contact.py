@@ -133,7 +133,7 @@ class Search:
         self.points_grid, self.edges_grid = grids
         self.x_ref = x_ref
         self.queries = table.triangle_count + table.edge_count
-        self.blocks = (self.queries + QUERY_BLOCK - 1) // QUERY_BLOCK
+        self.blocks = blocks_for(self.queries, QUERY_BLOCK)
         self.block_slots = block_slots
         self.found = ti.field(ti.i32, shape=self.blocks * block_slots)
         self.fill = ti.field(ti.i32, shape=self.blocks)
@@ -534,8 +534,7 @@ class SelfContact(Term):
         self._centre = ti.Vector.field(3, ti.f64, shape=())
         self._grids = (HashGrid(table.point_count), HashGrid(table.edge_count))
         self.search = self._search(4 * QUERY_BLOCK)
-        self.candidates = ContactList(table, self.inv_mass,
-                                      8 * (table.point_count + table.edge_count))
+        self.candidates = self._list(8 * (table.point_count + table.edge_count))
         self.count = 0
         self.rebuilds = 0
         self._built = False
@@ -544,6 +543,9 @@ class SelfContact(Term):
 
     def _search(self, block_slots):
         return Search(self.table, self.inv_mass, self._grids, self._x_ref, block_slots)
+
+    def _list(self, capacity):
+        return ContactList(self.table, self.inv_mass, capacity)
 
     def _field(self, key, make):
         if key not in self._scratch:
@@ -562,7 +564,7 @@ class SelfContact(Term):
             if most > self.search.block_slots:
                 self.search = self._search(2 * most)
             elif count > self.candidates.capacity:
-                self.candidates = ContactList(self.table, self.inv_mass, 2 * count)
+                self.candidates = self._list(2 * count)
             else:
                 break
         self.count, self._built = count, True
