@@ -6,6 +6,7 @@ Corrections of one pass are computed for all springs in parallel and averaged pe
 (Jacobi); ``iterations`` passes. Velocities get the position change divided by dt, so the
 state stays consistent with the corrected motion.
 """
+import numpy as np
 import taichi as ti
 
 from . import runtime
@@ -13,48 +14,20 @@ from .runtime import serial
 
 
 @ti.kernel
-def _limit_pass(x: ti.template(), inv_mass: ti.template(), pairs: ti.template(),
-                rest: ti.template(), index: ti.template(), count: ti.i32, max_stretch: float,
-                dx: ti.template(), hits: ti.template()) -> ti.i32:
-    """One Jacobi pass; returns how many springs were too long."""
-    ti.loop_config(serialize=ti.static(serial(dx)))
-    for p in range(dx.shape[0]):
-        dx[p] = ti.Vector.zero(float, 3)
-        hits[p] = 0
-    violated = 0
-    ti.loop_config(serialize=ti.static(serial(index)))
-    for k in range(count):
-        s = index[k]
-        i, j = pairs[s][0], pairs[s][1]
-        d = x[i] - x[j]
-        length = d.norm()
-        limit = (1.0 + max_stretch) * rest[s]
-        wsum = inv_mass[i] + inv_mass[j]
-        if length > limit and wsum > 0.0:
-            corr = (length - limit) / (length * wsum) * d
-            dx[i] -= inv_mass[i] * corr
-            dx[j] += inv_mass[j] * corr
-            hits[i] += 1
-            hits[j] += 1
-            violated += 1
-    ti.loop_config(serialize=ti.static(serial(dx)))
-    for p in range(dx.shape[0]):
-        if hits[p] > 0:
-            x[p] += dx[p] / hits[p]
-    return violated
+def _limit_pass(limiter: ti.template(), x: ti.template()) -> ti.i32:
+    return limiter.limit_pass(x)
 
 
 @ti.kernel
-def _correct_velocities(x_before: ti.template(), x: ti.template(), inv_dt: float,
-                        v: ti.template()):
-    ti.loop_config(serialize=ti.static(serial(x)))
-    for p in range(x.shape[0]):
-        v[p] += (x[p] - x_before[p]) * inv_dt
+def _correct_velocities(limiter: ti.template(), state: ti.template(), inv_dt: float):
+    limiter.correct_velocities(state, inv_dt)
 
 
+@ti.data_oriented
 class StrainLimiter:
     """The model's strain limit with its scratch (corrections, hit counts, the positions
-    before the passes)."""
+    before the passes). ``apply`` runs it from Python (a launch a pass); ``limit`` is the
+    same as a ``ti.func`` for the simulator's batches of substeps."""
 
     def __init__(self, model):
         self.model = model
@@ -62,19 +35,74 @@ class StrainLimiter:
         self.dx = ti.Vector.field(3, real, shape=n)
         self.hits = ti.field(ti.i32, shape=n)
         self.x_before = ti.Vector.field(3, real, shape=n)
+        self.inv_mass, self.pairs, self.rest = model.inv_mass, model.spring_pairs, model.spring_rest
+        self.index, self.count = model.limit_index, model.limit_count
+        # the longest length over the rest length, rounded as the working precision adds
+        real_np = np.dtype(runtime.numpy_real()).type
+        self.stretch_factor = float(real_np(1.0) + real_np(model.strain_limit["max_stretch"]))
+        self.iterations = model.strain_limit["iterations"]
+
+    def batch_obstacle(self):
+        if not serial(self.index):
+            return f"strain limiting's {self.count} springs run on several threads"
+        return None
+
+    @ti.func
+    def limit_pass(self, x):
+        """One Jacobi pass; returns how many springs were too long."""
+        dx, hits, inv_mass, pairs, rest = ti.static(self.dx, self.hits, self.inv_mass,
+                                                    self.pairs, self.rest)
+        ti.loop_config(serialize=ti.static(serial(dx)))
+        for p in range(dx.shape[0]):
+            dx[p] = ti.Vector.zero(float, 3)
+            hits[p] = 0
+        violated = 0
+        ti.loop_config(serialize=ti.static(serial(self.index)))
+        for k in range(self.count):
+            s = self.index[k]
+            i, j = pairs[s][0], pairs[s][1]
+            d = x[i] - x[j]
+            length = d.norm()
+            limit = self.stretch_factor * rest[s]
+            wsum = inv_mass[i] + inv_mass[j]
+            if length > limit and wsum > 0.0:
+                corr = (length - limit) / (length * wsum) * d
+                dx[i] -= inv_mass[i] * corr
+                dx[j] += inv_mass[j] * corr
+                hits[i] += 1
+                hits[j] += 1
+                violated += 1
+        ti.loop_config(serialize=ti.static(serial(dx)))
+        for p in range(dx.shape[0]):
+            if hits[p] > 0:
+                x[p] += dx[p] / hits[p]
+        return violated
+
+    @ti.func
+    def correct_velocities(self, state, inv_dt):
+        ti.loop_config(serialize=ti.static(serial(state.x)))
+        for p in range(state.x.shape[0]):
+            state.v[p] += (state.x[p] - self.x_before[p]) * inv_dt
+
+    @ti.func
+    def limit(self, state, inv_dt):
+        """``apply`` as a ``ti.func`` (inv_dt = 1/dt, computed as ``apply`` does)."""
+        ti.loop_config(serialize=ti.static(serial(state.x)))
+        for p in range(state.x.shape[0]):
+            self.x_before[p] = state.x[p]
+        for _ in range(self.iterations):
+            if self.limit_pass(state.x) == 0:
+                break
+        self.correct_velocities(state, inv_dt)
 
     def apply(self, state, dt):
         """Apply the strain limit to ``state`` in place. Returns the number of springs
         still too long before the last pass."""
-        m = self.model
-        lim = m.strain_limit
         self.x_before.copy_from(state.x)
         violated = 0
-        for _ in range(lim["iterations"]):
-            violated = _limit_pass(state.x, m.inv_mass, m.spring_pairs, m.spring_rest,
-                                   m.limit_index, m.limit_count, lim["max_stretch"],
-                                   self.dx, self.hits)
+        for _ in range(self.iterations):
+            violated = _limit_pass(self, state.x)
             if violated == 0:
                 break
-        _correct_velocities(self.x_before, state.x, 1.0 / dt, state.v)
+        _correct_velocities(self, state, 1.0 / dt)
         return violated

@@ -28,8 +28,9 @@ def _vec_field(n):
     return ti.Vector.field(3, runtime.real(), shape=n)
 
 
+@ti.data_oriented
 class State:
-    """Per-step particle state.
+    """Per-step particle state (kernels and ``ti.func``s take a State whole).
 
     Attributes:
         x: positions, shape (particle_count,) of vec3, m.

@@ -2,13 +2,13 @@
 import numpy as np
 import taichi as ti
 
-from . import checkpoint, runtime
+from . import batch, checkpoint, runtime
 from .constraints import StrainLimiter
 from .diagnostics import Diagnostics
 from .errors import InstabilityError, SceneError
 from .integrators import INTEGRATORS
 from .model import Model
-from .runtime import serial
+from .runtime import serial_count
 from .scene import Scene
 from .validate import as_int, as_points, as_scalar, as_vec3
 
@@ -23,17 +23,7 @@ _DEFAULT_HINT = ("try a smaller dt, more spring damping (k_d) or air drag, "
 @ti.kernel
 def _first_bad_particle(x: ti.template(), v: ti.template(), x_bound: float,
                         v_bound: float) -> ti.i32:
-    """Smallest id whose position or velocity is non-finite or out of bounds, else -1."""
-    bad = 2147483647
-    ti.loop_config(serialize=ti.static(serial(x)))
-    for p in range(x.shape[0]):
-        ok = True
-        for c in ti.static(range(3)):
-            if not (abs(x[p][c]) <= x_bound and abs(v[p][c]) <= v_bound):
-                ok = False
-        if not ok:
-            ti.atomic_min(bad, p)
-    return -1 if bad == 2147483647 else bad
+    return batch.first_bad(x, v, x_bound, v_bound)
 
 
 def _integrator_class(name):
@@ -75,6 +65,9 @@ class Simulator:
             (see ``set_collider_enabled``).
         grab: build the grab spring (``grab``/``release``: the viewer's mouse drag);
             without it nothing of it is compiled or launched.
+        batch: let ``step(n)`` run its n substeps in one kernel launch where the scene
+            allows (default True; ``fusion()`` says whether it does, and why not). The
+            results are the same numbers either way.
         **options: the integrator's own options.
 
     Live changes (the viewer's controls) keep the state and recompile nothing, except a
@@ -86,7 +79,7 @@ class Simulator:
 
     def __init__(self, scene, integrator="symplectic_euler", dt=1e-3, grid_stencil=True,
                  position_bound=1e6, velocity_bound=1e8, strain_limiting=True,
-                 colliders_off=(), grab=False, **options):
+                 colliders_off=(), grab=False, batch=True, **options):
         if not isinstance(scene, Scene):
             raise SceneError(f"scene must be a tcloth.Scene (got {type(scene).__name__})")
         integrator_class = _integrator_class(integrator)
@@ -99,7 +92,7 @@ class Simulator:
                          "position_bound": self.position_bound,
                          "velocity_bound": self.velocity_bound,
                          "strain_limiting": bool(strain_limiting), "colliders_off": off,
-                         "grab": bool(grab)}
+                         "grab": bool(grab), "batch": bool(batch)}
         self.model = Model(scene, grid_stencil=bool(grid_stencil), colliders_off=off,
                            grab=bool(grab))
         self.precision = runtime.precision()
@@ -112,6 +105,7 @@ class Simulator:
         self._diag = Diagnostics(self.model)
         self.num_steps = 0
         self._time_base, self._step_base = 0.0, 0      # the time at step _step_base
+        self._batch_start = None                        # a batch's start state (batch.py)
 
     @property
     def scene(self):
@@ -132,11 +126,14 @@ class Simulator:
 
     def step(self, n=1):
         """Advance n steps of dt. Raises InstabilityError on a bad step, keeping the last
-        good state."""
+        good state. Where ``fusion()`` is None the n steps run in one kernel launch."""
         self._check()
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
             raise SceneError(f"n must be an integer >= 0 (got {n!r})")
         limiter = self._limiter if self.settings["strain_limiting"] else None
+        if n and self.fusion() is None:
+            self._step_batch(int(n), limiter)
+            return
         for _ in range(int(n)):
             s_in, s_out = self._states
             self.integrator.simulate(self.model, s_in, s_out, self.dt)
@@ -150,6 +147,51 @@ class Simulator:
             self._states.reverse()
             self.num_steps += 1
             self.state.t = self.time
+
+    def fusion(self):
+        """None where ``step(n)`` runs its n substeps in one kernel launch (``batch.py``),
+        else the reason why it launches kernels for every substep (one line)."""
+        self._check()
+        if not self.settings["batch"]:
+            return "batches are switched off (Simulator(..., batch=False))"
+        if not runtime.cpu():
+            return (f"on {runtime.arch_name()} the loops of a step run in parallel, which a "
+                    "batch's one thread would not")
+        if not hasattr(self.integrator, "advance"):
+            return (f"integrator '{self.integrator_name}' steps from Python (its solver "
+                    "decides between launches)")
+        n = self.model.particle_count
+        if not serial_count(n):
+            return f"the {n} particles' loops run on several threads"
+        why = self.integrator.forces.batch_obstacle()
+        if why is None and self._limiter is not None and self.settings["strain_limiting"]:
+            why = self._limiter.batch_obstacle()
+        return why
+
+    def _step_batch(self, n, limiter):
+        a, b = self._states
+        if self._batch_start is None:
+            self._batch_start = self.model.state()
+        start = self._batch_start
+        fresh = 0 if self.integrator.holds_forces(a) else 1
+        args = (fresh, self._time_base, self.num_steps - self._step_base, self.dt,
+                self.position_bound, self.velocity_bound)
+        done, bad = (int(c) for c in batch.run(self.integrator, limiter, a, b, start, n,
+                                               *args))
+        if bad >= 0:
+            # back to the batch's start, and again through the good steps only
+            for name in ("x", "v", "f"):
+                getattr(a, name).copy_from(getattr(start, name))
+            if done:
+                batch.run(self.integrator, limiter, a, b, start, done, *args)
+        self.num_steps += done
+        self.state.t = self.time
+        if limiter is None and bad < 0:
+            self.integrator.adopt_forces(self.state)
+        else:
+            self.integrator.invalidate()
+        if bad >= 0:
+            self._raise_instability(bad)
 
     def _raise_instability(self, particle):
         step = self.num_steps + 1

@@ -7,27 +7,8 @@ and projective take it at the start of the step.
 """
 import taichi as ti
 
+from ..runtime import serial_count
 from .base import Term
-
-
-@ti.kernel
-def eval_attraction(
-        # Model:
-        mass: ti.template(), G: float, softening: float,
-        # State in:
-        x: ti.template(),
-        # Out:
-        f_out: ti.template()):
-    """Softened inverse-square attraction, gathered per particle over all others."""
-    eps2 = softening * softening
-    for i in range(x.shape[0]):
-        acc = ti.Vector.zero(float, 3)
-        for j in range(x.shape[0]):
-            if j != i:
-                d = x[j] - x[i]
-                r2 = d.dot(d) + eps2
-                acc += mass[j] * d / (r2 * ti.sqrt(r2))
-        f_out[i] += G * mass[i] * acc
 
 
 @ti.kernel
@@ -42,6 +23,7 @@ def attraction_energy(x: ti.template(), mass: ti.template(), G: float, softening
             out[0] += ti.cast(-G * mass[i] * mass[j] / ti.sqrt(d.dot(d) + eps2), out.dtype)
 
 
+@ti.data_oriented
 class Attraction(Term):
     name = "attraction"
 
@@ -53,8 +35,27 @@ class Attraction(Term):
         self.mass = model.mass
         self.G, self.softening = model.attraction
 
-    def add_forces(self, x, v, t, f_out):
-        eval_attraction(self.mass, self.G, self.softening, x, f_out)
+    def batch_obstacle(self):
+        n = self.mass.shape[0]
+        if not serial_count(n * n):
+            return f"the attraction's {n} x {n} pairs run on several threads"
+        return None
+
+    @ti.func
+    def accumulate(self, x, v, t, f_out):
+        """Softened inverse-square attraction, gathered per particle over all others (on
+        one thread below ``serial_below`` pairs)."""
+        eps2 = self.softening * self.softening
+        mass = ti.static(self.mass)
+        ti.loop_config(serialize=ti.static(serial_count(x.shape[0] * x.shape[0])))
+        for i in range(x.shape[0]):
+            acc = ti.Vector.zero(float, 3)
+            for j in range(x.shape[0]):
+                if j != i:
+                    d = x[j] - x[i]
+                    r2 = d.dot(d) + eps2
+                    acc += mass[j] * d / (r2 * ti.sqrt(r2))
+            f_out[i] += self.G * mass[i] * acc
 
     def energy(self, x, t, out):
         attraction_energy(x, self.mass, self.G, self.softening, out)

@@ -6,8 +6,15 @@ keeps its own scratch. Every term gives:
 
   - ``present(model)`` (static): whether the scene has it; absent terms are never built,
     so nothing of theirs is compiled or launched;
-  - ``add_forces(x, v, t, f_out)``: f_out += its force at positions x, velocities v and
-    time t (kernel launches);
+  - ``accumulate(x, v, t, f_out)`` (a ``ti.func`` with the term's loops): f_out += its
+    force at positions x, velocities v and time t. ``Forces`` calls the accumulates of a
+    scene's terms in one kernel, and the simulator's batch of substeps calls them all in
+    one launch (``batch.py``). A term whose force needs Python between its loops (a
+    candidate list that grows) sets ``in_kernel = False`` and gives
+    ``add_forces(x, v, t, f_out)`` (kernel launches) instead;
+  - ``prepare(t)``: Python work before a force evaluation at time t (an upload);
+  - ``batch_obstacle()``: None when its force may run in a batch of substeps without
+    Python between them, else the reason why not (one line, for ``Simulator.fusion``);
   - ``energy(x, t, out)``: its potential energy (J, a float), or None when it has none;
   - ``name``: its key in ``Simulator.energy()``;
   - ``implicit``: how backward Euler takes it: "potential" (its energy, gradient and
@@ -41,13 +48,17 @@ class Term:
     implicit = "lagged"
     projective = "lagged"
     per_particle = False
+    in_kernel = True
 
     @staticmethod
     def present(model):
         return True
 
-    def add_forces(self, x, v, t, f_out):
-        raise NotImplementedError
+    def prepare(self, t):
+        """Nothing to do before a force evaluation."""
+
+    def batch_obstacle(self):
+        return None
 
     def energy(self, x, t, out):
         return None

@@ -126,8 +126,12 @@ class Colliders(Term):
             e = self.table.for_each_contact(x, p, t, self._energy_body, e, 0)
         return e
 
-    def add_forces(self, x, v, t, f_out):
-        collide(self, x, v, t, f_out)
+    @ti.func
+    def accumulate(self, x, v, t, f_out):
+        """f_out += the contact forces of every collider."""
+        ti.loop_config(serialize=ti.static(serial(f_out)))
+        for p in range(f_out.shape[0]):
+            f_out[p] += self.force(p, x, v, t)
 
     def energy(self, x, t, out):
         return particle_energy(self, x, t, out)
@@ -227,20 +231,6 @@ class Colliders(Term):
         velocity and cut the tangential one by mu times that change (Coulomb), relative to
         the collider's motion."""
         project_contacts(self, x, v, t)
-
-
-@ti.kernel
-def collide(
-        # Model:
-        term: ti.template(),
-        # State in:
-        x: ti.template(), v: ti.template(), t: float,
-        # Out:
-        f_out: ti.template()):
-    """f_out += the contact forces of every collider."""
-    ti.loop_config(serialize=ti.static(serial(f_out)))
-    for p in range(f_out.shape[0]):
-        f_out[p] += term.force(p, x, v, t)
 
 
 @ti.kernel

@@ -62,8 +62,12 @@ class Grab(Term):
     def __init__(self, model):
         self.spring = model.grab
 
-    def add_forces(self, x, v, t, f_out):
-        add_grab(self, x, v, t, f_out)
+    @ti.func
+    def accumulate(self, x, v, t, f_out):
+        """f_out += the grab spring's force (one particle: no loop)."""
+        p = self.spring.particle[None]
+        if p >= 0:
+            f_out[p] += self.force(p, x, v, t)
 
     def energy(self, x, t, out):
         return particle_energy(self, x, t, out)
@@ -109,11 +113,3 @@ class Grab(Term):
                 * ti.Matrix.identity(float, 3)
         return block
 
-
-@ti.kernel
-def add_grab(term: ti.template(), x: ti.template(), v: ti.template(), t: float,
-             f_out: ti.template()):
-    """f_out += the grab spring's force (one particle: a single-thread kernel)."""
-    p = term.spring.particle[None]
-    if p >= 0:
-        f_out[p] += term.force(p, x, v, t)

@@ -34,9 +34,12 @@ class GravityDrag(Term):
     def potential(self, p, x, t):
         return -self.mass[p] * self.gravity().dot(x[p])
 
-    def add_forces(self, x, v, t, f_out):
-        """Sets f_out (the first term of every force evaluation)."""
-        init_forces(self, x, v, t, f_out)
+    @ti.func
+    def accumulate(self, x, v, t, f_out):
+        """f_out = m g - c v: sets f_out (the first term of every force evaluation)."""
+        ti.loop_config(serialize=ti.static(serial(f_out)))
+        for p in range(f_out.shape[0]):
+            f_out[p] = self.force(p, x, v, t)
 
     def energy(self, x, t, out):
         return particle_energy(self, x, t, out)
@@ -54,16 +57,3 @@ class GravityDrag(Term):
     def hessian_block(self, p, x, x0, h, t):
         return self.params[3] / h * ti.Matrix.identity(float, 3)
 
-
-@ti.kernel
-def init_forces(
-        # Model:
-        term: ti.template(),
-        # State in:
-        x: ti.template(), v: ti.template(), t: float,
-        # Out:
-        f_out: ti.template()):
-    """f = m g - c v for every particle."""
-    ti.loop_config(serialize=ti.static(serial(f_out)))
-    for p in range(f_out.shape[0]):
-        f_out[p] = term.force(p, x, v, t)

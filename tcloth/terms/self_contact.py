@@ -521,6 +521,7 @@ class SelfContact(Term):
     name = "self_contact"
     implicit = "potential"
     projective = "projection"
+    in_kernel = False          # the list's rebuild test and growth run in Python
 
     @staticmethod
     def present(model):

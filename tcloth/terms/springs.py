@@ -68,15 +68,8 @@ def hessian_blocks(xi, xj, ks, kd, rest, d0, h):
 
 
 # -- the spring list --------------------------------------------------------------------------
-@ti.kernel
-def eval_springs(
-        # Model:
-        pairs: ti.template(), ks: ti.template(), kd: ti.template(), rest: ti.template(),
-        count: ti.i32,
-        # State in:
-        x: ti.template(), v: ti.template(),
-        # Out:
-        f_out: ti.template()):
+@ti.func
+def list_springs(pairs, ks, kd, rest, count, x, v, f_out):
     """Springs from a list: equal and opposite forces on both ends (atomic adds)."""
     ti.loop_config(serialize=ti.static(serial(pairs)))
     for s in range(count):
@@ -166,22 +159,17 @@ def _gather_grid(x, v, t, offset, nx, ny, i, j, families: ti.template(), first: 
         f_out[p] += acc
 
 
-@ti.kernel
-def eval_grid_springs(
-        # Model:
-        grids: ti.template(), k: ti.i32, families: ti.template(), first: ti.template(),
-        # State in:
-        x: ti.template(), v: ti.template(), t: float,
-        # Out:
-        grid_forces: ti.template(), f_out: ti.template()):
+@ti.func
+def grid_springs(grids, k, families: ti.template(), first: ti.template(), x, v, t,
+                 grid_forces, f_out):
     """Provot springs of cloth grid k, each evaluated once and gathered per particle (no
     atomics): every particle computes the springs it owns (``OWNED``) into grid_forces,
     then adds those and subtracts the ones its neighbours own with it.
 
     grids: the ``GridTable``; families: static (structural, shear, flexion) flags.
     first: None (f += springs), or a per-particle term whose force the gather sets first
-    (f = its force + springs: one launch and one pass fewer), when the grid holds every
-    particle. grid_forces: (particles, 6) vec3 scratch.
+    (f = its force + springs: one pass fewer), when the grid holds every particle.
+    grid_forces: (particles, 6) vec3 scratch.
     """
     offset, nx, ny = grids.ints[k][0], grids.ints[k][1], grids.ints[k][2]
     owned_grid_springs(x, v, offset, nx, ny, grids.reals[k], families, grid_forces)
@@ -251,13 +239,16 @@ def add_incremental(
             grad_out[p] += g
 
 
+@ti.data_oriented
 class Springs(Term):
     """The scene's springs: grid stencils for cloth grids, a list for the rest.
 
     Attributes (besides the model's spring fields it reads):
         grids: the model's GridBlocks; spring_grids: indices of those with springs.
-        sets_forces: the first grid with springs holds every particle, so its gather sets
-            the force accumulator with the first term's force (``eval_grid_springs``).
+        sets_forces: the first grid with springs holds every particle, so its gather can
+            set the force accumulator with the first term's force (``grid_springs``).
+        first: None, or (where ``sets_forces``) the per-particle term whose force the
+            first grid's gather sets; ``Forces`` chooses it.
     """
     name = "spring"
     implicit = "potential"
@@ -276,6 +267,7 @@ class Springs(Term):
         self.spring_grids = [k for k, g in enumerate(self.grids) if any(g.families)]
         first = self.grids[self.spring_grids[0]] if self.spring_grids else None
         self.sets_forces = first is not None and first.covers(model.particle_count)
+        self.first = None
         self._grid_forces = None
         self._adjacency = None
         self._implicit = None
@@ -287,15 +279,20 @@ class Springs(Term):
                                                 shape=(self.model.particle_count, 6))
         return self._grid_forces
 
-    def add_forces(self, x, v, t, f_out, first=None):
-        """f_out += spring forces; first: the term whose force the first grid's gather
-        sets (only when ``sets_forces``)."""
-        for k in self.spring_grids:
-            eval_grid_springs(self.grid_table, k, self.grids[k].families,
-                              first if k == self.spring_grids[0] else None,
-                              x, v, t, self.grid_forces(), f_out)
-        if self.list_count:
-            eval_springs(self.pairs, self.ks, self.kd, self.rest, self.list_count, x, v, f_out)
+    @ti.func
+    def accumulate(self, x, v, t, f_out):
+        """f_out += spring forces (f_out = ``first``'s force + spring forces where
+        ``first`` is set). Needs ``grid_forces()`` made before it compiles."""
+        for k in ti.static(self.spring_grids):
+            if ti.static(k == self.spring_grids[0]):
+                grid_springs(self.grid_table, k, ti.static(self.grids[k].families), self.first,
+                             x, v, t, self._grid_forces, f_out)
+            else:
+                grid_springs(self.grid_table, k, ti.static(self.grids[k].families), None,
+                             x, v, t, self._grid_forces, f_out)
+        if ti.static(self.list_count):
+            list_springs(self.pairs, self.ks, self.kd, self.rest, self.list_count, x, v,
+                         f_out)
 
     def sums(self, x, out):
         """(spring energy, max strain) over all springs."""

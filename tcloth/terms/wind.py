@@ -20,38 +20,6 @@ from ..scene import wind_velocity
 from .base import Term
 
 
-@ti.kernel
-def eval_wind(
-        # Model:
-        triangles: ti.template(), params: ti.template(),
-        # State in:
-        x: ti.template(), v: ti.template(), t: float,
-        # Out:
-        f_out: ti.template()):
-    """Wejchert & Haumann quadratic wind on every triangle, a third to each particle.
-
-    params = (velocity (3), gust amplitude (3), frequency, phase, drag, lift, tangential).
-    """
-    wind = ti.Vector([params[0], params[1], params[2]]) + ti.Vector(
-        [params[3], params[4], params[5]]) * ti.sin(2.0 * 3.141592653589793 * params[6] * t
-                                                    + params[7])
-    ti.loop_config(serialize=ti.static(serial(triangles)))
-    for k in range(triangles.shape[0]):
-        a, b, c = triangles[k][0], triangles[k][1], triangles[k][2]
-        cross = (x[b] - x[a]).cross(x[c] - x[a])
-        twice_area = cross.norm()
-        if twice_area > 0.0:
-            n = cross / twice_area
-            area = 0.5 * twice_area
-            v_rel = wind - (v[a] + v[b] + v[c]) / 3.0
-            u = v_rel.dot(n)
-            vt = v_rel - u * n
-            force = area * (params[8] * u * abs(u) * n + params[10] * vt.norm() * vt
-                            + params[9] * abs(u) * vt)
-            for q in ti.static(range(3)):
-                f_out[triangles[k][q]] += force / 3.0
-
-
 def pack(wind, velocity):
     """The ``Model.wind_params`` values of a ``Scene.wind`` dict with this mean velocity."""
     return np.array([*velocity, *wind["amplitude"], wind["frequency"], wind["phase"],
@@ -59,6 +27,7 @@ def pack(wind, velocity):
                     dtype=runtime.numpy_real())
 
 
+@ti.data_oriented
 class Wind(Term):
     """The scene's wind on its cloth triangles (absent without cloth)."""
 
@@ -70,8 +39,39 @@ class Wind(Term):
         self.model = model
         self.triangles, self.params = model.triangles, model.wind_params
 
-    def add_forces(self, x, v, t, f_out):
+    def prepare(self, t):
+        """A callable gust: its velocity at t into ``params``."""
         wind = self.model.wind
         if wind["callable"] is not None:
             self.params.from_numpy(pack(wind, wind_velocity(wind, t)))
-        eval_wind(self.triangles, self.params, x, v, t, f_out)
+
+    def batch_obstacle(self):
+        if self.model.wind["callable"] is not None:
+            return "the wind's gust is a Python callable, evaluated between substeps"
+        return None
+
+    @ti.func
+    def accumulate(self, x, v, t, f_out):
+        """Wejchert & Haumann quadratic wind on every triangle, a third to each particle.
+
+        params = (velocity (3), gust amplitude (3), frequency, phase, drag, lift,
+        tangential)."""
+        params, triangles = ti.static(self.params, self.triangles)
+        wind = ti.Vector([params[0], params[1], params[2]]) + ti.Vector(
+            [params[3], params[4], params[5]]) * ti.sin(2.0 * 3.141592653589793 * params[6] * t
+                                                        + params[7])
+        ti.loop_config(serialize=ti.static(serial(triangles)))
+        for k in range(triangles.shape[0]):
+            a, b, c = triangles[k][0], triangles[k][1], triangles[k][2]
+            cross = (x[b] - x[a]).cross(x[c] - x[a])
+            twice_area = cross.norm()
+            if twice_area > 0.0:
+                n = cross / twice_area
+                area = 0.5 * twice_area
+                v_rel = wind - (v[a] + v[b] + v[c]) / 3.0
+                u = v_rel.dot(n)
+                vt = v_rel - u * n
+                force = area * (params[8] * u * abs(u) * n + params[10] * vt.norm() * vt
+                                + params[9] * abs(u) * vt)
+                for q in ti.static(range(3)):
+                    f_out[triangles[k][q]] += force / 3.0

@@ -1,0 +1,78 @@
+"""Batches of substeps: n steps of an explicit integrator in one kernel launch.
+
+Launching kernels from Python costs 20-70 us each on a CPU, and a substep of a small cloth
+is a few such launches; a batch runs the n substeps of ``Simulator.step(n)`` as one
+kernel whose outer loop walks the steps on one thread, each step being the integrator's
+``advance`` (the forces of every term, the update), the strain limit and the instability
+check, all the same ``ti.func``s that a step from Python launches one by one, so the results
+are the same numbers. The step works on the current State in place (one copy of the
+step's code, which keeps the compile time of the batch near that of the single step's
+kernels) with the other State as scratch, and a copy of the batch's start state to go
+back to if a step goes bad.
+
+A batch is used where every loop of a step would run on one thread anyway (on CPUs, below
+``serial_below`` items: ``runtime.serial``) and no term needs Python between substeps
+(``Simulator.fusion`` says why not otherwise: an implicit integrator, self-collision, a
+Python-callable gust, a GPU, a large scene).
+"""
+import taichi as ti
+
+from .runtime import serial
+
+
+@ti.func
+def first_bad(x, v, x_bound, v_bound):
+    """Smallest id whose position or velocity is non-finite or out of bounds, else -1."""
+    bad = 2147483647
+    ti.loop_config(serialize=ti.static(serial(x)))
+    for p in range(x.shape[0]):
+        ok = True
+        for c in ti.static(range(3)):
+            if not (abs(x[p][c]) <= x_bound and abs(v[p][c]) <= v_bound):
+                ok = False
+        if not ok:
+            ti.atomic_min(bad, p)
+    return -1 if bad == 2147483647 else bad
+
+
+@ti.func
+def _substep(integrator: ti.template(), limiter: ti.template(), a, b, t, dt, fresh,
+             x_bound, v_bound):
+    """One step of State a in place (b: scratch); returns ``first_bad`` of the result."""
+    integrator.advance(a, b, t, dt, fresh)
+    if ti.static(bool(limiter)):
+        limiter.limit(a, ti.cast(1.0 / dt, float))
+    return first_bad(a.x, a.v, x_bound, v_bound)
+
+
+@ti.kernel
+def run(integrator: ti.template(), limiter: ti.template(), a: ti.template(),
+        b: ti.template(), start: ti.template(), n: ti.i32, fresh: ti.i32,
+        time_base: ti.f64, steps_before: ti.i32, dt: ti.f64, x_bound: float,
+        v_bound: float) -> ti.types.vector(2, ti.i32):
+    """n steps of State a in place; b is scratch, and start gets a copy of a first.
+
+    The time of step k's start is time_base + (steps_before + k) dt, in float64 as the
+    simulator computes it. fresh: a's forces must be evaluated at the first step (Verlet;
+    after a strain limit they always are). Returns (steps done, first bad particle or -1):
+    the batch stops at the first step that leaves a particle non-finite or out of bounds;
+    a then holds that bad state, and the caller goes back to ``start`` and runs the good
+    steps again (the same numbers: the steps are deterministic).
+    """
+    ti.loop_config(serialize=ti.static(serial(a.x)))
+    for p in range(a.x.shape[0]):
+        start.x[p] = a.x[p]
+        start.v[p] = a.v[p]
+        start.f[p] = a.f[p]
+    result = ti.Vector([n, -1])
+    ti.loop_config(serialize=True)
+    for k in range(n):
+        t = time_base + ti.cast(steps_before + k, ti.f64) * dt
+        evaluate = fresh if k == 0 else 0
+        if ti.static(bool(limiter)):
+            evaluate = 1
+        bad = _substep(integrator, limiter, a, b, t, dt, evaluate, x_bound, v_bound)
+        if bad >= 0:
+            result = ti.Vector([k, bad])
+            break
+    return result

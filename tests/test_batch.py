@@ -1,0 +1,96 @@
+"""Batches of substeps (``tcloth/batch.py``): n steps in one kernel launch give the same
+numbers as n steps from Python, bit for bit (the same ``ti.func``s do the same arithmetic),
+for every explicit integrator with every in-kernel term; a bad step inside a batch is named
+and the state before it kept, as between single steps."""
+import numpy as np
+import pytest
+
+import tcloth
+from tcloth.errors import InstabilityError
+
+
+@pytest.fixture(scope="module")
+def f32():
+    """float32, the default, where a changed rounding would show soonest."""
+    tcloth.init(arch="cpu", precision="f32")
+    yield
+
+
+def every_term_scene():
+    scene = tcloth.Scene(gravity=(0.0, -9.81, 0.0), air_drag=0.01)
+    cloth = scene.add_cloth(resolution=(8, 8), size=(1.0, 1.0), center=(0.0, 1.0, 0.0),
+                            pinned=[(0, 0), (7, 0)])
+    scene.add_springs([cloth.particles[[0, 7], [7, 7]]], stiffness=50.0, damping=0.1)
+    scene.set_wind((1.0, 0.0, 0.5), gust={"amplitude": (2.0, 0.0, 0.0), "frequency": 3.0,
+                                          "phase": 0.1})
+    scene.add_attraction(1e-3)
+    scene.add_sphere((0.1, 0.705, 0.0), 0.3, friction=0.3)
+    scene.add_plane((0.0, 0.2, 0.0), (0.0, 1.0, 0.0), friction=0.5)
+    scene.limit_strain(0.02)
+    return scene
+
+
+def run(integrator, batch, before, after, dt):
+    """Steps of dt in chunks ``before``, then of dt / 2 in chunks ``after``."""
+    sim = tcloth.Simulator(every_term_scene(), integrator, dt=dt, batch=batch)
+    assert (sim.fusion() is None) == batch
+    for n in before:
+        sim.step(n)
+    sim.set_dt(dt / 2)
+    for n in after:
+        sim.step(n)
+    return sim
+
+
+@pytest.mark.parametrize("integrator", ["forward_euler", "symplectic_euler", "verlet", "rk4"])
+def test_a_batch_equals_single_steps_bit_for_bit(f32, integrator):
+    dt = 2e-4 if integrator == "forward_euler" else 1e-3
+    single = run(integrator, False, [1] * 8, [1] * 32, dt)
+    # uneven batches, a change of dt between them (the time is computed in the kernel)
+    batched = run(integrator, True, [7, 1], [20, 12], dt)
+    assert batched.num_steps == single.num_steps == 40
+    assert batched.time == single.time
+    assert np.array_equal(batched.positions(), single.positions())
+    assert np.array_equal(batched.velocities(), single.velocities())
+    # the sphere's contact and the strain limit were at work
+    assert single.energy()["contact"] > 0.0 and single.max_strain() < 0.03
+    assert np.array_equal(batched.forces(), single.forces())
+
+
+def test_a_bad_step_inside_a_batch_is_named_and_the_state_before_it_kept(f64):
+    def exploding(batch):
+        scene = tcloth.Scene()
+        scene.add_cloth(resolution=(6, 6), structural=(1e4, 0.0), shear=(1e4, 0.0),
+                        flexion=(1e4, 0.0))
+        sim = tcloth.Simulator(scene, "forward_euler", dt=1e-3, velocity_bound=50.0,
+                               batch=batch)
+        rng = np.random.default_rng(1)
+        sim.set_state(velocities=rng.normal(0.0, 0.1, (36, 3)))
+        with pytest.raises(InstabilityError) as err:
+            sim.step(500)
+        return sim, err.value
+    single, single_err = exploding(False)
+    batched, batched_err = exploding(True)
+    assert 1 < batched_err.step < 500 and batched_err.step == single_err.step
+    assert str(batched_err) == str(single_err)
+    assert batched.num_steps == single.num_steps == batched_err.step - 1
+    assert np.array_equal(batched.positions(), single.positions())
+    assert np.array_equal(batched.velocities(), single.velocities())
+    assert np.abs(batched.velocities()).max() <= 50.0
+
+
+def test_fusion_names_what_keeps_a_scene_out_of_batches(f64):
+    scene = tcloth.Scene()
+    scene.add_cloth(resolution=(4, 4))
+    assert tcloth.Simulator(scene).fusion() is None
+    assert "switched off" in tcloth.Simulator(scene, batch=False).fusion()
+    assert "backward_euler" in tcloth.Simulator(scene, "backward_euler").fusion()
+    gusty = tcloth.Scene()
+    gusty.add_cloth(resolution=(4, 4))
+    gusty.set_wind(gust=lambda t: (1.0, 0.0, 0.0))
+    sim = tcloth.Simulator(gusty)
+    assert "callable" in sim.fusion()
+    sim.step(2)                     # per substep, the gust evaluated in Python each time
+    assert sim.num_steps == 2
+    scene.set_self_collision()
+    assert "SelfContact" in tcloth.Simulator(scene).fusion()
