@@ -212,9 +212,14 @@ class Runner:
         client = self.client
         token = uuid.uuid4().hex[:6]              # this run's task keys are its own
 
+        homes = {}
+
         def home(key):
-            return {"workers": [self.workers[int(key[:8], 16) % len(self.workers)]],
-                    "allow_other_workers": True}
+            # each reference and group its own worker in turn, while there are workers
+            # left: a task queued on the worker of a case that kills its process dies
+            # with it
+            homes.setdefault(key, self.workers[len(homes) % len(self.workers)])
+            return {"workers": [homes[key]], "allow_other_workers": True}
 
         ref_futures, owner, owner_futures = {}, {}, []
         for ref_id, (build, times) in references.items():
