@@ -94,3 +94,16 @@ def test_fusion_names_what_keeps_a_scene_out_of_batches(f64):
     assert sim.num_steps == 2
     scene.set_self_collision()
     assert "SelfContact" in tcloth.Simulator(scene).fusion()
+
+
+def test_a_scene_whose_loops_run_on_several_threads_steps_from_python(f64):
+    """Below serial_below items every loop runs on one thread and a batch takes the step;
+    above, the loops run in parallel and a batch (one thread) would lose them."""
+    scene = tcloth.Scene()
+    scene.add_cloth(resolution=(6, 6))
+    try:
+        tcloth.init(arch="cpu", precision="f64", serial_below=30)
+        assert "36 particles" in tcloth.Simulator(scene).fusion()
+    finally:
+        tcloth.init(arch="cpu", precision="f64", serial_below=tcloth.runtime.SERIAL_BELOW)
+    assert tcloth.Simulator(scene).fusion() is None

@@ -279,6 +279,11 @@ class Springs(Term):
                                                 shape=(self.model.particle_count, 6))
         return self._grid_forces
 
+    def batch_obstacle(self):
+        if self.list_count and not serial(self.pairs):
+            return f"the spring list's {self.list_count} springs run on several threads"
+        return None
+
     @ti.func
     def accumulate(self, x, v, t, f_out):
         """f_out += spring forces (f_out = ``first``'s force + spring forces where

@@ -48,6 +48,8 @@ class Wind(Term):
     def batch_obstacle(self):
         if self.model.wind["callable"] is not None:
             return "the wind's gust is a Python callable, evaluated between substeps"
+        if not serial(self.triangles):
+            return f"the wind's {self.triangles.shape[0]} triangles run on several threads"
         return None
 
     @ti.func
