@@ -45,34 +45,40 @@ def _substep(integrator: ti.template(), limiter: ti.template(), a, b, t, dt, fre
     return first_bad(a.x, a.v, x_bound, v_bound)
 
 
-@ti.kernel
-def run(integrator: ti.template(), limiter: ti.template(), a: ti.template(),
-        b: ti.template(), start: ti.template(), n: ti.i32, fresh: ti.i32,
-        time_base: ti.f64, steps_before: ti.i32, dt: ti.f64, x_bound: float,
-        v_bound: float) -> ti.types.vector(2, ti.i32):
-    """n steps of State a in place; b is scratch, and start gets a copy of a first.
+def kernel(integrator, limiter, a, b, start, x_bound, v_bound):
+    """The batch kernel of one configuration: ``run(n, fresh, time_base, steps_before, dt)``.
 
-    The time of step k's start is time_base + (steps_before + k) dt, in float64 as the
-    simulator computes it. fresh: a's forces must be evaluated at the first step (Verlet;
-    after a strain limit they always are). Returns (steps done, first bad particle or -1):
-    the batch stops at the first step that leaves a particle non-finite or out of bounds;
-    a then holds that bad state, and the caller goes back to ``start`` and runs the good
-    steps again (the same numbers: the steps are deterministic).
+    Its objects are the closure's (compile-time constants), so a launch passes five
+    scalars: Taichi's Python side costs about 20 us per template argument of a launch,
+    and a batch is one launch per frame.
+
+    ``run`` advances State a by n steps in place; b is scratch, and start gets a copy of a
+    first. The time of step k's start is time_base + (steps_before + k) dt, in float64 as
+    the simulator computes it. fresh: a's forces must be evaluated at the first step
+    (Verlet; after a strain limit they always are). It returns -1, or k * particles + p
+    for the first step k that leaves particle p (the smallest) non-finite or out of
+    bounds: the batch stops there, a holds that bad state, and the caller goes back to
+    ``start`` and runs the good steps again (the same numbers: the steps are
+    deterministic).
     """
-    ti.loop_config(serialize=ti.static(serial(a.x)))
-    for p in range(a.x.shape[0]):
-        start.x[p] = a.x[p]
-        start.v[p] = a.v[p]
-        start.f[p] = a.f[p]
-    result = ti.Vector([n, -1])
-    ti.loop_config(serialize=True)
-    for k in range(n):
-        t = time_base + ti.cast(steps_before + k, ti.f64) * dt
-        evaluate = fresh if k == 0 else 0
-        if ti.static(bool(limiter)):
-            evaluate = 1
-        bad = _substep(integrator, limiter, a, b, t, dt, evaluate, x_bound, v_bound)
-        if bad >= 0:
-            result = ti.Vector([k, bad])
-            break
-    return result
+    @ti.kernel
+    def run(n: ti.i32, fresh: ti.i32, time_base: ti.f64, steps_before: ti.i32,
+            dt: ti.f64) -> ti.i64:
+        ti.loop_config(serialize=ti.static(serial(a.x)))
+        for p in range(a.x.shape[0]):
+            start.x[p] = a.x[p]
+            start.v[p] = a.v[p]
+            start.f[p] = a.f[p]
+        result = ti.i64(-1)
+        ti.loop_config(serialize=True)
+        for k in range(n):
+            t = time_base + ti.cast(steps_before + k, ti.f64) * dt
+            evaluate = fresh if k == 0 else 0
+            if ti.static(bool(limiter)):
+                evaluate = 1
+            bad = _substep(integrator, limiter, a, b, t, dt, evaluate, x_bound, v_bound)
+            if bad >= 0:
+                result = ti.cast(k, ti.i64) * a.x.shape[0] + bad
+                break
+        return result
+    return run

@@ -106,6 +106,7 @@ class Simulator:
         self.num_steps = 0
         self._time_base, self._step_base = 0.0, 0      # the time at step _step_base
         self._batch_start = None                        # a batch's start state (batch.py)
+        self._batch_kernels = {}     # (integrator, limiter, State) -> its batch kernel
 
     @property
     def scene(self):
@@ -172,18 +173,23 @@ class Simulator:
         a, b = self._states
         if self._batch_start is None:
             self._batch_start = self.model.state()
-        start = self._batch_start
+        key = (self.integrator, limiter, a)
+        if key not in self._batch_kernels:
+            self._batch_kernels[key] = batch.kernel(
+                self.integrator, limiter, a, b, self._batch_start, self.position_bound,
+                self.velocity_bound)
+        run = self._batch_kernels[key]
         fresh = 0 if self.integrator.holds_forces(a) else 1
-        args = (fresh, self._time_base, self.num_steps - self._step_base, self.dt,
-                self.position_bound, self.velocity_bound)
-        done, bad = (int(c) for c in batch.run(self.integrator, limiter, a, b, start, n,
-                                               *args))
-        if bad >= 0:
+        args = (fresh, self._time_base, self.num_steps - self._step_base, self.dt)
+        done, bad = n, -1
+        code = run(n, *args)
+        if code >= 0:
+            done, bad = divmod(code, self.model.particle_count)
             # back to the batch's start, and again through the good steps only
             for name in ("x", "v", "f"):
-                getattr(a, name).copy_from(getattr(start, name))
+                getattr(a, name).copy_from(getattr(self._batch_start, name))
             if done:
-                batch.run(self.integrator, limiter, a, b, start, done, *args)
+                run(done, *args)
         self.num_steps += done
         self.state.t = self.time
         if limiter is None and bad < 0:
@@ -254,6 +260,7 @@ class Simulator:
         self._check()
         self.integrator = _integrator_class(integrator)(self.model, **options)
         self.integrator_name = integrator
+        self._batch_kernels.clear()
 
     def set_dt(self, dt):
         """Continue with time step dt (s, > 0); the time so far is kept."""

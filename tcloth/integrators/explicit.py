@@ -25,6 +25,7 @@ from .base import Integrator
 
 @ti.func
 def copy(src, dst):
+    """dst = src, element by element."""
     ti.loop_config(serialize=ti.static(serial(src)))
     for p in range(src.shape[0]):
         dst[p] = src[p]
