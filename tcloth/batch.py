@@ -17,6 +17,7 @@ Python-callable gust, a GPU, a large scene).
 """
 import taichi as ti
 
+from .integrators.linalg import copy
 from .runtime import serial
 
 
@@ -64,11 +65,9 @@ def kernel(integrator, limiter, a, b, start, x_bound, v_bound):
     @ti.kernel
     def run(n: ti.i32, fresh: ti.i32, time_base: ti.f64, steps_before: ti.i32,
             dt: ti.f64) -> ti.i64:
-        ti.loop_config(serialize=ti.static(serial(a.x)))
-        for p in range(a.x.shape[0]):
-            start.x[p] = a.x[p]
-            start.v[p] = a.v[p]
-            start.f[p] = a.f[p]
+        copy(start.x, a.x)
+        copy(start.v, a.v)
+        copy(start.f, a.f)
         result = ti.i64(-1)
         ti.loop_config(serialize=True)
         for k in range(n):

@@ -10,6 +10,7 @@ import numpy as np
 import taichi as ti
 
 from . import runtime
+from .integrators.linalg import copy
 from .runtime import serial
 
 
@@ -87,9 +88,7 @@ class StrainLimiter:
     @ti.func
     def limit(self, state, inv_dt):
         """``apply`` as a ``ti.func`` (inv_dt = 1/dt, computed as ``apply`` does)."""
-        ti.loop_config(serialize=ti.static(serial(state.x)))
-        for p in range(state.x.shape[0]):
-            self.x_before[p] = state.x[p]
+        copy(self.x_before, state.x)
         for _ in range(self.iterations):
             if self.limit_pass(state.x) == 0:
                 break

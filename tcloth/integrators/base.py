@@ -10,7 +10,8 @@ class Integrator:
     cache of forces where it says so (``Verlet``).
 
     Subclasses list their options in ``defaults`` (name -> default); an unknown option
-    raises SceneError naming it.
+    raises SceneError naming it. Every integrator has ``forces`` (its ``Forces``) and
+    ``inv_mass`` (the model's field, read by its kernels).
     """
     name = "integrator"
     defaults = {}
@@ -22,6 +23,7 @@ class Integrator:
                              f"(its options: {sorted(self.defaults) or 'none'})")
         self.options = {**self.defaults, **options}
         self.forces = Forces(model)
+        self.inv_mass = model.inv_mass
 
     def forces_at(self, state):
         """Make ``state.f`` hold the forces at (state.x, state.v) and time state.t."""

@@ -21,14 +21,7 @@ import taichi as ti
 from .. import runtime
 from ..runtime import serial
 from .base import Integrator
-
-
-@ti.func
-def copy(src, dst):
-    """dst = src, element by element."""
-    ti.loop_config(serialize=ti.static(serial(src)))
-    for p in range(src.shape[0]):
-        dst[p] = src[p]
+from .linalg import copy
 
 
 @ti.kernel
@@ -42,10 +35,6 @@ def _phase(integrator: ti.template(), phase: ti.template(), a: ti.template(),
 class _OneEvaluation(Integrator):
     """A step that evaluates the forces at its start and then updates every particle
     (``update(a, b, dt)``)."""
-
-    def __init__(self, model, **options):
-        super().__init__(model, **options)
-        self.inv_mass = model.inv_mass
 
     def simulate(self, model, state_in, state_out, dt):
         self.forces_at(state_in)
@@ -102,7 +91,6 @@ class Verlet(Integrator):
 
     def __init__(self, model, **options):
         super().__init__(model, **options)
-        self.inv_mass = model.inv_mass
         self._cached = None          # the State whose f holds this integrator's forces
 
     def forces_at(self, state):
@@ -159,7 +147,7 @@ class Verlet(Integrator):
                     t_forces = t + dt
                 self.forces.accumulate(a.x, a.v, ti.cast(t_forces, float), b.f)
                 if not end:
-                    copy(b.f, a.f)
+                    copy(a.f, b.f)
             if not end:
                 self.drift(a, a, h)
         self.kick(a.v, b.f, a.f, h, True)
@@ -183,7 +171,6 @@ class RK4(Integrator):
 
     def __init__(self, model, **options):
         super().__init__(model, **options)
-        self.inv_mass = model.inv_mass
         self._stage = model.state()
         self._coefficients = ti.field(runtime.real(), shape=8)
         self._coefficients.from_numpy(np.array(_RK4_WEIGHTS + _RK4_ADVANCES,
@@ -222,10 +209,10 @@ class RK4(Integrator):
         # first stage's state and the sum start as copies of a
         s = self._stage
         h = ti.cast(dt, float)
-        copy(a.x, s.x)
-        copy(a.v, s.v)
-        copy(a.x, b.x)
-        copy(a.v, b.v)
+        copy(s.x, a.x)
+        copy(s.v, a.v)
+        copy(b.x, a.x)
+        copy(b.v, a.v)
         for k in range(4):
             t_stage = t
             if k == 3:
@@ -234,5 +221,5 @@ class RK4(Integrator):
                 t_stage = t + dt / 2
             self.forces.accumulate(s.x, s.v, ti.cast(t_stage, float), s.f)
             self.stage(a, s.x, s.v, s.f, h, k, b, b)
-        copy(b.x, a.x)
-        copy(b.v, a.v)
+        copy(a.x, b.x)
+        copy(a.v, b.v)

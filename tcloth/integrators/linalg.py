@@ -34,12 +34,17 @@ def axpy_into(out: ti.template(), x: ti.template(), alpha: float, d: ti.template
         out[p] = x[p] + alpha * d[p]
 
 
-@ti.kernel
-def copy_into(out: ti.template(), a: ti.template()):
+@ti.func
+def copy(out, a):
     """out = a (fields of one shape, any number of dimensions)."""
     ti.loop_config(serialize=ti.static(runtime.serial_count(int(np.prod(out.shape)))))
     for I in ti.grouped(ti.ndrange(*out.shape)):     # a range-for: serialize applies
         out[I] = a[I]
+
+
+@ti.kernel
+def copy_into(out: ti.template(), a: ti.template()):
+    copy(out, a)
 
 
 @ti.kernel

@@ -67,7 +67,7 @@ class Projective(Integrator):
         super().__init__(model, **options)
         self.grid = single_grid(model, self.options["linear_solver"])
         # the model's fields, read by the kernels without being passed (Python launch time)
-        self.mass, self.inv_mass, self.params = model.mass, model.inv_mass, model.params
+        self.mass, self.params = model.mass, model.params
         n, real = model.particle_count, runtime.real()
         self.x0, self.y, self.f = (ti.Vector.field(3, real, shape=n) for _ in range(3))
         # the terms by their treatment: in the force residual, in y, or projected after
