@@ -107,6 +107,7 @@ class Simulator:
         self._time_base, self._step_base = 0.0, 0      # the time at step _step_base
         self._batch_start = None                        # a batch's start state (batch.py)
         self._batch_kernels = {}     # (integrator, limiter, State) -> its batch kernel
+        self._fusion = None          # (fusion(),) once computed; reset by the live changes
 
     @property
     def scene(self):
@@ -153,6 +154,11 @@ class Simulator:
         """None where ``step(n)`` runs its n substeps in one kernel launch (``batch.py``),
         else the reason why it launches kernels for every substep (one line)."""
         self._check()
+        if self._fusion is None:
+            self._fusion = (self._why_not_batched(),)
+        return self._fusion[0]
+
+    def _why_not_batched(self):
         if not self.settings["batch"]:
             return "batches are switched off (Simulator(..., batch=False))"
         if not runtime.cpu():
@@ -213,18 +219,18 @@ class Simulator:
     def positions(self):
         """(N,3) NumPy copy of the positions, m."""
         self._check()
-        return self.state.x.to_numpy()
+        return runtime.to_numpy(self.state.x)
 
     def velocities(self):
         """(N,3) NumPy copy of the velocities, m/s."""
         self._check()
-        return self.state.v.to_numpy()
+        return runtime.to_numpy(self.state.v)
 
     def forces(self):
         """(N,3) total force on each particle at the current state, N."""
         self._check()
         self.integrator.forces_at(self.state)
-        return self.state.f.to_numpy()
+        return runtime.to_numpy(self.state.f)
 
     def set_state(self, positions=None, velocities=None):
         """Overwrite positions and/or velocities ((N,3) each)."""
@@ -261,6 +267,7 @@ class Simulator:
         self.integrator = _integrator_class(integrator)(self.model, **options)
         self.integrator_name = integrator
         self._batch_kernels.clear()
+        self._fusion = None
 
     def set_dt(self, dt):
         """Continue with time step dt (s, > 0); the time so far is kept."""
@@ -306,9 +313,11 @@ class Simulator:
     def set_strain_limiting(self, enabled):
         """Apply the scene's strain limit after each step (True) or not."""
         self.settings["strain_limiting"] = bool(enabled)
+        self._fusion = None
 
     def _parameters_changed(self):
         self._check()
+        self._fusion = None
         self.model.refresh(self.settings["colliders_off"])
         self.integrator.parameters_changed()
 

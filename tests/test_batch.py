@@ -85,6 +85,12 @@ def test_fusion_names_what_keeps_a_scene_out_of_batches(f64):
     assert tcloth.Simulator(scene).fusion() is None
     assert "switched off" in tcloth.Simulator(scene, batch=False).fusion()
     assert "backward_euler" in tcloth.Simulator(scene, "backward_euler").fusion()
+    sim = tcloth.Simulator(scene)            # the answer is kept, and follows live changes
+    assert sim.fusion() is None
+    sim.set_integrator("projective")
+    assert "projective" in sim.fusion()
+    sim.set_integrator("verlet")
+    assert sim.fusion() is None
     gusty = tcloth.Scene()
     gusty.add_cloth(resolution=(4, 4))
     gusty.set_wind(gust=lambda t: (1.0, 0.0, 0.0))

@@ -163,3 +163,21 @@ def test_a_batch_is_one_launch_for_every_substep(f64, monkeypatch):
         assert sim.fusion() is None
         assert launches(monkeypatch, sim, 20) == ["run"]
         assert sim.num_steps == 20
+
+
+@pytest.mark.parametrize("precision", ["f32", "f64"])
+def test_state_copies_equal_the_fields(precision):
+    """positions(), velocities() and forces() (one copy kernel each) give the fields'
+    values in the working precision, as Taichi's own to_numpy does."""
+    tcloth.init(arch="cpu", precision=precision)
+    scene = tcloth.Scene()
+    scene.add_cloth(resolution=(5, 7))
+    sim = tcloth.Simulator(scene)
+    sim.step(3)
+    for copy, field in ((sim.positions, sim.state.x), (sim.velocities, sim.state.v),
+                        (sim.forces, sim.state.f)):
+        got, expected = copy(), field.to_numpy()
+        assert got.dtype == expected.dtype == np.dtype("float32" if precision == "f32"
+                                                       else "float64")
+        assert got.shape == (35, 3) and np.array_equal(got, expected)
+        assert np.abs(expected).max() > 0
