@@ -8,6 +8,10 @@ springs' damping sets) so that every size is stable, the contact thickness too
 (6 mm x 40 / n, about a quarter of the spacing: a thickness above sqrt(2) spacings would
 put a flat cloth's own neighbours in contact), and the resampled state settles for
 ``--settle`` seconds of simulated time (0.04 s; at least 200 steps) before the timing.
+The folded 40 x 40 state is read from ``--state`` (tools/data/fold_40x40.npz) where that
+file exists and computed and written there otherwise: the fold is chaotic, so a change of
+rounding anywhere in the physics gives another fold with other contacts, and a saved state
+keeps the workload the same from one commit to the next.
 Per size it prints the median ms per substep of each (over chunks of steps), their
 ratio, the cost per particle and how often the candidate list was rebuilt.
 
@@ -23,6 +27,7 @@ Lines: ``self_collision.<n>x<n>.{off,on}.ms_per_substep``, ``.ratio``,
 Usage: python tools/bench_self_collision.py [--sizes 64,128,256,512] [--steps 300]
                                             [--settle 0.04] [--skin M]
                                             [--arch cpu|cuda] [--out docs]
+                                            [--state tools/data/fold_40x40.npz]
 """
 import argparse
 import os
@@ -39,11 +44,19 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 DAMPING_SUM = 4 * (0.05 + 0.02 + 0.005)
 
 
-def folded_state(module, base=40, seconds=0.9):
-    """(positions, velocities) of the 40 x 40 fold scene after ``seconds``, as (40, 40, 3)."""
+def folded_state(module, path, base=40, seconds=0.9):
+    """(positions, velocities) of the 40 x 40 fold scene after ``seconds``, as (40, 40, 3):
+    read from path, or computed and written to it."""
+    if os.path.exists(path):
+        with np.load(path) as data:
+            return data["positions"], data["velocities"]
     sim = tcloth.Simulator(module.build(resolution=(base, base)), dt=2.5e-4)
     sim.step(int(seconds / 2.5e-4))
-    return (sim.positions().reshape(base, base, 3), sim.velocities().reshape(base, base, 3))
+    x, v = sim.positions().reshape(base, base, 3), sim.velocities().reshape(base, base, 3)
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    np.savez_compressed(path, positions=x, velocities=v)
+    print(f"# wrote the folded state to {path}")
+    return x, v
 
 
 def resample(grid, n):
@@ -111,10 +124,12 @@ def main():
                          "rings at first)")
     ap.add_argument("--skin", type=float, default=None,
                     help="the broad phase's skin, m (default: the scene's)")
+    ap.add_argument("--state", default=os.path.join(HERE, "data", "fold_40x40.npz"),
+                    help="the folded 40 x 40 state: read if it exists, else written")
     args = ap.parse_args()
     tcloth.init(arch=args.arch)
     module = load_script(os.path.join(HERE, "..", "scenes", "fold.py"))[0]
-    x40, v40 = folded_state(module)
+    x40, v40 = folded_state(module, args.state)
     rows = []
     for n in (int(s) for s in args.sizes.split(",")):
         x, v = resample(x40, n), resample(v40, n)
