@@ -112,13 +112,15 @@ class HashGrid:
         """body(item, ctx) for every item above ``after`` (-1: all) whose position lies in
         the box [lo, hi]."""
         a, b = self.cell_of(lo), self.cell_of(hi)
-        for i, j, k in ti.ndrange((a[0], b[0] + 1), (a[1], b[1] + 1), (a[2], b[2] + 1)):
-            c = ti.Vector([i, j, k])
-            bk = self.bucket(c)
-            for s in range(self.start[bk], self.start[bk + 1]):
-                item = self.order[s]
-                if item > after:
-                    d, p = self.cell[item], self.pos[item]
-                    if d[0] == i and d[1] == j and d[2] == k and (lo <= p).all() \
-                            and (p <= hi).all():
-                        body(item, ctx)
+        # nested ranges: ti.ndrange recovers i, j, k by two integer divisions per cell
+        for i in range(a[0], b[0] + 1):
+            for j in range(a[1], b[1] + 1):
+                for k in range(a[2], b[2] + 1):
+                    bk = self.bucket(ti.Vector([i, j, k]))
+                    for s in range(self.start[bk], self.start[bk + 1]):
+                        item = self.order[s]
+                        if item > after:
+                            d, p = self.cell[item], self.pos[item]
+                            if d[0] == i and d[1] == j and d[2] == k and (lo <= p).all() \
+                                    and (p <= hi).all():
+                                body(item, ctx)
