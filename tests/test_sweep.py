@@ -3,6 +3,7 @@ worker killed mid-sweep, an interrupted sweep resumed. Sweeps run through the co
 in subprocesses (each with its own Taichi runtime, as the sweep's workers have)."""
 import csv
 import os
+import signal
 import subprocess
 import sys
 
@@ -19,9 +20,13 @@ def sweep(spec_text, tmp_path, out, *options):
     """Write the spec, run ``tcloth sweep`` on it; (return code, output, rows)."""
     spec = tmp_path / "spec.toml"
     spec.write_text(f'scene = "{SCENE}"\n' + spec_text)
+    # SIGINT as a terminal leaves it: a process started with SIGINT ignored (as this test
+    # worker may be, after other tests) keeps ignoring it, and Python then installs no
+    # KeyboardInterrupt handler, so the interrupted sweep would run to the end
     proc = subprocess.run([sys.executable, "-m", "tcloth", "sweep", str(spec), "--out",
                            str(out), "--quiet", *options], capture_output=True, text=True,
-                          timeout=600)
+                          timeout=600,
+                          preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     path = out / "results.csv"
     rows = list(csv.DictReader(open(path))) if path.exists() else []
     return proc.returncode, proc.stdout + proc.stderr, rows
