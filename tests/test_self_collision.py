@@ -313,3 +313,40 @@ def test_kept_candidate_list_misses_no_contact(f64):
         np.testing.assert_allclose(kept, fresh, rtol=0, atol=1e-12 * np.abs(fresh).max())
     assert max(contacts) > 10, contacts
     assert stepping_rebuilds < 0.5 * 800, stepping_rebuilds
+
+
+def test_displacement_test_matches_numpy_on_one_thread_and_on_several():
+    """The rebuild test's reduction (blocks of particles, then the blocks) gives what NumPy
+    gives from the positions: twice the largest distance of a displacement since the last
+    build from the previous centre, and the displacements' bounding-box middle as the next
+    centre; the same on one thread and with every loop parallel, over several blocks."""
+    from tcloth.terms import self_contact
+    noise = 1e-3 * np.random.default_rng(5).standard_normal((3, 1600, 3))
+    results = []
+    try:
+        for serial_below in (tcloth.runtime.SERIAL_BELOW, 0):
+            tcloth.init(arch="cpu", precision="f64", serial_below=serial_below)
+            scene = tcloth.Scene()
+            scene.add_cloth(resolution=(40, 40), **CLOTH)
+            scene.set_self_collision(thickness=0.005)
+            sim = tcloth.Simulator(scene, dt=1e-3)
+            term = next(t for t in sim.integrator.forces.terms if t.name == "self_contact")
+            term.update(sim.state.x)
+            x_ref = sim.positions()
+            assert len(x_ref) > 1.5 * self_contact.DISPLACEMENT_BLOCK
+            centre = np.zeros(3)
+            for shift, jitter in zip((0.0, 0.3, -0.2), noise):
+                x = x_ref + shift + jitter
+                sim.set_state(positions=x)
+                got = self_contact._relative_displacement(term.search, sim.state.x,
+                                                          term._centre)
+                d = x - x_ref
+                assert got == pytest.approx(2 * np.linalg.norm(d - centre, axis=1).max(),
+                                            rel=1e-12)
+                centre = 0.5 * (d.min(axis=0) + d.max(axis=0))
+                np.testing.assert_allclose(term._centre.to_numpy(), centre, rtol=0,
+                                           atol=1e-15)
+                results.append(got)
+    finally:
+        tcloth.init(arch="cpu", precision="f64", serial_below=tcloth.runtime.SERIAL_BELOW)
+    assert results[:3] == results[3:]

@@ -71,6 +71,8 @@ PROJECTION_PASSES = 4
 # runtime.SERIAL_BELOW was measured on, so its loop goes parallel from that many / this
 SEARCH_COST = 16
 QUERY_BLOCK = 64
+# particles per block of the displacement test's reduction
+DISPLACEMENT_BLOCK = 1024
 
 
 @ti.func
@@ -140,6 +142,10 @@ class Search:
         self.found_count = ti.field(ti.i32, shape=self.queries)
         self.found_start = ti.field(ti.i32, shape=self.queries + 1)
         self.scan_blocks = ti.field(ti.i32, shape=blocks_for(self.queries))
+        moved_blocks = blocks_for(table.point_count, DISPLACEMENT_BLOCK)
+        self.moved_lo = ti.Vector.field(3, ti.f64, shape=moved_blocks)
+        self.moved_hi = ti.Vector.field(3, ti.f64, shape=moved_blocks)
+        self.moved_farthest = ti.field(ti.f64, shape=moved_blocks)
 
     @ti.func
     def _consider(self, ids, kind, n_a, query, item):
@@ -199,21 +205,36 @@ def _relative_displacement(search: ti.template(), x: ti.template(),
     """Twice the largest distance of a displacement x - x_ref from ``centre``: no two
     particles have moved relative to each other by more, whatever the centre, and a motion
     they share does not count. The centre is then set to the middle of this call's
-    displacements' bounding box, the one the next call measures from."""
-    lo = ti.Vector([1e30, 1e30, 1e30], ti.f64)
-    hi = ti.Vector([-1e30, -1e30, -1e30], ti.f64)
-    farthest = ti.cast(0.0, ti.f64)
+    displacements' bounding box, the one the next call measures from.
+
+    Blocks of DISPLACEMENT_BLOCK particles reduce in parallel, then one thread over the
+    blocks: a reduction of all particles into one variable made the threads take turns
+    on its atomic compare-and-swaps (20 ms a call for 262144 particles on two threads)."""
+    P = ti.static(search.table.point_count)
+    B = ti.static(blocks_for(P, DISPLACEMENT_BLOCK))
     c = centre[None]
-    ti.loop_config(serialize=ti.static(serial(search.table.points)))
-    for i in range(search.table.point_count):
-        p = search.table.points[i]
-        d = ti.cast(x[p] - search.x_ref[p], ti.f64)
-        for k in ti.static(range(3)):
-            ti.atomic_min(lo[k], d[k])
-            ti.atomic_max(hi[k], d[k])
-        ti.atomic_max(farthest, (d - c).norm_sqr())
-    centre[None] = 0.5 * (lo + hi)
-    return 2.0 * ti.sqrt(farthest)
+    ti.loop_config(serialize=ti.static(serial_count(P)))
+    for blk in range(B):
+        lo = ti.Vector([1e30, 1e30, 1e30], ti.f64)
+        hi = ti.Vector([-1e30, -1e30, -1e30], ti.f64)
+        farthest = ti.cast(0.0, ti.f64)
+        for i in range(blk * DISPLACEMENT_BLOCK, ti.min((blk + 1) * DISPLACEMENT_BLOCK, P)):
+            p = search.table.points[i]
+            d = ti.cast(x[p] - search.x_ref[p], ti.f64)
+            lo, hi = ti.min(lo, d), ti.max(hi, d)
+            farthest = ti.max(farthest, (d - c).norm_sqr())
+        search.moved_lo[blk], search.moved_hi[blk] = lo, hi
+        search.moved_farthest[blk] = farthest
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        lo, hi = search.moved_lo[0], search.moved_hi[0]
+        farthest = search.moved_farthest[0]
+        for blk in range(1, B):
+            lo, hi = ti.min(lo, search.moved_lo[blk]), ti.max(hi, search.moved_hi[blk])
+            farthest = ti.max(farthest, search.moved_farthest[blk])
+        centre[None] = 0.5 * (lo + hi)
+        search.moved_farthest[0] = farthest
+    return 2.0 * ti.sqrt(search.moved_farthest[0])
 
 
 @ti.kernel
