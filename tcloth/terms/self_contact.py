@@ -233,7 +233,7 @@ def _relative_displacement(search: ti.template(), x: ti.template(),
             lo, hi = ti.min(lo, search.moved_lo[blk]), ti.max(hi, search.moved_hi[blk])
             farthest = ti.max(farthest, search.moved_farthest[blk])
         centre[None] = 0.5 * (lo + hi)
-        search.moved_farthest[0] = farthest
+        search.moved_farthest[0] = farthest              # the kernel returns it from there
     return 2.0 * ti.sqrt(search.moved_farthest[0])
 
 
