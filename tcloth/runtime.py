@@ -41,6 +41,13 @@ def init(arch="cpu", precision="f32", serial_below=None, **kwargs):
         serial_below: on CPUs, loops over fewer items run on one thread (default
             SERIAL_BELOW; see ``serial``). 0 makes every loop parallel.
         **kwargs: passed on to ``ti.init`` (e.g. ``kernel_profiler=True``).
+
+    Taichi compiles with ``fast_math=False`` unless ``fast_math=True`` is given: IEEE
+    arithmetic with no reassociation and no contraction into fused multiply-adds, so that
+    the same operations give the same numbers wherever a ``ti.func`` is inlined (a batch of
+    substeps against single steps, a checkpoint's continuation) and on CPUs with other
+    vector units (AVX2 against AVX-512). It costs about 2 % of an explicit substep
+    (docs/benchmarks.md, "Fast math and the scene snapshots").
     """
     if arch not in _ARCHS:
         raise SceneError(f"arch must be one of {sorted(_ARCHS)} (got {arch!r})")
@@ -54,6 +61,7 @@ def init(arch="cpu", precision="f32", serial_below=None, **kwargs):
     real = _PRECISIONS[precision]
     ti_arch = _ARCHS[arch]()
     kwargs.setdefault("log_level", ti.WARN)
+    kwargs.setdefault("fast_math", False)
     if ti_arch is None:
         ti.init(default_fp=real, **kwargs)
     else:
