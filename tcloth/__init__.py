@@ -6,7 +6,7 @@ import os
 os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "False")
 
 from . import cli  # noqa: E402  (after the environment default above)
-from .errors import InstabilityError, SceneError, StaleSimulatorError
+from .errors import ConvergenceWarning, InstabilityError, SceneError, StaleSimulatorError
 from .mesh import export_mesh, write_obj, write_ply
 from .camera import Camera
 from .render import Renderer, render
@@ -20,7 +20,7 @@ from .viewer import view
 
 __version__ = "0.1.0"
 
-__all__ = ["cli", "init", "Scene", "Cloth", "MeshCloth", "Rope", "load_obj", "Simulator", "SceneError", "InstabilityError",
+__all__ = ["cli", "init", "Scene", "Cloth", "MeshCloth", "Rope", "load_obj", "Simulator", "SceneError", "InstabilityError", "ConvergenceWarning",
            "StaleSimulatorError", "Camera", "Renderer", "render", "record", "write_png",
            "export_mesh", "write_obj", "write_ply", "view",
            "__version__"]

@@ -21,3 +21,9 @@ class InstabilityError(RuntimeError):
 
 class StaleSimulatorError(RuntimeError):
     """A simulator was used after ``tcloth.init`` re-initialised Taichi."""
+
+
+class ConvergenceWarning(UserWarning):
+    """An implicit solver stopped at its iteration cap without converging; the step keeps
+    its best iterate (backward Euler: the lowest incremental potential found)."""
+

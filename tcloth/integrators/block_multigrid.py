@@ -376,6 +376,19 @@ class GridPCG(linalg.ConjugateGradients):
         self.mg.cycle()
         return self._update()
 
+    def precondition(self):
+        """x = B b: one V-cycle on the right-hand side."""
+        self._start()
+        self.mg.cycle()
+        self._take_cycle()
+
+    @ti.kernel
+    def _take_cycle(self):
+        ny, nx = ti.static(self.mg.shapes[0])
+        ti.loop_config(serialize=ti.static(self.mg.serial))
+        for j, i in ti.ndrange(ny, nx):
+            self.x[j + PAD, i + PAD] = self.mg.result(j, i)
+
     @ti.kernel
     def _update(self) -> ti.f64:
         """With z = B r: beta = r.z / (the last r.z) (0 at the first iteration);

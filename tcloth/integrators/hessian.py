@@ -53,6 +53,12 @@ class BlockHessian:
         linalg.scale_into(self.solver.b, -1.0, grad)
         return self.solver.solve(tol, max_iterations)
 
+    def descent(self, grad):
+        """dx = -P^-1 grad: the preconditioned gradient, P the projected (positive
+        definite) blocks' block Jacobi; a descent direction of the Hessian's scale."""
+        linalg.scale_into(self.solver.b, -1.0, grad)
+        self.solver.precondition()
+
     def product(self, p):
         """H p for a field p (after ``assemble``), as (N,3) NumPy."""
         self.solver.apply(p, self.solver.ap)
@@ -106,6 +112,13 @@ class GridHessian:
         result = self.solver.solve(tol, max_iterations)
         self._solution()
         return result
+
+    def descent(self, grad):
+        """dx = -B grad: one V-cycle of the projected Hessian's multigrid on the gradient
+        (symmetric positive definite), a descent direction of the Hessian's scale."""
+        self._rhs(grad)
+        self.solver.precondition()
+        self._solution()
 
     def product(self, p):
         shape = self.mg.shapes[0] + (3,)

@@ -100,7 +100,8 @@ class ConjugateGradients:
     """The iteration loop of a conjugate-gradient solver whose kernels ``_start`` (set up
     from x = 0, return r.r) and ``_iterate`` (one iteration, return r.r, or -1 when the
     matrix is not positive definite along the search direction p, leaving x as it was)
-    are given by a subclass, with fields ``x`` and ``p``."""
+    are given by a subclass, with fields ``x`` and ``p``, and ``precondition`` (x = the
+    preconditioner applied to b)."""
 
     def solve(self, tol, max_iterations):
         """Iterate from x = 0 until the residual has dropped to tol times |b| or
@@ -108,7 +109,9 @@ class ConjugateGradients:
         CG stops at the first direction of non-positive curvature, with x as it was, or
         at the first iteration with x = p, the preconditioned right-hand side (truncated
         CG as in Newton-CG, Nocedal & Wright, Numerical Optimization, Algorithm 7.1): for a
-        Newton step on E, with b = -grad E, x is then still a descent direction."""
+        Newton step on E, with b = -grad E, x is then still a descent direction (of any
+        length: near-zero positive curvature before the negative one can make it huge;
+        ``precondition`` gives a bounded one)."""
         r0 = np.sqrt(self._start())
         if r0 == 0.0:
             return 0, 0.0
@@ -183,6 +186,11 @@ class PCG(ConjugateGradients):
     def _iterate(self):
         self._couple(self.p)
         return self._iteration()
+
+    def precondition(self):
+        """x = P^-1 b on free particles (0 on pinned ones)."""
+        self._start()
+        copy_into(self.x, self.p)
 
     @ti.kernel
     def _start(self) -> ti.f64:
