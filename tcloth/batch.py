@@ -18,35 +18,20 @@ Python-callable gust, a GPU, a large scene).
 import taichi as ti
 
 from .integrators.linalg import copy
-from .runtime import serial
 
 
 @ti.func
-def first_bad(x, v, x_bound, v_bound):
-    """Smallest id whose position or velocity is non-finite or out of bounds, else -1."""
-    bad = 2147483647
-    ti.loop_config(serialize=ti.static(serial(x)))
-    for p in range(x.shape[0]):
-        ok = True
-        for c in ti.static(range(3)):
-            if not (abs(x[p][c]) <= x_bound and abs(v[p][c]) <= v_bound):
-                ok = False
-        if not ok:
-            ti.atomic_min(bad, p)
-    return -1 if bad == 2147483647 else bad
-
-
-@ti.func
-def _substep(integrator: ti.template(), limiter: ti.template(), a, b, t, dt, fresh,
-             x_bound, v_bound):
-    """One step of State a in place (b: scratch); returns ``first_bad`` of the result."""
+def _substep(integrator: ti.template(), limiter: ti.template(), budget: ti.template(), a, b,
+             t, dt, fresh, x_bound, v_bound):
+    """One step of State a in place (b: scratch); returns the budget's ``check`` of the
+    result (-1, a bad particle, or particles + the fastest one)."""
     integrator.advance(a, b, t, dt, fresh)
     if ti.static(bool(limiter)):
         limiter.limit(a, ti.cast(1.0 / dt, float))
-    return first_bad(a.x, a.v, x_bound, v_bound)
+    return budget.check(a.x, a.v, t + dt, x_bound, v_bound)
 
 
-def kernel(integrator, limiter, a, b, start, x_bound, v_bound):
+def kernel(integrator, limiter, budget, a, b, start, x_bound, v_bound):
     """The batch kernel of one configuration: ``run(n, fresh, time_base, steps_before, dt)``.
 
     Its objects are the closure's (compile-time constants), so a launch passes five
@@ -56,11 +41,11 @@ def kernel(integrator, limiter, a, b, start, x_bound, v_bound):
     ``run`` advances State a by n steps in place; b is scratch, and start gets a copy of a
     first. The time of step k's start is time_base + (steps_before + k) dt, in float64 as
     the simulator computes it. fresh: a's forces must be evaluated at the first step
-    (Verlet; after a strain limit they always are). It returns -1, or k * particles + p
-    for the first step k that leaves particle p (the smallest) non-finite or out of
-    bounds: the batch stops there, a holds that bad state, and the caller goes back to
-    ``start`` and runs the good steps again (the same numbers: the steps are
-    deterministic).
+    (Verlet; after a strain limit they always are). It returns -1, or k * 2 particles + c
+    for the first step k whose result the energy budget's ``check`` finds bad (c: its
+    code, below 2 particles): the batch stops there, a holds that bad state, and the
+    caller goes back to ``start`` and runs the good steps again (the same numbers: the
+    steps are deterministic).
     """
     @ti.kernel
     def run(n: ti.i32, fresh: ti.i32, time_base: ti.f64, steps_before: ti.i32,
@@ -75,9 +60,9 @@ def kernel(integrator, limiter, a, b, start, x_bound, v_bound):
             evaluate = fresh if k == 0 else 0
             if ti.static(bool(limiter)):
                 evaluate = 1
-            bad = _substep(integrator, limiter, a, b, t, dt, evaluate, x_bound, v_bound)
+            bad = _substep(integrator, limiter, budget, a, b, t, dt, evaluate, x_bound, v_bound)
             if bad >= 0:
-                result = ti.cast(k, ti.i64) * a.x.shape[0] + bad
+                result = ti.cast(k, ti.i64) * (2 * a.x.shape[0]) + bad
                 break
         return result
     return run

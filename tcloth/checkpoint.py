@@ -187,6 +187,10 @@ def read(path):
     """(meta dict, scene arrays, state arrays) from a checkpoint, checked."""
     if not os.path.isfile(path):
         raise SceneError(f"checkpoint {path!r} does not exist")
+    if not zipfile.is_zipfile(path):
+        # np.load would try the bytes as a pickle, and say so
+        raise SceneError(f"checkpoint {path!r} is not a readable .npz file: not a zip "
+                         "archive (truncated or damaged, or not written by Simulator.save)")
     try:
         with np.load(path, allow_pickle=False) as data:
             files = {k: data[k] for k in data.files}

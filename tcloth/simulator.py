@@ -2,28 +2,19 @@
 import numpy as np
 import taichi as ti
 
-from . import batch, checkpoint, runtime
+from . import batch, checkpoint, runtime, stability
+from .budget import EnergyBudget, check_state
 from .constraints import StrainLimiter
 from .diagnostics import Diagnostics
 from .errors import InstabilityError, SceneError
 from .integrators import INTEGRATORS
 from .model import Model
 from .runtime import serial_count
-from .scene import Scene
+from .scene import Scene, wind_velocity
 from .validate import as_int, as_points, as_scalar, as_vec3
 
-_HINTS = {
-    "forward_euler": "forward Euler gains energy at every dt on undamped springs: use "
-                     "symplectic_euler, verlet or an implicit integrator",
-}
 _DEFAULT_HINT = ("try a smaller dt, more spring damping (k_d) or air drag, "
                  "or an implicit integrator")
-
-
-@ti.kernel
-def _first_bad_particle(x: ti.template(), v: ti.template(), x_bound: float,
-                        v_bound: float) -> ti.i32:
-    return batch.first_bad(x, v, x_bound, v_bound)
 
 
 def _integrator_class(name):
@@ -58,7 +49,14 @@ class Simulator:
             rather than the spring list; both give the same forces.
         position_bound, velocity_bound: a step that leaves |x_k| <= position_bound (m,
             default 1e6) or |v_k| <= velocity_bound (m/s, default 1e8) in any coordinate
-            raises InstabilityError, as does any non-finite value.
+            raises InstabilityError, as does any non-finite value, and a step that gives
+            the particles more kinetic and gravitational energy than the scene can supply
+            (``budget.py``: the energy at the last baseline plus what gravity, wind,
+            moving colliders and moving pins can add, plus a margin of the scene's
+            energy scale).
+        energy_bound: apply that energy budget (default True); False leaves only the
+            non-finite values and the two bounds (to study how an integrator's energy
+            grows, as forward Euler's does on undamped springs).
         strain_limiting: apply the scene's strain limit (default True; see
             ``set_strain_limiting``).
         colliders_off: indices into ``scene.colliders`` of colliders switched off
@@ -78,8 +76,8 @@ class Simulator:
     """
 
     def __init__(self, scene, integrator="symplectic_euler", dt=1e-3, grid_stencil=True,
-                 position_bound=1e6, velocity_bound=1e8, strain_limiting=True,
-                 colliders_off=(), grab=False, batch=True, **options):
+                 position_bound=1e6, velocity_bound=1e8, energy_bound=True,
+                 strain_limiting=True, colliders_off=(), grab=False, batch=True, **options):
         if not isinstance(scene, Scene):
             raise SceneError(f"scene must be a tcloth.Scene (got {type(scene).__name__})")
         integrator_class = _integrator_class(integrator)
@@ -91,6 +89,7 @@ class Simulator:
         self.settings = {"grid_stencil": bool(grid_stencil),
                          "position_bound": self.position_bound,
                          "velocity_bound": self.velocity_bound,
+                         "energy_bound": bool(energy_bound),
                          "strain_limiting": bool(strain_limiting), "colliders_off": off,
                          "grab": bool(grab), "batch": bool(batch)}
         self.model = Model(scene, grid_stencil=bool(grid_stencil), colliders_off=off,
@@ -103,11 +102,13 @@ class Simulator:
         self._limiter = (StrainLimiter(self.model) if limit is not None and self.model.limit_count
                          else None)
         self._diag = Diagnostics(self.model)
+        self._budget = EnergyBudget(self.model, bool(energy_bound))
         self.num_steps = 0
         self._time_base, self._step_base = 0.0, 0      # the time at step _step_base
         self._batch_start = None                        # a batch's start state (batch.py)
         self._batch_kernels = {}     # (integrator, limiter, State) -> its batch kernel
         self._fusion = None          # (fusion(),) once computed; reset by the live changes
+        self._rebase()
 
     @property
     def scene(self):
@@ -142,8 +143,10 @@ class Simulator:
             if limiter is not None:
                 limiter.apply(s_out, self.dt)
                 self.integrator.invalidate()
-            bad = _first_bad_particle(s_out.x, s_out.v, self.position_bound,
-                                      self.velocity_bound)
+            t_end = self.time + self.dt
+            self._see_gust(t_end)
+            bad = check_state(self._budget, s_out.x, s_out.v, t_end, self.position_bound,
+                              self.velocity_bound)
             if bad >= 0:
                 self._raise_instability(bad)
             self._states.reverse()
@@ -182,15 +185,15 @@ class Simulator:
         key = (self.integrator, limiter, a)
         if key not in self._batch_kernels:
             self._batch_kernels[key] = batch.kernel(
-                self.integrator, limiter, a, b, self._batch_start, self.position_bound,
-                self.velocity_bound)
+                self.integrator, limiter, self._budget, a, b, self._batch_start,
+                self.position_bound, self.velocity_bound)
         run = self._batch_kernels[key]
         fresh = 0 if self.integrator.holds_forces(a) else 1
         args = (fresh, self._time_base, self.num_steps - self._step_base, self.dt)
         done, bad = n, -1
         code = run(n, *args)
         if code >= 0:
-            done, bad = divmod(code, self.model.particle_count)
+            done, bad = divmod(code, 2 * self.model.particle_count)
             # back to the batch's start, and again through the good steps only
             for name in ("x", "v", "f"):
                 getattr(a, name).copy_from(getattr(self._batch_start, name))
@@ -205,16 +208,53 @@ class Simulator:
         if bad >= 0:
             self._raise_instability(bad)
 
-    def _raise_instability(self, particle):
+    def _see_gust(self, t):
+        """A callable gust's speed at t into the energy budget (its fastest so far)."""
+        wind = self.model.wind
+        if wind is not None and wind["callable"] is not None:
+            if self._budget.see_wind(float(np.linalg.norm(wind_velocity(wind, t)))):
+                self._rebase()
+
+    def _rebase(self):
+        """A new energy baseline at the current state (``budget.py``): after a change
+        that adds or removes energy from outside the equations of motion."""
+        state = self.state
+        self._budget.rebase(self._diag.energy(state), runtime.to_numpy(state.x),
+                            runtime.to_numpy(state.v), self.time,
+                            self.settings["colliders_off"])
+
+    def _raise_instability(self, code):
         step = self.num_steps + 1
         t = self.time + self.dt
-        hint = _HINTS.get(self.integrator_name, _DEFAULT_HINT)
+        n = self.model.particle_count
+        hint = self._hint()
+        if code < n:
+            what = (f"left particle {code} non-finite or beyond |x| <= "
+                    f"{self.position_bound:g} m, |v| <= {self.velocity_bound:g} m/s")
+        else:
+            budget = self._budget
+            what = (f"gave the particles more kinetic and gravitational energy than the "
+                    f"scene can supply (limit {budget.limit(t):.4g} J from its energy "
+                    f"{budget.values['baseline']:.4g} J at t = {budget.values['time']:.6g} s, "
+                    f"budget.py; the fastest particle is {code - n})")
         raise InstabilityError(
             f"step {step} (t = {t:.6g} s, dt = {self.dt:.3g} s) of integrator "
-            f"'{self.integrator_name}' left particle {particle} non-finite or beyond "
-            f"|x| <= {self.position_bound:g} m, |v| <= {self.velocity_bound:g} m/s; "
-            f"the last good state (t = {self.time:.6g} s) is kept. Hint: {hint}.",
+            f"'{self.integrator_name}' {what}; the last good state (t = {self.time:.6g} s) "
+            f"is kept. Hint: {hint}.",
             step=step, time=t, integrator=self.integrator_name)
+
+    def _hint(self):
+        if self.integrator_name in ("backward_euler", "projective"):
+            return ("try a smaller dt, more solver iterations (newton_iterations, "
+                    "iterations) or more damping")
+        if self.integrator_name != "forward_euler":
+            return _DEFAULT_HINT
+        if not (self.scene.springs["damping"] > 0.0).any():
+            return ("forward Euler gains energy at every dt on undamped springs: use "
+                    "symplectic_euler, verlet or an implicit integrator")
+        return (f"forward Euler is stable only well below the springs' explicit limit "
+                f"(about {stability.gershgorin_dt(self.scene):.2g} s here) and with enough "
+                f"damping: use symplectic_euler, verlet or an implicit integrator")
 
     def positions(self):
         """(N,3) NumPy copy of the positions, m."""
@@ -246,6 +286,7 @@ class Simulator:
                 raise SceneError(f"{name} must have shape ({n}, 3) (got {arr.shape})")
             field.from_numpy(arr.astype(npr))
         self.integrator.invalidate()
+        self._rebase()
 
     def reset(self, dt=None):
         """Back to the scene's initial positions and velocities at t = 0, optionally with a
@@ -254,10 +295,10 @@ class Simulator:
         self._check()
         if dt is not None:
             self.dt = as_scalar("dt", dt, minimum=0.0, strict=True)
-        self.set_state(self.scene.positions, self.scene.velocities)
         self.num_steps = 0
         self._time_base, self._step_base = 0.0, 0
         self.state.t = 0.0
+        self.set_state(self.scene.positions, self.scene.velocities)
 
     # -- live changes ------------------------------------------------------------------------
     def set_integrator(self, integrator, **options):
@@ -320,6 +361,7 @@ class Simulator:
         self._fusion = None
         self.model.refresh(self.settings["colliders_off"])
         self.integrator.parameters_changed()
+        self._rebase()
 
     def grab(self, particle, target, stiffness=None, damping=None):
         """Pull particle ``particle`` towards ``target`` (3,) m with a zero-rest-length
@@ -341,6 +383,7 @@ class Simulator:
             as_scalar("damping", damping, minimum=0.0)
         self.model.grab.hold(particle, target, k, c)
         self.integrator.invalidate()
+        self._rebase()
 
     def release(self):
         """Let go of the grabbed particle (nothing happens when none is held)."""
@@ -348,6 +391,7 @@ class Simulator:
         if self.model.grab is not None:
             self.model.grab.release()
             self.integrator.invalidate()
+            self._rebase()
 
     @property
     def grabbed(self):
@@ -388,6 +432,7 @@ class Simulator:
         if meta.get("grabbed"):
             held = meta["grabbed"]
             sim.grab(held["particle"], held["target"], held["stiffness"], held["damping"])
+        sim._rebase()
         return sim
 
     def energy(self):

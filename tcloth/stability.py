@@ -65,3 +65,30 @@ def explicit_dt_limit(scene):
     springs)."""
     w = omega_max(scene)
     return 2.0 / w if w > 0 else float("inf")
+
+
+def gershgorin_dt(scene):
+    """2 / omega_bound, s: a lower bound on symplectic Euler's stability limit from
+    Gershgorin's theorem (no eigenvalue solve, so cheap at any size): omega^2 <= max over
+    free particles i of sum over i's springs of k_s (1/m_i + 1/sqrt(m_i m_j)), the row sums
+    of M^-1/2 K M^-1/2 at rest length. Colliders and self-contact add their penalty
+    stiffness k / m_i (a particle pressed by one contact at a time). inf without springs
+    or contacts."""
+    m = scene.masses
+    free = ~np.asarray(scene.pinned, dtype=bool)
+    rows = np.zeros(len(m))
+    springs = scene.springs
+    if len(springs["pairs"]):
+        i, j = springs["pairs"][:, 0], springs["pairs"][:, 1]
+        k = springs["stiffness"]
+        cross = k / np.sqrt(m[i] * m[j])
+        np.add.at(rows, i, k / m[i] + cross)
+        np.add.at(rows, j, k / m[j] + cross)
+    contact = max([c["stiffness"] for c in scene.colliders], default=0.0)
+    if scene.self_collision is not None:
+        own = scene.self_collision["stiffness"]
+        contact = max(contact, own if own is not None else
+                      scene.mean_stiffness("structural") or 0.0)
+    rows += contact / m
+    bound = rows[free].max() if free.any() else 0.0
+    return 2.0 / np.sqrt(bound) if bound > 0 else float("inf")

@@ -172,7 +172,8 @@ def record(sim, path, frames=240, steps_per_frame=10, fps=30, width=640, height=
             bar.update(k + 1)
     except InstabilityError as err:
         sink.close()
-        err.args = (f"{err.args[0]} Kept {sink.count} good frames in {path}.",)
+        kept = f"{sink.count} good frame{'' if sink.count == 1 else 's'}"
+        err.args = (f"{err.args[0]} Kept {kept} in {path}.",)
         raise
     except BaseException:
         sink.abort()

@@ -75,6 +75,11 @@ def test_damaged_checkpoints_are_refused_clearly(f64, tmp_path):
         tcloth.Simulator.load(str(tmp_path / "short.npz"))
     with pytest.raises(SceneError, match="does not exist"):
         tcloth.Simulator.load(str(tmp_path / "absent.npz"))
+    text = tmp_path / "notes.npz"
+    text.write_text("not a checkpoint\n")
+    with pytest.raises(SceneError, match="not a readable .npz file") as err:
+        tcloth.Simulator.load(str(text))
+    assert "pickle" not in str(err.value)
     tcloth.init(precision="f32")
     with pytest.raises(SceneError, match="precision"):
         tcloth.Simulator.load(path)
@@ -139,11 +144,42 @@ def test_render_keeps_good_frames_when_the_run_blows_up(tmp_path):
     assert "unstable" in res.stderr and "step" in res.stderr and "Kept" in res.stderr
     kept = int(res.stderr.split("Kept ")[1].split()[0])
     assert 0 < kept < 200 and out.exists()
+    assert f"Kept {kept} good frame{'' if kept == 1 else 's'} in" in res.stderr
     assert len(os.listdir(meshes)) == kept
     import imageio_ffmpeg
     reader = imageio_ffmpeg.read_frames(str(out))
     next(reader)
     assert len(list(reader)) == kept
+
+
+def hanging_cloth():
+    return tcloth.script.load_script(os.path.join(ROOT, "scenes", "hanging_cloth.py"))[0].build()
+
+
+@pytest.mark.parametrize("integrator,dt_over_limit", [
+    ("forward_euler", 0.39), ("symplectic_euler", 1.2), ("symplectic_euler", 3.0),
+    ("verlet", 1.2), ("rk4", 1.6)])
+def test_a_blow_up_keeps_a_state_that_looks_like_the_cloth(integrator, dt_over_limit):
+    """The energy budget stops each explicit integrator's blow-up of the demo cloth while
+    the kept state is still cloth (strain below 50 %), in a batch and step by step alike;
+    forward Euler at the scene's own dt (0.39 of symplectic Euler's limit) blows up too,
+    and its hint speaks of damped springs, which it has."""
+    tcloth.init(precision="f32")
+    dt = dt_over_limit * tcloth.stability.explicit_dt_limit(hanging_cloth())
+    kept = []
+    for batch in (True, False):
+        sim = tcloth.Simulator(hanging_cloth(), integrator, dt=dt, batch=batch)
+        with pytest.raises(InstabilityError) as err:
+            sim.step(20000)
+        assert sim.num_steps == err.value.step - 1
+        assert "energy than the scene can supply" in str(err.value)
+        assert sim.max_strain() < 0.5
+        energy = sim.energy()
+        assert energy["total"] < 10 * energy["gravity"]
+        kept.append((err.value.step, sim.positions()))
+    assert kept[0][0] == kept[1][0] and np.array_equal(kept[0][1], kept[1][1])
+    if integrator == "forward_euler":
+        assert "undamped" not in str(err.value) and "explicit limit" in str(err.value)
 
 
 # -- fuzzing -----------------------------------------------------------------------------
