@@ -6,11 +6,12 @@ import os
 os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "False")
 
 from . import cli  # noqa: E402  (after the environment default above)
-from .errors import ConvergenceWarning, InstabilityError, SceneError, StaleSimulatorError
+from .errors import (ConvergenceWarning, DeviceWarning, InstabilityError, SceneError,
+                     StaleSimulatorError)
 from .mesh import export_mesh, write_obj, write_ply
 from .camera import Camera
 from .render import Renderer, render
-from .runtime import init
+from .runtime import device, init
 from .builders import Cloth, MeshCloth, Rope
 from .objfile import load_obj
 from .scene import Scene
@@ -20,7 +21,7 @@ from .viewer import view
 
 __version__ = "0.1.0"
 
-__all__ = ["cli", "init", "Scene", "Cloth", "MeshCloth", "Rope", "load_obj", "Simulator", "SceneError", "InstabilityError", "ConvergenceWarning",
+__all__ = ["cli", "init", "device", "Scene", "Cloth", "MeshCloth", "Rope", "load_obj", "Simulator", "SceneError", "InstabilityError", "ConvergenceWarning", "DeviceWarning",
            "StaleSimulatorError", "Camera", "Renderer", "render", "record", "write_png",
            "export_mesh", "write_obj", "write_ply", "view",
            "__version__"]

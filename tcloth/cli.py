@@ -3,74 +3,40 @@
 
 A scene script defines ``build(**params) -> tcloth.Scene`` and a dict ``CONFIG`` with any
 of: description, integrator, dt, steps_per_frame, frames, fps, camera, width, height,
-supersample, options (integrator options), render (Renderer options), precision.
+supersample, options (integrator options), render (Renderer options), precision
+(``script.py``: loading, the defaults, the step a script without dt gets).
 """
 import argparse
-import ast
 import glob
-import importlib.util
 import os
 import sys
 import traceback
+import warnings
 
 from .errors import InstabilityError, SceneError
-
-DEFAULTS = {"integrator": "symplectic_euler", "dt": 1e-3, "steps_per_frame": 10,
-            "frames": 120, "fps": 30, "camera": None, "width": 640, "height": 480,
-            "supersample": 2, "options": {}, "render": {}, "precision": "f32"}
+from .script import (ScriptError, build_scene, describe, load_script, parse_settings,
+                     timing)
 
 
-class ScriptError(Exception):
-    """A scene script that cannot be used; the message names the path."""
+def init(arch, precision):
+    """tcloth.init for the command line: one line on what it runs on, and any
+    DeviceWarning (a GPU asked for, a CPU or software driver given) as a line of its own."""
+    import tcloth
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", tcloth.DeviceWarning)
+        tcloth.init(arch=arch, precision=precision)
+    print(f"tcloth: running on {tcloth.device()} in {precision}", file=sys.stderr)
+    for w in caught:
+        if issubclass(w.category, tcloth.DeviceWarning):
+            print(f"tcloth: warning: {w.message}", file=sys.stderr)
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
 
 
-def load_script(path):
-    """Import a scene script; returns (module, CONFIG merged over DEFAULTS)."""
-    if not os.path.isfile(path):
-        raise ScriptError(f"scene script {path!r} does not exist")
-    name = "tcloth_scene_" + os.path.splitext(os.path.basename(path))[0]
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    try:
-        spec.loader.exec_module(module)
-    except Exception as e:
-        raise ScriptError(f"scene script {path!r} raised {type(e).__name__}: {e}") from e
-    if not callable(getattr(module, "build", None)):
-        raise ScriptError(f"scene script {path!r} defines no build(**params) function")
-    config = getattr(module, "CONFIG", {})
-    if not isinstance(config, dict):
-        raise ScriptError(f"scene script {path!r}: CONFIG must be a dict "
-                          f"(got {type(config).__name__})")
-    unknown = sorted(set(config) - set(DEFAULTS) - {"description"})
-    if unknown:
-        raise ScriptError(f"scene script {path!r}: unknown CONFIG key {unknown[0]!r} "
-                          f"(known: {sorted(DEFAULTS)})")
-    return module, {**DEFAULTS, **config}
-
-
-def build_scene(module, path):
-    """The Scene of a loaded script's build(), or ScriptError naming the script."""
-    from .scene import Scene
-    try:
-        scene = module.build()
-    except SceneError:
-        raise
-    except Exception as e:
-        raise ScriptError(f"scene script {path!r}: build() raised {type(e).__name__}: {e}") from e
-    if not isinstance(scene, Scene):
-        raise ScriptError(f"scene script {path!r}: build() must return a tcloth.Scene "
-                          f"(got {type(scene).__name__})")
-    return scene
-
-
-def describe(path):
-    """The first line of a script's docstring, read without running it."""
-    try:
-        with open(path) as f:
-            doc = ast.get_docstring(ast.parse(f.read())) or ""
-    except (OSError, SyntaxError) as e:
-        return f"(unreadable: {e})"
-    return doc.strip().splitlines()[0] if doc.strip() else "(no description)"
+def _set_argument(parser):
+    parser.add_argument("--set", action="append", metavar="NAME=VALUE",
+                        help="a build() parameter of the script, e.g. --set resolution=[64,64]"
+                             " --set thickness=0.004 (repeatable; VALUE a Python literal)")
 
 
 def _render_parser(parser):
@@ -86,6 +52,7 @@ def _render_parser(parser):
     parser.add_argument("--height", type=int, help="image height, pixels")
     parser.add_argument("--supersample", type=int, help="s x s samples per pixel")
     parser.add_argument("--meshes", help="also write each frame's cloth mesh (OBJ) here")
+    _set_argument(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument("--verbose", action="store_true", help="tracebacks on errors")
 
@@ -95,6 +62,7 @@ def render_script(path, args):
     import tcloth
 
     module, cfg = load_script(path)
+    params = parse_settings(module, path, args.set)
     for key in ("frames", "integrator", "dt", "steps_per_frame", "precision", "width",
                 "height", "supersample"):
         if getattr(args, key) is not None:
@@ -102,10 +70,11 @@ def render_script(path, args):
     name = os.path.splitext(os.path.basename(path))[0]
     out = args.out or os.path.join("out", name + ".mp4")
     tcloth.video.check_writable(out)
-    tcloth.init(arch=args.arch, precision=cfg["precision"])
-    scene = build_scene(module, path)
-    sim = tcloth.Simulator(scene, cfg["integrator"], dt=cfg["dt"], **cfg["options"])
-    return tcloth.record(sim, out, frames=cfg["frames"], steps_per_frame=cfg["steps_per_frame"],
+    init(args.arch, cfg["precision"])
+    scene = build_scene(module, path, params)
+    dt, steps = timing(cfg, scene)
+    sim = tcloth.Simulator(scene, cfg["integrator"], dt=dt, **cfg["options"])
+    return tcloth.record(sim, out, frames=cfg["frames"], steps_per_frame=steps,
                          fps=cfg["fps"], width=cfg["width"], height=cfg["height"],
                          camera=cfg["camera"], supersample=cfg["supersample"],
                          progress=not args.quiet, mesh_dir=args.meshes, **cfg["render"])
@@ -117,6 +86,7 @@ def view_script(path, args):
     from .viewer import DisplayError, Viewer, check_display
 
     module, cfg = load_script(path)
+    params = parse_settings(module, path, args.set)
     for key in ("integrator", "dt", "precision"):
         if getattr(args, key) is not None:
             cfg[key] = getattr(args, key)
@@ -128,14 +98,15 @@ def view_script(path, args):
         check_display()
     except DisplayError as e:
         raise ViewerUnavailable(str(e)) from None
-    tcloth.init(arch=args.arch, precision=cfg["precision"])
-    scene = build_scene(module, path)
+    init(args.arch, cfg["precision"])
+    scene = build_scene(module, path, params)
     if args.wind and scene.wind is None:
         scene.set_wind((0.0, 0.0, 0.0))
-    sim = tcloth.Simulator(scene, cfg["integrator"], dt=cfg["dt"], grab=True, **cfg["options"])
+    dt, steps = timing(cfg, scene)
+    sim = tcloth.Simulator(scene, cfg["integrator"], dt=dt, grab=True, **cfg["options"])
     render = cfg["render"]
     try:
-        viewer = Viewer(sim, substeps=args.substeps or cfg["steps_per_frame"],
+        viewer = Viewer(sim, substeps=args.substeps or steps,
                         camera=cfg["camera"], width=args.width, height=args.height,
                         ground=render.get("ground"), cloth_colours=render.get("cloth_colours"),
                         title=f"tcloth: {os.path.basename(path)}")
@@ -235,6 +206,7 @@ def main(argv=None):
     p_view.add_argument("--screenshot", help="save the window's image (PNG) at the last "
                                              "frame; needs --frames (no screen: xvfb-run -a)")
     p_view.add_argument("--verbose", action="store_true", help="tracebacks on errors")
+    _set_argument(p_view)
     args = parser.parse_args(argv)
     if args.command == "view":
         return _guarded(lambda: view_script(args.script, args), args.verbose)

@@ -27,3 +27,6 @@ class ConvergenceWarning(UserWarning):
     """An implicit solver stopped at its iteration cap without converging; the step keeps
     its best iterate (backward Euler: the lowest incremental potential found)."""
 
+
+class DeviceWarning(UserWarning):
+    """A GPU was asked for and the CPU or a software (CPU) Vulkan driver was given."""

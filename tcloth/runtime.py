@@ -3,10 +3,12 @@
 ``init`` may be called again; every call starts a new *generation*, and objects that
 hold Taichi fields from an earlier generation refuse to run (``StaleSimulatorError``).
 """
+import warnings
+
 import numpy as np
 import taichi as ti
 
-from .errors import SceneError, StaleSimulatorError
+from .errors import DeviceWarning, SceneError, StaleSimulatorError
 
 _ARCHS = {
     "auto": lambda: None,
@@ -29,6 +31,7 @@ class _Runtime:
     real = ti.f32
     precision = "f32"
     arch_name = "cpu"
+    device = "the CPU"
     serial_below = SERIAL_BELOW
 
 
@@ -48,6 +51,10 @@ def init(arch="cpu", precision="f32", serial_below=None, **kwargs):
     substeps against single steps, a checkpoint's continuation) and on CPUs with other
     vector units (AVX2 against AVX-512). It costs about 2 % of an explicit substep
     (docs/benchmarks.md, "Fast math and the scene snapshots").
+
+    A request for a GPU that lands on the CPU (Taichi falls back without a word) or on a
+    software Vulkan driver warns (``tcloth.DeviceWarning``); ``device()`` says what it
+    runs on.
     """
     if arch not in _ARCHS:
         raise SceneError(f"arch must be one of {sorted(_ARCHS)} (got {arch!r})")
@@ -71,7 +78,37 @@ def init(arch="cpu", precision="f32", serial_below=None, **kwargs):
     _Runtime.real = real
     _Runtime.precision = precision
     _Runtime.arch_name = ti.lang.impl.current_cfg().arch.name
+    _Runtime.device = _device()
+    gpu_asked = arch in ("gpu", "cuda", "vulkan", "metal")
+    if gpu_asked and cpu():
+        warnings.warn(f"arch={arch!r} asked for a GPU, and none that Taichi can use is here: "
+                      f"running on {_Runtime.device}", DeviceWarning, stacklevel=2)
+    elif "software" in _Runtime.device:
+        warnings.warn(f"arch={arch!r} runs on {_Runtime.device}, which works on the CPU far "
+                      "slower than arch='cpu'", DeviceWarning, stacklevel=2)
     return _Runtime.generation
+
+
+def _device():
+    """What the current arch runs on, in words."""
+    name = _Runtime.arch_name
+    if cpu():
+        return f"the CPU ({name}, {ti.lang.impl.current_cfg().cpu_max_num_threads} threads)"
+    if name == "vulkan":
+        from .vulkan_probe import devices
+        found = devices()
+        if found and all(kind == "CPU" for _, kind in found):
+            return f"Vulkan on {found[0][0]} (a software driver)"
+        gpus = [n for n, kind in found if kind != "CPU"]
+        return f"Vulkan on {gpus[0]}" if gpus else "Vulkan"
+    return {"cuda": "CUDA", "metal": "Metal", "opengl": "OpenGL"}.get(name, name)
+
+
+def device():
+    """What tcloth runs on, in words (e.g. "the CPU (x64, 2 threads)", "CUDA",
+    "Vulkan on llvmpipe (...) (a software driver)")."""
+    ensure_init()
+    return _Runtime.device
 
 
 def ensure_init():

@@ -10,7 +10,7 @@ import pytest
 
 import tcloth
 from tcloth import Camera
-from tcloth.render import COLLIDER_ID
+from tcloth.render import COLLIDER_ID, ground_and_checker
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RED, GREEN, BLUE = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)
@@ -163,3 +163,117 @@ def test_cli_errors_are_clear_with_exit_code_2(tmp_path):
     res = run_cli("render", os.path.join(ROOT, "scenes", "rope.py"), "--out",
                   str(blocked / "sub" / "out.mp4"))
     assert res.returncode == 2 and "output folder" in res.stderr
+
+
+# -- the ground, scripts without CONFIG, --set, --arch (issue 34) -------------------------
+def readme_example():
+    """The Python block under "A scene in a few lines" in README.md."""
+    with open(os.path.join(ROOT, "README.md")) as f:
+        text = f.read()
+    section = text.split("## A scene in a few lines", 1)[1]
+    return section.split("```python", 1)[1].split("```", 1)[0]
+
+
+def test_the_readme_example_shows_what_it_says(f32, monkeypatch):
+    """Its cloth swings onto its sphere (contact energy), and the ground is drawn below
+    everything the cloth reaches, not through it (it was at y = 0.293, from the cloth's
+    start, hiding the cloth's lower 30 cm and half the sphere)."""
+    seen = {"contact": 0.0, "lowest": np.inf, "frames": 0}
+
+    def record(sim, path, frames, steps_per_frame, **options):
+        for _ in range(frames):
+            sim.step(steps_per_frame)
+            seen["contact"] = max(seen["contact"], sim.energy()["contact"])
+            seen["lowest"] = min(seen["lowest"], sim.positions()[:, 1].min())
+            seen["frames"] += 1
+        seen["sim"] = sim
+    monkeypatch.setattr(tcloth, "record", record)
+    monkeypatch.setattr(tcloth, "init", lambda **kwargs: None)
+    exec(readme_example(), {"__name__": "readme"})
+    scene = seen["sim"].scene
+    ground, _ = ground_and_checker(scene, None, np.sqrt(2.0))
+    sphere = scene.colliders[0]
+    assert seen["frames"] == 90 and seen["contact"] > 0.0
+    assert ground < seen["lowest"] and ground < sphere["center"][1] - sphere["radius"]
+
+
+def test_a_ground_is_drawn_only_below_what_can_reach_it():
+    scene = tcloth.Scene()
+    scene.add_cloth(resolution=(6, 6), size=(1, 1), center=(0, 1, 0), pinned=[(0, 0)])
+    ground, _ = ground_and_checker(scene, None, 1.0)
+    # the far corner hangs at most its shortest spring path below the pin (1 m of
+    # structural springs, or sqrt(2) m of shear ones: sqrt(2) * 1.25 stretched)
+    assert ground < 1.0 - 1.25 * np.sqrt(2.0) + 1e-9
+    free = tcloth.Scene()
+    free.add_cloth(resolution=(6, 6), pinned=[])
+    free.add_sphere((0, 0, 0), 0.3)
+    assert ground_and_checker(free, None, 1.0)[0] is False
+    free.add_plane()
+    assert ground_and_checker(free, None, 1.0)[0] is False
+    assert ground_and_checker(free, 0.25, 1.0)[0] == 0.25
+    floating = tcloth.Scene(gravity=(0, 0, 0))
+    floating.add_particles([[0, 1, 0], [0, 2, 0]])
+    assert ground_and_checker(floating, None, 1.0)[0] < 1.0
+
+
+CONFIGLESS = ("import tcloth\n"
+              "def build(resolution=(32, 32)):\n"
+              "    scene = tcloth.Scene(gravity=(0, -9.81, 0), air_drag=2e-4)\n"
+              "    scene.add_cloth(resolution=resolution, size=(1, 1), center=(0, 1, 0),\n"
+              "                    mass=0.2, structural=(400, 0.05), shear=(80, 0.02),\n"
+              "                    flexion=(10, 0.005), pinned=[(0, 0), (resolution[0] - 1, 0)])\n"
+              "    return scene\n")
+
+
+def test_a_script_without_config_gets_a_stable_real_time_step(f32, tmp_path):
+    """The README's cloth as a script with no CONFIG: the old default dt = 1e-3 blew it up
+    at step 20. The step from its springs is below symplectic Euler's limit, a frame is
+    1/30 s of simulated time, and a second of it runs without blowing up; --dt alone
+    keeps real time too."""
+    script = tmp_path / "bare.py"
+    script.write_text(CONFIGLESS)
+    module, cfg = tcloth.script.load_script(str(script))
+    scene = module.build()
+    dt, steps = tcloth.script.timing(cfg, scene)
+    assert dt < tcloth.stability.explicit_dt_limit(scene)
+    assert steps * dt == pytest.approx(1 / 30, rel=1e-12)
+    tcloth.Simulator(scene, cfg["integrator"], dt=dt).step(30 * steps)
+    assert tcloth.script.timing({**cfg, "dt": 1e-4}, scene) == (1e-4, 333)
+    assert tcloth.script.timing({**cfg, "integrator": "backward_euler"}, scene)[1] == 4
+    with pytest.raises(tcloth.InstabilityError):
+        tcloth.Simulator(scene, "symplectic_euler", dt=1e-3).step(400)
+
+
+def test_cli_set_passes_build_parameters_and_names_unknown_ones(tmp_path):
+    script = tmp_path / "bare.py"
+    script.write_text(CONFIGLESS)
+    meshes = tmp_path / "meshes"
+    res = run_cli("render", str(script), "--out", str(tmp_path / "f"), "--frames", "2",
+                  "--width", "32", "--height", "24", "--supersample", "1", "--quiet",
+                  "--set", "resolution=[6,5]", "--meshes", str(meshes))
+    assert res.returncode == 0, res.stderr
+    assert "running on the CPU" in res.stderr
+    with open(meshes / "frame_00000.obj") as f:
+        assert sum(line.startswith("v ") for line in f) == 30
+    res = run_cli("render", str(script), "--out", str(tmp_path / "g"), "--set", "size=2")
+    assert res.returncode == 2 and "no build parameter 'size'" in res.stderr
+    assert "resolution" in res.stderr and "Traceback" not in res.stderr
+    res = run_cli("render", str(script), "--out", str(tmp_path / "g"), "--set", "resolution")
+    assert res.returncode == 2 and "NAME=VALUE" in res.stderr
+
+
+def test_a_gpu_asked_for_and_not_given_is_said():
+    """Taichi falls back to the CPU without a word when no CUDA is there, and Vulkan may be
+    a software driver on the CPU (lavapipe): tcloth warns in both cases."""
+    try:
+        with pytest.warns(tcloth.DeviceWarning, match="running on the CPU"):
+            tcloth.init(arch="cuda")
+        assert tcloth.runtime.cpu()
+    except pytest.fail.Exception:
+        assert not tcloth.runtime.cpu()        # a real CUDA device: nothing to say
+    from tcloth.vulkan_probe import devices
+    found = devices()
+    if found and all(kind == "CPU" for _, kind in found):
+        with pytest.warns(tcloth.DeviceWarning, match="software driver"):
+            tcloth.init(arch="vulkan")
+    tcloth.init(arch="cpu")

@@ -175,3 +175,31 @@ def test_interrupted_sweep_resumes_computing_each_case_once(tmp_path):
     for a, b in zip(rows, again):
         assert np.isclose(float(a["error"] or "nan"), float(b["error"] or "nan"),
                           equal_nan=True) and a["stable"] == b["stable"]
+
+
+def test_ctrl_c_on_a_pool_sweep_prints_its_line_and_exits_4(tmp_path):
+    """Ctrl-C in a terminal signals the whole process group: the Dask pool's processes
+    used to die of it, and the sweep then printed Dask's tracebacks or waited 60 s for
+    Client.__del__. They ignore it now; only the line and exit code 4 remain."""
+    import glob
+    import time
+    spec = tmp_path / "spec.toml"
+    spec.write_text(f'scene = "{SCENE}"\nduration = 0.5\n'
+                    '[vary]\nk = [100.0, 200.0, 300.0, 400.0, 500.0, 600.0, 700.0, 800.0]\n'
+                    'dt = [1e-4]\n')
+    out = tmp_path / "o"
+    proc = subprocess.Popen([sys.executable, "-m", "tcloth", "sweep", str(spec), "--out",
+                             str(out), "--quiet", "--workers", "2"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    deadline = time.time() + 300
+    while not glob.glob(str(out / "cases" / "*.json")) and time.time() < deadline:
+        assert proc.poll() is None, proc.communicate()
+        time.sleep(0.2)
+    os.killpg(proc.pid, signal.SIGINT)
+    interrupted = time.time()
+    stdout, stderr = proc.communicate(timeout=120)
+    assert proc.returncode == 4, stdout + stderr
+    assert "interrupted" in stderr and "run the same command again" in stderr
+    assert "Traceback" not in stderr and "Error" not in stderr, stderr
+    assert time.time() - interrupted < 30

@@ -30,7 +30,7 @@ import os
 import numpy as np
 
 from benchcsv import write_csv
-from tcloth.cli import load_script
+from tcloth.script import load_script
 from tcloth.stability import omega_max
 from tcloth.sweep import Runner, load_spec
 from tcloth.sweep.plots import stability_map

@@ -25,7 +25,7 @@ import os
 import numpy as np
 
 import tcloth
-from tcloth.cli import load_script
+from tcloth.script import load_script
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 SCENES = os.path.join(HERE, "..", "scenes")

@@ -6,11 +6,14 @@ Output folder: ``cases/ID.json`` (one finished case, written atomically), ``refe
 ID.npz``, ``results.csv`` (every case of the spec in order), ``metadata.json`` (the spec,
 the package versions, the backend), and the plots.
 """
+import contextlib
 import csv
 import datetime
 import json
 import math
 import os
+import signal
+import threading
 import uuid
 
 import numpy as np
@@ -72,6 +75,23 @@ class Store:
                       lambda f: np.savez(f, **arrays), mode="wb")
 
 
+@contextlib.contextmanager
+def _sigint_ignored():
+    """SIGINT ignored while the local pool's processes start: they inherit it (an ignored
+    signal stays ignored across exec), so Ctrl-C in a terminal, which signals the whole
+    process group, interrupts only this process, which then shuts the pool down; the
+    workers themselves dying of it made the shutdown wait 60 s and print Dask's
+    tracebacks."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 def _cores():
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
 
@@ -107,7 +127,8 @@ class Runner:
         if scheduler is None:
             workers = workers or _cores()
             threads = threads or max(1, _cores() // workers)
-            with dask.config.set({"distributed.scheduler.allowed-failures": 0}):
+            with dask.config.set({"distributed.scheduler.allowed-failures": 0}), \
+                    _sigint_ignored():
                 self.cluster = LocalCluster(n_workers=workers, threads_per_worker=1,
                                             processes=True, dashboard_address=None,
                                             memory_limit=0, silence_logs=50)

@@ -15,7 +15,7 @@ import sys
 
 import numpy as np
 
-from ..cli import load_script
+from ..script import load_script
 from ..stability import explicit_dt_limit
 from .spec import SETTINGS
 

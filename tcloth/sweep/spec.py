@@ -28,7 +28,7 @@ import json
 import math
 import os
 
-from ..cli import ScriptError, load_script
+from ..script import ScriptError, build_scene, load_script, timing
 from ..errors import SceneError
 from ..integrators import INTEGRATORS
 
@@ -140,6 +140,12 @@ class Spec:
         self.build = dict(data.get("build", {}))
         for name in self.build:
             self._check_parameter(f"build.{name}", name)
+        if self.settings["dt"] is None:         # the script's own rule (script.timing)
+            try:
+                scene = build_scene(module, self.scene, self.build)
+            except ScriptError as e:
+                raise SpecError(str(e)) from None
+            self.settings["dt"] = timing({**config, **self.settings}, scene)[0]
         self.vary = self._vary(data.get("vary", {}))
         self.reference = self._reference(data.get("reference"))
 

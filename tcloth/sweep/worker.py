@@ -11,7 +11,7 @@ from collections import OrderedDict
 import numpy as np
 
 from .. import runtime
-from ..cli import load_script
+from ..script import load_script
 from ..errors import InstabilityError
 from ..simulator import Simulator
 
