@@ -30,7 +30,8 @@ COLLIDER_ID = 1 << 30          # collider c has id COLLIDER_ID + c
 PARTICLE_COLOUR = (0.95, 0.78, 0.25)
 COLLIDER_COLOUR = (0.50, 0.58, 0.66)
 LIGHT_DIR = (0.35, 0.85, 0.4)
-SHADOW_MAP = 768
+SHADOW_MAP = 1024
+CONTACT_REACH = 3.0     # a particle within this many thicknesses of a collider rests on it
 
 
 @ti.data_oriented
@@ -98,6 +99,8 @@ class Renderer:
         self.colour = ti.Vector.field(3, ti.f32, shape=(H, W))
         self.image = ti.Vector.field(3, ti.u8, shape=(self.height, self.width))
         self.normals = ti.Vector.field(3, ti.f32, shape=scene.num_particles)
+        # 1 where a particle is within CONTACT_REACH thicknesses of a collider this frame
+        self.near_collider = ti.field(ti.i32, shape=scene.num_particles)
         self.tris = ti.Vector.field(3, ti.i32, shape=max(self.tri_count, 1))
         self.tri_cloth = ti.field(ti.i32, shape=max(self.tri_count, 1))
         self.palette = ti.Vector.field(3, ti.f32, shape=(max(len(tris), 1), 2))
@@ -120,6 +123,8 @@ class Renderer:
         self.time[None] = self.sim.time
         if self.tri_count:
             self._vertex_normals(x)
+            if self.colliders.count:
+                self._near_colliders(x)
         targets = [(self.depth, True)] + ([(self.shadow, False)] if self.shadows else [])
         for depth, camera in targets[::-1]:
             if camera or self.moving:
@@ -222,11 +227,26 @@ class Renderer:
             self.normals[b] += n
             self.normals[c] += n
 
+    @ti.kernel
+    def _near_colliders(self, x: ti.template()):
+        """Flag the particles within CONTACT_REACH thicknesses of a switched-on collider."""
+        time = self.time[None]
+        for p in self.near_collider:
+            near = 0
+            for g in ti.static(self.colliders.groups):
+                for k in range(g.first, g.first + g.count):
+                    col = self.colliders.data[k]
+                    phi, _ = SHAPES[g.shape].signed_distance(col, x[p], time)
+                    if col.stiffness > 0.0 and phi < CONTACT_REACH * col.thickness:
+                        near = 1
+            self.near_collider[p] = near
+
     @ti.func
     def _splat(self, depth: ti.template(), camera: ti.template(), sphere: ti.template(), h, w,
-               lo, hi, prim_id, a, b, c, radius):
+               lo, hi, prim_id, a, b, c, radius, pull=0.0):
         """Test the rays of the pixels in [lo, hi] (col, row) against one triangle (a, b, c)
-        or one sphere (centre a, radius)."""
+        or one sphere (centre a, radius); ``pull`` (m) moves the hit towards the eye in
+        the depth test only."""
         for r in range(ti.max(ti.cast(ti.floor(lo[1]), ti.i32), 0),
                        ti.min(ti.cast(ti.ceil(hi[1]), ti.i32), h - 1) + 1):
             for col in range(ti.max(ti.cast(ti.floor(lo[0]), ti.i32), 0),
@@ -238,11 +258,28 @@ class Renderer:
                 else:
                     hit = raycast.hit_triangle(o, d, a, b, c)[0]
                 if hit > 0.0:
-                    ti.atomic_min(depth[r, col], raycast.key(hit, prim_id))
+                    ti.atomic_min(depth[r, col], raycast.key(ti.max(hit - pull, 1e-6),
+                                                             prim_id))
+
+    @ti.func
+    def _pull(self, i, a, b, c):
+        """How far triangle i = (a, b, c) is drawn nearer than it is (m): 0, or, where one
+        of its particles rests on a collider, half its longest edge. Flat between its
+        particles, which rest a thickness out, such a triangle cuts into a round or
+        edged collider by up to a fraction of its size; drawn nearer by the chord's depth
+        it hides the collider's rim; in the shadow lookup the collider does not shade it
+        from within that depth either (``_lit``)."""
+        pull = 0.0
+        if ti.static(self.colliders.count > 0):
+            if self.near_collider[i[0]] + self.near_collider[i[1]] \
+                    + self.near_collider[i[2]] > 0:
+                pull = 0.5 * ti.max((b - a).norm(), (c - b).norm(), (a - c).norm())
+        return pull
 
     @ti.kernel
     def _splat_triangles(self, x: ti.template(), depth: ti.template(), camera: ti.template()):
-        """Cloth triangles; id k for triangle k."""
+        """Cloth triangles; id k for triangle k, drawn ``_pull`` nearer the camera than
+        they are (the shadow map has them where they are); shading uses the true hit."""
         h, w = depth.shape
         for k in range(self.tri_count):
             i = self.tris[k]
@@ -253,8 +290,11 @@ class Renderer:
             pb = self._project(camera, b, h, w)
             pc = self._project(camera, c, h, w)
             if pa[2] > 1e-3 and pb[2] > 1e-3 and pc[2] > 1e-3:
+                pull = 0.0
+                if ti.static(camera):
+                    pull = self._pull(i, a, b, c)
                 self._splat(depth, camera, False, h, w, ti.min(pa, pb, pc),
-                            ti.max(pa, pb, pc), k, a, b, c, 0.0)
+                            ti.max(pa, pb, pc), k, a, b, c, 0.0, pull)
 
     @ti.func
     def _sphere_centre(self, x, k):
@@ -280,10 +320,13 @@ class Renderer:
                             self.tri_count + k, centre, centre, centre, radius)
 
     @ti.func
-    def _lit(self, p, n):
-        """Direct light reaching point p with normal n: Lambert times the fraction of a
-        2 x 2 shadow-map neighbourhood that does not block it (percentage-closer filter),
-        with a bias that grows at grazing light (no self-shadowing acne)."""
+    def _lit(self, p, n, pull=0.0):
+        """Direct light reaching point p with normal n: Lambert times the fraction of the
+        shadow map's 2 x 2 texels around p that do not block it, weighted bilinearly by
+        p's position between their centres (a percentage-closer filter whose shadow edges
+        are smooth ramps rather than texel-sized steps), with a bias that grows at grazing
+        light (no self-shadowing acne). ``pull`` > 0: the point is on cloth resting on a
+        collider (``_pull``), which does not shade it from within that depth."""
         light = -self._vec(19)
         cos_l = n.dot(light)
         lit = ti.max(cos_l, 0.0)
@@ -291,17 +334,23 @@ class Renderer:
             s = self._project(False, p, SHADOW_MAP, SHADOW_MAP)
             texel = 2.0 * ti.static(self.view[28]) / SHADOW_MAP
             bias = texel * (1.5 + 2.0 * ti.sqrt(1.0 - cos_l * cos_l) / ti.max(cos_l, 0.2))
-            r0 = ti.cast(ti.floor(s[1]), ti.i32)
-            c0 = ti.cast(ti.floor(s[0]), ti.i32)
+            # texel centres are at integer + 0.5
+            fy, fx = s[1] - 0.5 - ti.floor(s[1] - 0.5), s[0] - 0.5 - ti.floor(s[0] - 0.5)
+            r0 = ti.cast(ti.floor(s[1] - 0.5), ti.i32)
+            c0 = ti.cast(ti.floor(s[0] - 0.5), ti.i32)
             visible = 0.0
             for dr, dc in ti.static(ti.ndrange(2, 2)):
                 r, c = r0 + dr, c0 + dc
                 blocked = False
                 if 0 <= r < SHADOW_MAP and 0 <= c < SHADOW_MAP:
                     blocker = self.shadow[r, c]
-                    blocked = blocker != ti.i64(SKY_KEY) and raycast.key_t(blocker) < s[2] - bias
+                    depth = raycast.key_t(blocker)
+                    blocked = blocker != ti.i64(SKY_KEY) and depth < s[2] - bias
+                    if blocked and raycast.key_id(blocker) >= COLLIDER_ID \
+                            and depth > s[2] - pull - bias:
+                        blocked = False
                 if not blocked:
-                    visible += 0.25
+                    visible += (fy if dr else 1.0 - fy) * (fx if dc else 1.0 - fx)
             lit *= visible
         return lit
 
@@ -319,6 +368,7 @@ class Renderer:
             p = o + t * d
             base = ti.math.vec3(0.0)
             n = ti.math.vec3(0.0, 1.0, 0.0)
+            pull = 0.0
             if k == SKY_ID:
                 s = 0.5 + 0.5 * d[1]
                 base = (1.0 - s) * ti.math.vec3(0.93, 0.95, 0.98) + s * ti.math.vec3(0.55, 0.70, 0.92)
@@ -345,6 +395,8 @@ class Renderer:
                 b = ti.cast(x[i[1]], ti.f32)
                 cv = ti.cast(x[i[2]], ti.f32)
                 hit = raycast.hit_triangle(o, d, a, b, cv)
+                p = o + hit[0] * d              # the true hit (the depth key may be pulled)
+                pull = self._pull(i, a, b, cv)
                 u, v = hit[1], hit[2]
                 ns = ((1.0 - u - v) * self.normals[i[0]] + u * self.normals[i[1]]
                       + v * self.normals[i[2]])
@@ -360,7 +412,7 @@ class Renderer:
             if k != SKY_ID:
                 if n.dot(d) > 0.0:
                     n = -n
-                lit = self._lit(p, n)
+                lit = self._lit(p, n, pull)
                 half = (-self._vec(19) - d).normalized()
                 spec = ti.max(half.dot(n), 0.0)
                 for _ in ti.static(range(5)):

@@ -10,7 +10,7 @@ import pytest
 
 import tcloth
 from tcloth import Camera
-from tcloth.render import COLLIDER_ID, ground_and_checker
+from tcloth.render import COLLIDER_ID, LIGHT_DIR, ground_and_checker
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RED, GREEN, BLUE = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)
@@ -277,3 +277,54 @@ def test_a_gpu_asked_for_and_not_given_is_said():
         with pytest.warns(tcloth.DeviceWarning, match="software driver"):
             tcloth.init(arch="vulkan")
     tcloth.init(arch="cpu")
+
+
+def test_cloth_resting_on_a_collider_hides_its_rim(f32):
+    """A coarse cloth lying a thickness over a sphere: between its particles the flat
+    triangles cut into the sphere, whose cap used to show through them. Seen from above,
+    no pixel inside the cloth shows the collider."""
+    scene = tcloth.Scene(gravity=(0, 0, 0))
+    n, half, radius, thickness = 7, 0.2, 0.12, 0.005
+    scene.add_cloth(resolution=(n, n), size=(2 * half, 2 * half), center=(0, 0, 0),
+                    structural=None, shear=None, flexion=None, pinned=[])
+    scene.add_sphere((0, 0, 0), radius, thickness=thickness)
+    x = scene.positions.copy()
+    r2 = x[:, 0] ** 2 + x[:, 2] ** 2
+    x[:, 1] = np.sqrt(np.maximum((radius + thickness) ** 2 - r2, 0.0))
+    sim = tcloth.Simulator(scene)
+    sim.set_state(positions=x)
+    r = tcloth.Renderer(sim, 120, 120, camera={"eye": (0, 2, 0.001), "target": (0, 0, 0),
+                                               "fov": 20}, supersample=1, ground=False)
+    r.render()
+    ids = r.ids()
+    col, row = project(r.camera, np.array([[-0.15, 0.1, -0.15], [0.15, 0.1, 0.15]]), 120, 120)
+    inside = ids[int(min(row)):int(max(row)), int(min(col)):int(max(col))]
+    assert (inside < r.tri_count).mean() > 0.99 and not (inside >= COLLIDER_ID).any()
+
+
+def test_shadow_edges_ramp_smoothly(f32):
+    """The shadow lookup weighs the 2 x 2 shadow-map texels bilinearly by the point's
+    position between their centres: along a line across a cloth's straight shadow edge
+    the light ramps through many values, where a plain 2 x 2 average had five steps."""
+    import taichi as ti
+    scene = tcloth.Scene(gravity=(0, 0, 0))
+    scene.add_cloth(resolution=(3, 3), size=(1, 1), center=(0, 1, 0), structural=None,
+                    shear=None, flexion=None, pinned=[])
+    sim = tcloth.Simulator(scene)
+    r = tcloth.Renderer(sim, 64, 48, supersample=1, ground=0.0)
+    r.render()
+    light = np.array(LIGHT_DIR) / np.linalg.norm(LIGHT_DIR)
+    # the cloth's edge x = 0.5 at y = 1 casts its shadow on y = 0 at x = 0.5 - light_x / light_y
+    edge = 0.5 - light[0] / light[1]
+    samples = 400
+
+    @ti.kernel
+    def lit_line(r: ti.template(), x0: float, x1: float, out: ti.types.ndarray()):
+        for i in range(samples):
+            p = ti.Vector([x0 + (x1 - x0) * i / (samples - 1), 0.0, 0.0])
+            out[i] = r._lit(p, ti.Vector([0.0, 1.0, 0.0]))
+    out = np.zeros(samples, dtype=np.float32)
+    lit_line(r, edge - 0.05, edge + 0.05, out)
+    assert out[0] < 0.01 and out[-1] > 0.9 * light[1]
+    assert np.all(np.diff(out) >= -1e-6)                  # a ramp from shadow to light
+    assert len(np.unique(np.round(out, 4))) > 10          # 2 x 2 nearest texels: 5 levels

@@ -6,7 +6,9 @@
   Euler's limit 2 / omega_max of each scene (``tcloth.stability``).
 - ``work_precision.png`` where a reference is given: error against run time and against
   dt, one line per combination of the varied keys other than dt, with the convergence
-  order fitted over the points below 10 % of the scene's size in the legend.
+  order fitted over the points below 10 % of the scene's size in the legend (or why
+  there is none).
+Legends sit below the axes; ticks on short log ranges are the swept values themselves.
 """
 import json
 import math
@@ -80,6 +82,21 @@ def _shown(value):
     return json.loads(value) if isinstance(value, str) and value[:1] in "[{" else value
 
 
+def _log_ticks(axis, values):
+    """Ticks at the sweep's own values where there are few (log axes label minor ticks
+    over a short range, and "3x10^3 4x10^3" run into each other), decades otherwise; no
+    minor labels."""
+    from matplotlib.ticker import FixedLocator, FuncFormatter, NullFormatter
+    values = sorted({v for v in values if v is not None and v > 0})
+    if 0 < len(values) <= MAX_VALUE_TICKS:
+        axis.set_major_locator(FixedLocator(values))
+        axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
+    axis.set_minor_formatter(NullFormatter())
+
+
+MAX_VALUE_TICKS = 6
+
+
 def stability_map(spec, rows, x_key, path):
     import matplotlib.pyplot as plt
     others = [k for k in spec.vary if k not in ("dt", x_key)]
@@ -106,16 +123,22 @@ def stability_map(spec, rows, x_key, path):
         line = sorted(set(line))
         ax.plot(*zip(*line), "k--", lw=1, label="2 / omega_max")
         ax.set(xscale="log", yscale="log", title=title)
+        ax.margins(0.08)                   # markers at the extremes stay whole
         ax.title.set_fontsize(9)
     for ax in axes.flat[len(panels):]:
         ax.set_visible(False)
+    for ax in axes.flat[:len(panels)]:
+        _log_ticks(ax.xaxis, [_numeric(_shown(r[x_key])) for r in rows])
+        _log_ticks(ax.yaxis, [r["dt"] for r in rows])
     for ax in axes[-1]:
         ax.set_xlabel(x_key)
     for ax in axes[:, 0]:
         ax.set_ylabel("dt (s)")
-    axes[0, 0].legend(fontsize=8, loc="lower left")
     fig.suptitle(f"{os.path.basename(spec.scene)}: stable (green o) / unstable (red x)")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.06, 1, 1))
+    # below the panels, where it hides no marker
+    fig.legend(*axes[0, 0].get_legend_handles_labels(), loc="lower center", fontsize=8,
+               frameon=False)
     fig.savefig(path, dpi=90)
     plt.close(fig)
     return path
@@ -133,13 +156,20 @@ def work_precision(spec, rows, path):
         if not pts:
             continue
         dt, err, wall = np.array(pts).T
-        label = f"{title} (order {order(list(zip(dt, err)), size):.2f})"
+        fitted = order(list(zip(dt, err)), size)
+        label = (f"{title} (order {fitted:.2f})" if math.isfinite(fitted) else
+                 f"{title} (no order: {len(pts)} stable point{'s' * (len(pts) != 1)} "
+                 f"below 10 % of the size)" if len(pts) > 1 else
+                 f"{title} (one stable point)")
         ax_t.plot(wall, err, "o-", label=label)
         ax_dt.plot(dt, err, "o-", label=label)
     ax_t.set(xscale="log", yscale="log", xlabel="run time (s)", ylabel="RMS error (m)",
              title="error against run time")
     ax_dt.set(xscale="log", yscale="log", xlabel="dt (s)", ylabel="RMS error (m)",
               title="error against dt (missing points: unstable)")
+    _log_ticks(ax_dt.xaxis, [r["dt"] for r in rows])
+    for ax in (ax_t, ax_dt):
+        ax.margins(0.06)
     handles, labels = ax_t.get_legend_handles_labels()
     legend_rows = (len(labels) + 1) // 2
     fig.suptitle(f"{os.path.basename(spec.scene)}: work-precision against "
