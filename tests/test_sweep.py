@@ -203,3 +203,38 @@ def test_ctrl_c_on_a_pool_sweep_prints_its_line_and_exits_4(tmp_path):
     assert "interrupted" in stderr and "run the same command again" in stderr
     assert "Traceback" not in stderr and "Error" not in stderr, stderr
     assert time.time() - interrupted < 30
+
+
+def test_plots_keep_markers_and_labels_readable(tmp_path, monkeypatch):
+    """The sweep example's plots as a reader sees them: the stability map's legend below
+    the panels (inside, it hid a marker), ticks at the swept values on a short log range
+    (matplotlib labelled minor ticks there, '3x10^3 4x10^3' running together), markers
+    off the axes' edges, and a series with one stable point saying so, not 'order nan'."""
+    import json
+    import matplotlib.figure
+    from tcloth.sweep import plots
+    spec = load_spec(os.path.join(ROOT, "docs", "sweeps", "hanging_cloth.toml"))
+    rows = []
+    for c in spec.cases():
+        row = {k: (json.dumps(v) if isinstance(v, list) else v) for k, v in c["values"].items()}
+        unstable = c["values"]["integrator"] == "symplectic_euler" and c["values"]["dt"] > 1e-3
+        stiff = c["values"]["structural"][0] > 1000
+        row.update(id=c["id"], stable=not unstable and not (stiff and c["values"]["dt"] > 1e-4
+                   and c["values"]["integrator"] == "symplectic_euler"),
+                   error=1e-3 * c["values"]["dt"] / 1e-3, ms_per_step=0.1, steps=c["steps"])
+        rows.append(row)
+    figures = []
+    monkeypatch.setattr(matplotlib.figure.Figure, "savefig",
+                        lambda self, *a, **k: figures.append(self))
+    plots.plot_all(spec, rows, str(tmp_path))
+    stability, precision = figures
+    panels = [ax for ax in stability.axes if ax.get_visible()]
+    assert stability.legends and all(ax.get_legend() is None for ax in panels)
+    for ax in panels:
+        assert [t.get_text() for t in ax.get_xticklabels()] == ["400", "4000"]
+        assert all(t.get_text() == "" for t in ax.xaxis.get_ticklabels(minor=True))
+        (x0, x1), (y0, y1) = ax.get_xlim(), ax.get_ylim()
+        assert x0 < 400 and x1 > 4000 and y0 < 1e-4 and y1 > 4e-3
+    labels = [t.get_text() for legend in precision.legends for t in legend.get_texts()]
+    assert not any("nan" in label for label in labels)
+    assert any("one stable point" in label for label in labels), labels
