@@ -20,8 +20,9 @@ sys.path.insert(0, os.path.join(HERE, "..", "tools"))
 from scene_snapshot import TOLERANCE, run_scene, scene_names  # noqa: E402
 
 # scenes whose structural springs carry load within the snapshot's 0.1 s (the others
-# are still falling freely, or have no springs)
-LOADED = ("cloth_pile", "curtain", "flag", "hanging_cloth", "rope", "sphere_through_cloth",
+# are still falling freely, or have no springs); cloth_pile too (1.3e-5 m), but it is
+# the slowest scene to run twice
+LOADED = ("curtain", "flag", "hanging_cloth", "rope", "sphere_through_cloth",
           "strain_limiting", "tablecloth")
 
 
