@@ -17,21 +17,29 @@ Python-callable gust, a GPU, a large scene).
 """
 import taichi as ti
 
+from .contact.guard import sweep_colliders
 from .integrators.linalg import copy
 
 
 @ti.func
-def _substep(integrator: ti.template(), limiter: ti.template(), budget: ti.template(), a, b,
-             t, dt, fresh, x_bound, v_bound):
-    """One step of State a in place (b: scratch); returns the budget's ``check`` of the
-    result (-1, a bad particle, or particles + the fastest one)."""
+def _substep(integrator: ti.template(), limiter: ti.template(), contact: ti.template(),
+             budget: ti.template(), a, b, t, dt, fresh, x_bound, v_bound):
+    """One step of State a in place (b: scratch), with the contact stage's collider sweep
+    (the batch's scenes have no self-collision); returns (the budget's ``check`` of the
+    result: -1, a bad particle, or particles + the fastest one; the paths the sweep cut)."""
+    if ti.static(bool(contact)):
+        copy(contact.x_start, a.x)
     integrator.advance(a, b, t, dt, fresh)
     if ti.static(bool(limiter)):
         limiter.limit(a, ti.cast(1.0 / dt, float))
-    return budget.check(a.x, a.v, t + dt, x_bound, v_bound)
+    cut = 0
+    if ti.static(bool(contact)):
+        cut = sweep_colliders(contact.colliders, contact.inv_mass, contact.x_start, a.x, a.v,
+                              ti.cast(t, float), ti.cast(dt, float), contact.held)
+    return budget.check(a.x, a.v, t + dt, x_bound, v_bound), cut
 
 
-def kernel(integrator, limiter, budget, a, b, start, x_bound, v_bound):
+def kernel(integrator, limiter, contact, budget, a, b, start, x_bound, v_bound):
     """The batch kernel of one configuration: ``run(n, fresh, time_base, steps_before, dt)``.
 
     Its objects are the closure's (compile-time constants), so a launch passes five
@@ -54,13 +62,18 @@ def kernel(integrator, limiter, budget, a, b, start, x_bound, v_bound):
         copy(start.v, a.v)
         copy(start.f, a.f)
         result = ti.i64(-1)
+        cut = 0
         ti.loop_config(serialize=True)
         for k in range(n):
             t = time_base + ti.cast(steps_before + k, ti.f64) * dt
             evaluate = fresh if k == 0 else 0
-            if ti.static(bool(limiter)):
+            if ti.static(bool(limiter)) or cut > 0:     # a's forces are of another state
                 evaluate = 1
-            bad = _substep(integrator, limiter, budget, a, b, t, dt, evaluate, x_bound, v_bound)
+            bad, cut = _substep(integrator, limiter, contact, budget, a, b, t, dt, evaluate,
+                                x_bound, v_bound)
+            if ti.static(bool(contact)):
+                contact.batch_cuts[0] += cut
+                contact.batch_cuts[1] = cut
             if bad >= 0:
                 result = ti.cast(k, ti.i64) * (2 * a.x.shape[0]) + bad
                 break

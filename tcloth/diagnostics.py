@@ -59,6 +59,11 @@ class Diagnostics:
         return ({"point_triangle": 0, "edge_edge": 0} if term is None
                 else term.active(state.x))
 
+    def collider_contacts(self, state):
+        """How many free particles are within a collider's thickness now."""
+        term = term_modules.find(self.terms, term_modules.Colliders)
+        return 0 if term is None else term.touching(state.x, state.t)
+
     def momentum(self, state):
         """(linear (3,) kg m/s, angular about the origin (3,) kg m^2/s)."""
         sums = self.particle_sums(state)

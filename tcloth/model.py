@@ -21,7 +21,8 @@ from .grid import GridBlock, GridTable
 from .shapes import ColliderTable
 from .terms import wind as wind_term
 from .terms.grab import GrabSpring
-from .topology import SelfCollisionTable
+from .contact.stage import ContactStage
+from .contact.topology import SelfCollisionTable
 
 
 def _vec_field(n):
@@ -65,7 +66,9 @@ class Model:
         strain_limit: dict or None; limit_index: shape (limit_count,), the model rows
             of the limited springs.
         colliders: ``ColliderTable``.
-        self_collision: ``topology.SelfCollisionTable`` or None.
+        self_collision: ``contact.topology.SelfCollisionTable`` or None.
+        contact: ``contact.stage.ContactStage`` (self-collision's candidates and the guard
+            of every step) or None in a scene with neither self-collision nor colliders.
         grab: ``terms.grab.GrabSpring`` (the mouse spring of the viewer) or None.
 
     Args:
@@ -133,6 +136,9 @@ class Model:
                                else None)
         self.grab = GrabSpring() if grab else None
         self.refresh(colliders_off)
+        # the contact set and the guard, one per model (and so per simulator)
+        self.contact = (ContactStage(self) if self.self_collision is not None
+                        or self.colliders.count else None)
 
     @staticmethod
     def _grid_block(cloth):

@@ -207,7 +207,8 @@ class Renderer:
                 # checkered shapes (planes) receive shadows but cast none worth a test
                 if ti.static(camera or not SHAPES[g.shape].checkered):
                     for k in range(g.first, g.first + g.count):
-                        t = SHAPES[g.shape].ray_hit(self.colliders.data[k], o, d, time)
+                        t = ti.cast(SHAPES[g.shape].ray_hit(self.colliders.data[k], o, d,
+                                                            time), ti.f32)
                         if 0.0 < t < best:
                             best, best_id = t, COLLIDER_ID + k
             key = ti.i64(SKY_KEY)

@@ -74,27 +74,30 @@ def _face_normal(q, d):
     return nl
 
 
+# The ray hits take the ray's origin o and unit direction d in any precision and compute
+# in the wider of it and the colliders' (the renderer's float32 rays, the contact stage's
+# sweeps in the simulation's precision).
 @ti.func
 def _sphere_hit(col, o, d, t):
-    return raycast.hit_sphere(o, d, ti.cast(_centre(col, t), ti.f32), ti.cast(col.extent[0], ti.f32))
+    return raycast.hit_sphere(o, d, _centre(col, t), col.extent[0])
 
 
 @ti.func
 def _plane_hit(col, o, d, t):
-    n = ti.cast(col.extent, ti.f32)
+    n = col.extent
     dn = d.dot(n)
     hit = -1.0
     if dn < -1e-6:
-        hit = (ti.cast(_centre(col, t), ti.f32) - o).dot(n) / dn
+        hit = (_centre(col, t) - o).dot(n) / dn
     return hit
 
 
 @ti.func
 def _box_hit(col, o, d, t):
     """Slab test in the box frame: entry t > 0, or -1 (a ray from inside does not hit)."""
-    rot = ti.cast(col.rotation, ti.f32)
-    half = ti.cast(col.extent, ti.f32)
-    ol = rot.transpose() @ (o - ti.cast(_centre(col, t), ti.f32))
+    rot = col.rotation
+    half = col.extent
+    ol = rot.transpose() @ (o - _centre(col, t))
     dl = rot.transpose() @ d
     t_near, t_far = -1e30, 1e30
     for k in ti.static(range(3)):
@@ -158,9 +161,9 @@ def _cylinder_distance(col, x, t):
 @ti.func
 def _cylinder_hit(col, o, d, t):
     """Entry of a ray into the capped cylinder (side or caps), or -1."""
-    rot = ti.cast(col.rotation, ti.f32)
-    radius, half = ti.cast(col.extent[0], ti.f32), ti.cast(col.extent[1], ti.f32)
-    ol = rot.transpose() @ (o - ti.cast(_centre(col, t), ti.f32))
+    rot = col.rotation
+    radius, half = col.extent[0], col.extent[1]
+    ol = rot.transpose() @ (o - _centre(col, t))
     dl = rot.transpose() @ d
     best = 1e30
     a = dl[0] * dl[0] + dl[2] * dl[2]
@@ -194,8 +197,9 @@ class Shape:
 
     name: the scene's ``kind``. extent: collider dict -> 3 numbers (radius | normal |
     half extents | radius, half height, 0). signed_distance(col, x, t) -> (phi, outward unit normal): ti.func.
-    ray_hit(col, o, d, t) -> ray parameter or -1, and normal(col, p, t) -> shading normal:
-    ti.funcs in float32 for the renderer. checkered: drawn with the ground's squares.
+    ray_hit(col, o, d, t) -> the ray's entry parameter or -1 (from outside; any precision:
+    the renderer's and the contact stage's), normal(col, p, t) -> shading normal in
+    float32 for the renderer. checkered: drawn with the ground's squares.
     """
     name: str
     extent: Callable

@@ -1,6 +1,5 @@
 """Simulator: a Scene turned into a Model, two States and an integrator."""
 import numpy as np
-import taichi as ti
 
 from . import batch, checkpoint, runtime, stability
 from .budget import EnergyBudget, check_state
@@ -108,6 +107,9 @@ class Simulator:
         self._batch_start = None                        # a batch's start state (batch.py)
         self._batch_kernels = {}     # (integrator, limiter, State) -> its batch kernel
         self._fusion = None          # (fusion(),) once computed; reset by the live changes
+        self._contact = self.model.contact
+        if self._contact is not None:
+            self._contact.refresh(self.state.x)
         self._rebase()
 
     @property
@@ -142,6 +144,9 @@ class Simulator:
             self.integrator.simulate(self.model, s_in, s_out, self.dt)
             if limiter is not None:
                 limiter.apply(s_out, self.dt)
+                self.integrator.invalidate()
+            if self._contact is not None and self._contact.end_step(
+                    s_in.x, s_out.x, s_out.v, s_in.t, self.dt):
                 self.integrator.invalidate()
             t_end = self.time + self.dt
             self._see_gust(t_end)
@@ -185,8 +190,8 @@ class Simulator:
         key = (self.integrator, limiter, a)
         if key not in self._batch_kernels:
             self._batch_kernels[key] = batch.kernel(
-                self.integrator, limiter, self._budget, a, b, self._batch_start,
-                self.position_bound, self.velocity_bound)
+                self.integrator, limiter, self._contact, self._budget, a, b,
+                self._batch_start, self.position_bound, self.velocity_bound)
         run = self._batch_kernels[key]
         fresh = 0 if self.integrator.holds_forces(a) else 1
         args = (fresh, self._time_base, self.num_steps - self._step_base, self.dt)
@@ -201,7 +206,8 @@ class Simulator:
                 run(done, *args)
         self.num_steps += done
         self.state.t = self.time
-        if limiter is None and bad < 0:
+        swept = self._contact is not None and self._contact.batch_cuts[1] > 0
+        if limiter is None and bad < 0 and not swept:
             self.integrator.adopt_forces(self.state)
         else:
             self.integrator.invalidate()
@@ -286,6 +292,8 @@ class Simulator:
                 raise SceneError(f"{name} must have shape ({n}, 3) (got {arr.shape})")
             field.from_numpy(arr.astype(npr))
         self.integrator.invalidate()
+        if self._contact is not None:
+            self._contact.refresh(self.state.x)
         self._rebase()
 
     def reset(self, dt=None):
@@ -425,6 +433,8 @@ class Simulator:
         state.f.from_numpy(files["state_f"].astype(npr))
         if meta["forces_valid"]:
             sim.integrator.adopt_forces(state)
+        if sim._contact is not None:
+            sim._contact.refresh(state.x)
         sim.num_steps = int(meta["num_steps"])
         sim._time_base = float(meta.get("time_base", 0.0))
         sim._step_base = int(meta.get("step_base", 0))
@@ -444,6 +454,17 @@ class Simulator:
         """(linear (3,), angular about the origin (3,))."""
         self._check()
         return self._diag.momentum(self.state)
+
+    def contact_stats(self):
+        """dict of the contact stage's statistics (``contact.stage.STATS`` says what each
+        key counts; {} in a scene without self-collision or colliders) and the active
+        self-contacts ("point_triangle", "edge_edge") and collider contacts ("collider":
+        free particles within a collider's thickness)."""
+        self._check()
+        if self._contact is None:
+            return {}
+        return {**self._contact.contact_stats(), **self.self_contacts(),
+                "collider": self._diag.collider_contacts(self.state)}
 
     def self_contacts(self):
         """{"point_triangle": n, "edge_edge": m}: the self-contacts closer than the

@@ -237,12 +237,14 @@ class Controls:
 
     def stats(self, every=1):
         """dict: fps, ms_per_substep (medians of the last 30 frames), energy (J),
-        max_strain, time (s), integrator. every=k reuses the energy and strain of the last
-        call for k - 1 calls (the panel: they cost more than a 64 x 64 cloth's frame)."""
+        max_strain, time (s), integrator, contacts (``Simulator.contact_stats``). every=k
+        reuses the energy, strain and contacts of the last call for k - 1 calls (the
+        panel: they cost more than a 64 x 64 cloth's frame)."""
         sim = self.sim
         self._stats_age += 1
         if self._measured is None or self._stats_age >= every:
-            self._measured = {"energy": sim.energy()["total"], "max_strain": sim.max_strain()}
+            self._measured = {"energy": sim.energy()["total"], "max_strain": sim.max_strain(),
+                              "contacts": sim.contact_stats()}
             self._stats_age = 0
         return {"fps": 1.0 / np.median(self.frame_seconds) if self.frame_seconds else 0.0,
                 "ms_per_substep": 1e3 * np.median(self.substep_seconds)
@@ -552,6 +554,8 @@ class Viewer:
             w.text(f"{st['fps']:.0f} frames/s, {st['ms_per_substep']:.3f} ms/substep")
             w.text(f"t = {st['time']:.3f} s   energy {st['energy']:.4g} J")
             w.text(f"max strain {100 * st['max_strain']:.1f} %")
+            for line in contact_lines(st["contacts"]):
+                w.text(line)
             if c.message:
                 w.text("UNSTABLE (last good state kept):", color=(0.8, 0.1, 0.1))
                 for line in _wrap(c.message, 44):
@@ -638,6 +642,24 @@ class Viewer:
             self.controls.frame_done(time.perf_counter() - start)
             count += 1
         return count
+
+
+def contact_lines(stats):
+    """The panel's lines for ``Simulator.contact_stats()`` (none for a scene without
+    contact): the contacts active now, then what the stage did so far."""
+    if not stats:
+        return []
+    lines = []
+    if stats.get("rebuilds"):
+        lines.append(f"self-contacts: {stats['point_triangle']} point-triangle, "
+                     f"{stats['edge_edge']} edge-edge")
+        lines.append(f"  {stats['candidates']} candidates, {stats['rebuilds']} rebuilds")
+        lines.append(f"  guard: {stats['guard_corrections']} corrections, "
+                     f"{stats['failsafe_steps']} fail-safe steps")
+    lines.append(f"collider contacts: {stats['collider']}, "
+                 f"{stats['collider_paths_cut']} paths cut")
+    lines.append(f"contact stage: {stats['seconds']:.2f} s so far")
+    return lines
 
 
 def _wrap(text, width):

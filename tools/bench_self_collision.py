@@ -24,6 +24,11 @@ broad phase costs rather than matching tcloth's whole step.
 Lines: ``self_collision.<n>x<n>.{off,on}.ms_per_substep``, ``.ratio``,
 ``.ns_per_particle``, ``.rebuilds_per_100``, ``.warp_hashgrid_cpu.ms``; <out>/self_collision.csv.
 
+--implicit backward_euler,projective instead runs one simulated second of the same fold
+at one step per frame (--dt 1/60), self-collision on and off, with the worst crossing count
+over every step: ``self_collision.<n>x<n>.<integrator>.{on,off}_wall_s``, ``.ratio``,
+``.crossings_max``, ``.stage_*`` (the contact stage's statistics).
+
 Usage: python tools/bench_self_collision.py [--sizes 64,128,256,512] [--steps 600]
                                             [--settle 0.04] [--skin M]
                                             [--arch cpu|cuda] [--out docs]
@@ -118,6 +123,41 @@ def warp_hashgrid_ms(x, reach, repeats=5):
     return float(np.median(times[1:]))
 
 
+def one_second(module, x40, v40, n, integrator, dt, seconds):
+    """The n x n fold from the saved state, ``seconds`` of simulated time at one step of
+    dt per frame with ``integrator``, self-collision on and off: wall time (after four steps
+    that compile, from the same start), the worst crossing count over every step (NumPy,
+    ``crossings.py``), the contact stage's statistics (the warm-up's included)."""
+    from crossings import count_crossings
+    x, v = resample(x40, n), resample(v40, n)
+    out = {}
+    for mode in ("off", "on"):
+        scene = module.build(resolution=(n, n), thickness=0.006 * 40 / n)
+        if mode == "off":
+            scene.self_collision = None
+        sim = tcloth.Simulator(scene, integrator, dt=dt)
+        sim.set_state(positions=x, velocities=v)
+        sim.step(4)                     # compiles the kernels of both states' alternation
+        sim.set_state(positions=x, velocities=v)
+        wall, worst = 0.0, 0
+        for _ in range(int(round(seconds / dt))):
+            t = time.perf_counter()
+            sim.step()
+            sim.positions()
+            wall += time.perf_counter() - t
+            if mode == "on":
+                worst = max(worst, count_crossings(sim.positions(), scene.triangles))
+        out[f"{mode}_wall_s"] = wall
+        if mode == "on":
+            out["crossings_max"] = worst
+            stats = sim.contact_stats()
+            for key in ("seconds", "failsafe_steps", "swept_searches", "rebuilds",
+                        "guard_corrections", "collider_paths_cut"):
+                out[f"stage_{key}"] = stats[key]
+    out["ratio"] = out["on_wall_s"] / out["off_wall_s"]
+    return out
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", default="64,128,256")
@@ -132,10 +172,24 @@ def main():
                     help="the broad phase's skin, m (default: the scene's)")
     ap.add_argument("--state", default=os.path.join(HERE, "data", "fold_40x40.npz"),
                     help="the folded 40 x 40 state: read if it exists, else written")
+    ap.add_argument("--implicit", default=None,
+                    help="instead: one simulated second at one step per frame with these "
+                         "integrators, e.g. backward_euler,projective")
+    ap.add_argument("--dt", default="1/60", help="--implicit's step, s")
+    ap.add_argument("--seconds", type=float, default=1.0, help="--implicit's span, s")
+    ap.add_argument("--precision", default="f32")
     args = ap.parse_args()
-    tcloth.init(arch=args.arch)
+    tcloth.init(arch=args.arch, precision=args.precision)
     module = load_script(os.path.join(HERE, "..", "scenes", "fold.py"))[0]
     x40, v40 = folded_state(module, args.state)
+    if args.implicit:
+        for integrator in args.implicit.split(","):
+            for n in (int(s) for s in args.sizes.split(",")):
+                result = one_second(module, x40, v40, n, integrator, eval(args.dt, {}),
+                                    args.seconds)
+                for key, value in result.items():
+                    print(f"self_collision.{n}x{n}.{integrator}.{key}: {value:.6g}")
+        return
     rows = []
     for n in (int(s) for s in args.sizes.split(",")):
         x, v = resample(x40, n), resample(v40, n)
@@ -152,13 +206,13 @@ def main():
             sim.set_state(positions=x, velocities=v)
             sim.step(max(200, int(round(args.settle / dt))))
             if mode == "on":
-                term = sim.integrator.forces.terms[-1]
-                first = term.rebuilds
+                broad = sim.model.contact.broad
+                first = broad.rebuilds
             ms, stepped = time_steps(sim, args.steps)
             result[f"{mode}_ms_per_substep"] = ms
             if mode == "on":
-                result["rebuilds_per_100"] = 100.0 * (term.rebuilds - first) / stepped
-                result["candidates"] = term.count
+                result["rebuilds_per_100"] = 100.0 * (broad.rebuilds - first) / stepped
+                result["candidates"] = broad.count
                 result["contacts"] = sum(sim.self_contacts().values())
                 settings = sim.model.self_collision.settings
                 reach = settings["thickness"] + settings["skin"]

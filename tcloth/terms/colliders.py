@@ -136,6 +136,14 @@ class Colliders(Term):
     def energy(self, x, t, out):
         return particle_energy(self, x, t, out)
 
+    @ti.func
+    def _touch_body(self, col, c, x, p, phi, n, ctx):
+        return 1 if phi < col.thickness and col.stiffness > 0.0 else 0
+
+    def touching(self, x, t):
+        """How many particles are within a collider's thickness at x and time t."""
+        return int(_touching(self, x, t))
+
     # -- backward Euler ----------------------------------------------------------------------
     def begin_step(self, x0, t0):
         """Store each contact's normal force and normal at the step's start."""
@@ -231,6 +239,16 @@ class Colliders(Term):
         velocity and cut the tangential one by mu times that change (Coulomb), relative to
         the collider's motion."""
         project_contacts(self, x, v, t)
+
+
+@ti.kernel
+def _touching(term: ti.template(), x: ti.template(), t: float) -> ti.i32:
+    count = 0
+    for p in range(x.shape[0]):
+        if term.inv_mass[p] > 0.0:
+            if term.table.for_each_contact(x, p, t, term._touch_body, 0, 0) > 0:
+                count += 1
+    return count
 
 
 @ti.kernel

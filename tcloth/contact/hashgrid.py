@@ -13,7 +13,7 @@ items per cell, which the caller bounds by choosing the cell size (``set_cell``)
 """
 import taichi as ti
 
-from . import runtime
+from .. import runtime
 
 BLOCK = 256
 

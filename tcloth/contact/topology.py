@@ -12,8 +12,8 @@ particle of the other (``SelfCollisionTable.excluded``).
 import numpy as np
 import taichi as ti
 
-from . import runtime
-from .errors import SceneError
+from .. import runtime
+from ..errors import SceneError
 
 # the order of SelfCollisionTable.params
 PARAMS = ("thickness", "stiffness", "friction", "damping", "stick_velocity", "skin")

@@ -1,0 +1,396 @@
+"""The self-contact broad phase: which point-triangle and edge-edge pairs can touch.
+
+A contact joins four particles x_k with weights alpha_k so that the gap between the two
+closest points is g = sum_k alpha_k x_k (``proximity.py``): point-triangle (a particle
+against a cloth triangle, alpha = (1, -w_a, -w_b, -w_c)) and edge-edge (two cloth edges or
+rope segments, alpha = (1 - s, s, -(1 - u), -u)). Pairs that touch by construction are
+left out (``topology.py``).
+
+``BroadPhase`` keeps a candidate list: every pair whose gap was within thickness + skin at
+the positions x_ref of its last build. Particles and edge midpoints are binned in hashed
+uniform cells of size max(longest edge, reach) and sorted by counting sort
+(``hashgrid.py``); each triangle visits the particles in its box grown by the reach, each
+edge the edges of higher index whose midpoints lie in its box grown by the reach and half
+the longest edge; a shared particle is skipped before the exact distance and the
+exclusion rule, which marks the pair as one that does not repel (``ContactList.repels``)
+but is still listed for the guard. The queries run in blocks of QUERY_BLOCK in parallel, each block writing
+to its own slots laid out by a prefix sum, so on CPUs the list's order (and every sum
+over it) is that of a serial search whatever the threads.
+
+The list covers a set of configurations when no two particles have moved, from x_ref to
+any of them, by more than the skin relative to each other: twice the largest distance of
+a displacement from the centre c of all the displacements' bounding box is at most the
+skin (any c bounds |d_i - d_j| <= |d_i - c| + |d_j - c|). Then no pair left out can be
+within the thickness in any of them, nor anywhere on a straight path between two of
+them, since a displacement on the path lies between its ends'. A motion the particles
+share (a cloth falling) costs no rebuild.
+
+Cost of a build: O(particles + edges + table) for the sort; per triangle or edge, the
+cells its box covers (at most 4 and 5 per axis) times the items per cell, which is the
+number of layers of cloth within a cell of each other.
+"""
+import taichi as ti
+
+from .. import runtime
+from ..runtime import serial_count
+from .hashgrid import HashGrid, blocks_for, exclusive_scan
+from .proximity import contact_weights
+
+POINT_TRIANGLE, EDGE_EDGE = 0, 1
+# one query of the search costs about as much as this many items of the loops that
+# runtime.SERIAL_BELOW was measured on, so its loop goes parallel from that many / this
+SEARCH_COST = 16
+QUERY_BLOCK = 64
+# particles per block of the displacement test's reduction
+DISPLACEMENT_BLOCK = 1024
+
+
+@ti.func
+def gap(ids, kind, x):
+    """(alpha, g) of a contact at positions x."""
+    alpha = contact_weights(kind, x[ids[0]], x[ids[1]], x[ids[2]], x[ids[3]])
+    g = ti.Vector.zero(float, 3)
+    for k in ti.static(range(4)):
+        g += alpha[k] * x[ids[k]]
+    return alpha, g
+
+
+@ti.data_oriented
+class ContactList:
+    """Candidate contacts (ids (4,), kind and whether they repel, per row) of capacity
+    ``capacity``, and (with
+    ``lagged``) the values the contact law keeps per row for backward Euler (lagged normal
+    force, normal and weights; the Hessian's weights, penalty and dissipation blocks)."""
+
+    def __init__(self, table, inv_mass, capacity, lagged=True):
+        real = runtime.real()
+        self.table, self.inv_mass = table, inv_mass
+        self.capacity = capacity
+        self.ids = ti.Vector.field(4, ti.i32, shape=capacity)
+        self.kind = ti.field(ti.i32, shape=capacity)
+        # 0 for a pair that touches by construction (mesh neighbours across its sides):
+        # no penalty, but the guard keeps it from crossing
+        self.repels = ti.field(ti.u8, shape=capacity)
+        # the guard's separating plane per row at a step's start (``guard.planes``)
+        self.plane_n = ti.Vector.field(3, real, shape=capacity)
+        self.plane_delta = ti.field(real, shape=capacity)
+        if not lagged:
+            return
+        self.lag_fn = ti.field(real, shape=capacity)
+        self.lag_n = ti.Vector.field(3, real, shape=capacity)
+        self.lag_alpha = ti.Vector.field(4, real, shape=capacity)
+        self.alpha = ti.Vector.field(4, real, shape=capacity)
+        self.penalty = ti.Matrix.field(3, 3, real, shape=capacity)
+        self.damping = ti.Matrix.field(3, 3, real, shape=capacity)
+
+    @ti.func
+    def gap(self, ids, kind, x):
+        """(alpha, g) of a contact at positions x."""
+        return gap(ids, kind, x)
+
+    @ti.func
+    def inverse_mass(self, ids, alpha):
+        """sum_k alpha_k^2 / m_k: the contact's inverse effective mass."""
+        w = 0.0
+        for k in ti.static(range(4)):
+            w += alpha[k] * alpha[k] * self.inv_mass[ids[k]]
+        return w
+
+
+@ti.func
+def record(search, ids, n_a, query, item):
+    """Append ``item`` to the query's block (``search.found``, ``fill``, ``found_count``)
+    with whether the pair touches by construction (``topology.excluded``) in its lowest
+    bit, unless all four particles are pinned."""
+    free = False
+    for k in ti.static(range(4)):
+        if search.inv_mass[ids[k]] > 0.0:
+            free = True
+    if free:
+        blk = query // QUERY_BLOCK
+        k = search.fill[blk]
+        if k < search.block_slots:
+            search.found[blk * search.block_slots + k] = 2 * item + ti.cast(
+                search.table.excluded(ids, n_a), ti.i32)
+        search.fill[blk] = k + 1
+        search.found_count[query] += 1
+
+
+@ti.func
+def lay_out(search, cl, q, slot, row):
+    """Write found entry ``slot`` of query q as list row ``row``."""
+    T = ti.static(cl.table.triangle_count)
+    entry = search.found[slot]
+    item = entry // 2
+    if q < T:
+        tri = cl.table.triangles[q]
+        cl.ids[row] = ti.Vector([cl.table.points[item], tri[0], tri[1], tri[2]])
+        cl.kind[row] = POINT_TRIANGLE
+    else:
+        a, b = cl.table.edges[q - T], cl.table.edges[item]
+        cl.ids[row] = ti.Vector([a[0], a[1], b[0], b[1]])
+        cl.kind[row] = EDGE_EDGE
+    cl.repels[row] = ti.cast(1 - entry % 2, ti.u8)
+
+
+@ti.data_oriented
+class Search:
+    """The particles' and edge midpoints' hash grids, and what the queries found.
+
+    There is one query per triangle (the particles near it) and one per edge (the edges
+    of higher index near it). Blocks of QUERY_BLOCK consecutive queries run in parallel,
+    each block on one thread appending what its queries find to its own ``block_slots``
+    slots; a prefix sum over the queries' counts lays out the rows."""
+
+    def __init__(self, table, inv_mass, grids, x_ref, reach, block_slots):
+        self.table, self.inv_mass = table, inv_mass
+        self.points_grid, self.edges_grid = grids
+        self.x_ref, self.reach = x_ref, reach
+        self.queries = table.triangle_count + table.edge_count
+        self.blocks = blocks_for(self.queries, QUERY_BLOCK)
+        self.block_slots = block_slots
+        self.found = ti.field(ti.i32, shape=self.blocks * block_slots)
+        self.fill = ti.field(ti.i32, shape=self.blocks)
+        self.found_count = ti.field(ti.i32, shape=self.queries)
+        self.found_start = ti.field(ti.i32, shape=self.queries + 1)
+        self.scan_blocks = ti.field(ti.i32, shape=blocks_for(self.queries))
+
+    @ti.func
+    def _consider(self, ids, kind, n_a, query, item):
+        """Record ``item`` for the query if the contact ids is not between pinned
+        particles only and its gap at x_ref is within the reach (``record``)."""
+        alpha, g = gap(ids, kind, self.x_ref)
+        if g.norm() <= self.reach[None]:
+            record(self, ids, n_a, query, item)
+        return 0
+
+    @ti.func
+    def _point_triangle(self, item, t):
+        tri, p = self.table.triangles[t], self.table.points[item]
+        if p != tri[0] and p != tri[1] and p != tri[2]:
+            self._consider(ti.Vector([p, tri[0], tri[1], tri[2]]), POINT_TRIANGLE, 1, t, item)
+
+    @ti.func
+    def _edge_edge(self, item, e):
+        a, b = self.table.edges[e], self.table.edges[item]
+        if a[0] != b[0] and a[0] != b[1] and a[1] != b[0] and a[1] != b[1]:
+            self._consider(ti.Vector([a[0], a[1], b[0], b[1]]), EDGE_EDGE, 2,
+                           self.table.triangle_count + e, item)
+
+    @ti.func
+    def query(self, q, x, reach, longest):
+        """Run query q (a triangle, then the edges) at positions x."""
+        T = ti.static(self.table.triangle_count)
+        self.found_count[q] = 0
+        if q < T:
+            tri = self.table.triangles[q]
+            a, b, c = x[tri[0]], x[tri[1]], x[tri[2]]
+            self.points_grid.for_each_in_box(ti.min(a, b, c) - reach,
+                                             ti.max(a, b, c) + reach, -1,
+                                             self._point_triangle, q)
+        else:
+            e = q - T
+            a, b = x[self.table.edges[e][0]], x[self.table.edges[e][1]]
+            grow = reach + 0.5 * longest
+            self.edges_grid.for_each_in_box(ti.min(a, b) - grow, ti.max(a, b) + grow, e,
+                                            self._edge_edge, e)
+
+
+@ti.kernel
+def _spread(broad: ti.template(), x: ti.template(), y: ti.template(),
+            both: ti.template()) -> ti.f64:
+    """Twice the largest distance of a displacement (x - x_ref, and y - x_ref when
+    ``both``) from the middle of all the displacements' bounding box: no two particles
+    have moved relative to each other by more, from x_ref to x or y or anywhere on the
+    straight path between them. Blocks of DISPLACEMENT_BLOCK particles reduce in parallel,
+    then one thread over the blocks (a reduction of every particle into one vector made
+    the threads take turns on its atomic compare-and-swaps)."""
+    P = ti.static(broad.table.point_count)
+    B = ti.static(blocks_for(P, DISPLACEMENT_BLOCK))
+    ti.loop_config(serialize=ti.static(serial_count(P)))
+    for blk in range(B):
+        lo = ti.Vector([1e30, 1e30, 1e30], ti.f64)
+        hi = ti.Vector([-1e30, -1e30, -1e30], ti.f64)
+        for i in range(blk * DISPLACEMENT_BLOCK, ti.min((blk + 1) * DISPLACEMENT_BLOCK, P)):
+            p = broad.table.points[i]
+            d = ti.cast(x[p] - broad.x_ref[p], ti.f64)
+            lo, hi = ti.min(lo, d), ti.max(hi, d)
+            if ti.static(both):
+                e = ti.cast(y[p] - broad.x_ref[p], ti.f64)
+                lo, hi = ti.min(lo, e), ti.max(hi, e)
+        broad.moved_lo[blk], broad.moved_hi[blk] = lo, hi
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        lo, hi = broad.moved_lo[0], broad.moved_hi[0]
+        for blk in range(1, B):
+            lo, hi = ti.min(lo, broad.moved_lo[blk]), ti.max(hi, broad.moved_hi[blk])
+        broad.centre[None] = 0.5 * (lo + hi)
+    ti.loop_config(serialize=ti.static(serial_count(P)))
+    for blk in range(B):
+        c = broad.centre[None]
+        farthest = ti.cast(0.0, ti.f64)
+        for i in range(blk * DISPLACEMENT_BLOCK, ti.min((blk + 1) * DISPLACEMENT_BLOCK, P)):
+            p = broad.table.points[i]
+            farthest = ti.max(farthest, (ti.cast(x[p] - broad.x_ref[p], ti.f64) - c).norm_sqr())
+            if ti.static(both):
+                farthest = ti.max(farthest,
+                                  (ti.cast(y[p] - broad.x_ref[p], ti.f64) - c).norm_sqr())
+        broad.moved_far[blk] = farthest
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        farthest = broad.moved_far[0]
+        for blk in range(1, B):
+            farthest = ti.max(farthest, broad.moved_far[blk])
+        broad.moved_far[0] = farthest                # the kernel returns it from there
+    return 2.0 * ti.sqrt(broad.moved_far[0])
+
+
+@ti.kernel
+def _spread_between(broad: ti.template(), x: ti.template(), y: ti.template()) -> ti.f64:
+    """``_spread`` of the displacements y - x (from x, not x_ref): twice the largest
+    relative motion of a step from x to y."""
+    P = ti.static(broad.table.point_count)
+    B = ti.static(blocks_for(P, DISPLACEMENT_BLOCK))
+    ti.loop_config(serialize=ti.static(serial_count(P)))
+    for blk in range(B):
+        lo = ti.Vector([1e30, 1e30, 1e30], ti.f64)
+        hi = ti.Vector([-1e30, -1e30, -1e30], ti.f64)
+        for i in range(blk * DISPLACEMENT_BLOCK, ti.min((blk + 1) * DISPLACEMENT_BLOCK, P)):
+            p = broad.table.points[i]
+            d = ti.cast(y[p] - x[p], ti.f64)
+            lo, hi = ti.min(lo, d), ti.max(hi, d)
+        broad.moved_lo[blk], broad.moved_hi[blk] = lo, hi
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        lo, hi = broad.moved_lo[0], broad.moved_hi[0]
+        for blk in range(1, B):
+            lo, hi = ti.min(lo, broad.moved_lo[blk]), ti.max(hi, broad.moved_hi[blk])
+        broad.centre[None] = 0.5 * (lo + hi)
+    ti.loop_config(serialize=ti.static(serial_count(P)))
+    for blk in range(B):
+        c = broad.centre[None]
+        farthest = ti.cast(0.0, ti.f64)
+        for i in range(blk * DISPLACEMENT_BLOCK, ti.min((blk + 1) * DISPLACEMENT_BLOCK, P)):
+            p = broad.table.points[i]
+            farthest = ti.max(farthest, (ti.cast(y[p] - x[p], ti.f64) - c).norm_sqr())
+        broad.moved_far[blk] = farthest
+    ti.loop_config(serialize=True)
+    for _ in range(1):
+        farthest = broad.moved_far[0]
+        for blk in range(1, B):
+            farthest = ti.max(farthest, broad.moved_far[blk])
+        broad.moved_far[0] = farthest
+    return 2.0 * ti.sqrt(broad.moved_far[0])
+
+
+@ti.kernel
+def _rebuild(broad: ti.template(), search: ti.template(), cl: ti.template(),
+             x: ti.template()) -> ti.types.vector(2, ti.i32):
+    """Bin the particles and edge midpoints at x and list the candidate contacts within
+    the reach; x_ref = x. Returns (the number of candidates, the most a block of queries
+    found): more than the list's capacity or the search's block_slots means rebuild
+    larger."""
+    P, E, T = ti.static(cl.table.point_count, cl.table.edge_count, cl.table.triangle_count)
+    Q, B, slots = ti.static(search.queries, search.blocks, search.block_slots)
+    ti.loop_config(serialize=ti.static(serial_count(P)))
+    for i in range(P):
+        p = cl.table.points[i]
+        broad.x_ref[p] = x[p]
+        search.points_grid.pos[i] = x[p]
+    longest = 0.0
+    ti.loop_config(serialize=ti.static(serial_count(E)))
+    for e in range(E):
+        a, b = x[cl.table.edges[e][0]], x[cl.table.edges[e][1]]
+        search.edges_grid.pos[e] = 0.5 * (a + b)
+        ti.atomic_max(longest, (a - b).norm())
+    reach = broad.reach[None]
+    cell = ti.max(longest, reach)
+    search.points_grid.set_cell(cell)
+    search.edges_grid.set_cell(cell)
+    search.points_grid.build(P)
+    search.edges_grid.build(E)
+    ti.loop_config(serialize=ti.static(serial_count(SEARCH_COST * Q)))
+    for blk in range(B):
+        search.fill[blk] = 0
+        for q in range(blk * QUERY_BLOCK, ti.min((blk + 1) * QUERY_BLOCK, Q)):
+            search.query(q, x, reach, longest)
+    exclusive_scan(search.found_count, search.found_start, search.scan_blocks, Q,
+                   ti.static(serial_count(Q)), False)
+    most = 0
+    ti.loop_config(serialize=ti.static(serial_count(Q)))
+    for blk in range(B):
+        ti.atomic_max(most, search.fill[blk])
+        slot = blk * slots
+        for q in range(blk * QUERY_BLOCK, ti.min((blk + 1) * QUERY_BLOCK, Q)):
+            row = search.found_start[q]
+            for _ in range(search.found_count[q]):
+                if slot < (blk + 1) * slots and row < cl.capacity:
+                    lay_out(search, cl, q, slot, row)
+                slot += 1
+                row += 1
+    return ti.Vector([search.found_start[Q], most])
+
+
+@ti.data_oriented
+class BroadPhase:
+    """The candidate list of one model's self-contact and the positions it was built at.
+
+    Attributes:
+        candidates: the ``ContactList``; count: its rows in use.
+        skin: the margin of the last build, m (the list holds pairs within thickness +
+            skin); rebuilds: how many builds so far.
+    """
+
+    def __init__(self, table, inv_mass, particle_count):
+        self.table, self.inv_mass = table, inv_mass
+        real = runtime.real()
+        self.x_ref = ti.Vector.field(3, real, shape=particle_count)
+        self.reach = ti.field(real, shape=())
+        self.centre = ti.Vector.field(3, ti.f64, shape=())
+        moved_blocks = blocks_for(table.point_count, DISPLACEMENT_BLOCK)
+        self.moved_lo = ti.Vector.field(3, ti.f64, shape=moved_blocks)
+        self.moved_hi = ti.Vector.field(3, ti.f64, shape=moved_blocks)
+        self.moved_far = ti.field(ti.f64, shape=moved_blocks)
+        self._grids = (HashGrid(table.point_count), HashGrid(table.edge_count))
+        self.search = self._search(4 * QUERY_BLOCK)
+        self.candidates = self._list(8 * (table.point_count + table.edge_count))
+        self.count = 0
+        self.skin = None
+        self.rebuilds = 0
+
+    def _search(self, block_slots):
+        return Search(self.table, self.inv_mass, self._grids, self.x_ref, self.reach,
+                      block_slots)
+
+    def _list(self, capacity):
+        return ContactList(self.table, self.inv_mass, capacity)
+
+    def covers(self, x, y=None):
+        """Whether the list holds every pair that can be within the thickness at x, at y,
+        and on the straight path from x to y."""
+        if self.skin is None:
+            return False
+        return _spread(self, x, x if y is None else y, y is not None) <= self.skin
+
+    def motion(self, x, y):
+        """Twice the largest motion from x to y relative to the others' (m)."""
+        return _spread_between(self, x, y)
+
+    def build(self, x, skin):
+        """List the pairs within thickness + skin at x."""
+        self.reach[None] = float(self.table.settings["thickness"] + skin)
+        while True:
+            count, most = (int(c) for c in _rebuild(self, self.search, self.candidates, x))
+            if most > self.search.block_slots:
+                self.search = self._search(2 * most)
+            elif count > self.candidates.capacity:
+                self.candidates = self._list(2 * count)
+            else:
+                break
+        self.count, self.skin = count, float(skin)
+        self.rebuilds += 1
+
+    def invalidate(self):
+        """The next ``covers`` is False (the state was set from outside)."""
+        self.skin = None
+

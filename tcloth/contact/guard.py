@@ -1,0 +1,269 @@
+"""The guarantee: a step's motion never takes cloth through cloth or a particle into a
+collider, whatever the integrator and the step size (``docs/contact.md``).
+
+The motion of a step is the straight path of every particle from its start x0 to its end
+x1. Kernels here change x1 (and v1 by the same change over dt) until that motion is safe:
+
+  - ``project``: each candidate pair (a point and a triangle, or two edges) was
+    separated at x0 by its gap D0 > 0 along the unit normal n of its closest points. The
+    pair stays separated by the plane normal to n along the whole motion if, at x1, every
+    vertex a of its first side and b of its second keep n . (x_a - x_b) >= delta: the
+    function min_a n . x_a - max_b n . x_b is concave, so on the path it stays above its
+    smaller end value. delta = min(thickness, max(D0 / 2, thickness / 4)): a pair may
+    close to the thickness in one step, or halve a gap already inside it, never more, and
+    one closer than a quarter of the thickness ends the step that far apart (float32
+    resolves no gap of a few ulps of the coordinates). Violated vertex pairs are
+    moved apart along n in proportion to their inverse masses (Gauss-Seidel sweeps over
+    the candidates): each correction moves equal and opposite momenta.
+  - ``sweep_colliders``: a particle's path (relative to a moving collider) that enters a
+    collider ends at the entry point, BACK_OFF before it (a ray cast, so a thin box cannot
+    be stepped over), its normal velocity into the collider removed; one that started
+    inside may not end deeper.
+  - ``truncate`` (the fail-safe, where the sweeps left violations): every vertex of every
+    candidate pair is kept on its side of a plane normal to n between the pair's two
+    sides at x0, placed by how fast each side approaches (planar Divide and Truncate,
+    SIGGRAPH 2026), by cutting its displacement short: x1 = x0 + t (x1 - x0), t the
+    smallest over its planes of 0.9 of the fraction that reaches the plane. A vertex on
+    its side of a plane at both ends of its path is on it all along, so every pair stays
+    separated whatever the others' cuts. It conserves no momentum; the stage counts it.
+Pairs with no gap at x0 (touching, or a scene that started crossed) have no normal: they
+are left as they are.
+"""
+import taichi as ti
+
+from ..runtime import serial
+from ..shapes import SHAPES
+from .broad import POINT_TRIANGLE, gap
+
+# the (first side, second side) vertex pairs of a point-triangle and an edge-edge contact
+POINT_TRIANGLE_PAIRS = ((0, 1), (0, 2), (0, 3))
+EDGE_EDGE_PAIRS = ((0, 2), (0, 3), (1, 2), (1, 3))
+SLACK = 1e-3             # a violation below this fraction of delta is no violation
+KEEP = 0.9               # the fail-safe stops a vertex at this fraction of its way to a plane
+FLOOR = 0.25             # pairs end a step at least this fraction of the thickness apart
+HELD_WEIGHT = 1e-3       # the inverse-mass factor of a vertex a collider holds
+BACK_OFF = 1e-6          # m: a path a collider stops ends this far before the surface
+LEAST_GAP = 1e-6         # m: a pair closer than this at x0 has no normal (float32 rounds
+                         # coordinates near 1 m to 6e-8 m)
+
+
+@ti.func
+def _normal_margin(ids, kind, x0, thickness):
+    """(unit normal, D0, delta) of a candidate at x0; D0 <= LEAST_GAP: no normal."""
+    alpha, g = gap(ids, kind, x0)
+    d0 = g.norm()
+    n = g / ti.max(d0, LEAST_GAP)
+    return n, d0, ti.min(thickness, ti.max(0.5 * d0, FLOOR * thickness))
+
+
+@ti.func
+def _correct(ids, a: ti.template(), b: ti.template(), n, delta, x1, v1, inv_mass, held,
+             inv_dt):
+    """Move vertices a and b of a candidate apart along n until n . (x_a - x_b) = delta,
+    in proportion to their inverse masses (equal and opposite momenta), their velocities
+    by the same over dt; a vertex a collider holds this step moves as if HELD_WEIGHT
+    times as heavy (the collider takes its share; two held vertices share it equally).
+    1 if they were closer, else 0."""
+    pa, pb = ids[a], ids[b]
+    violation = delta - n.dot(x1[pa] - x1[pb])
+    wa = inv_mass[pa] * (HELD_WEIGHT if held[pa] else 1.0)
+    wb = inv_mass[pb] * (HELD_WEIGHT if held[pb] else 1.0)
+    corrected = 0
+    if violation > SLACK * delta and wa + wb > 0.0:
+        lam = violation / (wa + wb)
+        x1[pa] += wa * lam * n
+        x1[pb] -= wb * lam * n
+        v1[pa] += wa * lam * inv_dt * n
+        v1[pb] -= wb * lam * inv_dt * n
+        corrected = 1
+    return corrected
+
+
+@ti.func
+def _worst(ids, a: ti.template(), b: ti.template(), n, delta, x1):
+    return delta - n.dot(x1[ids[a]] - x1[ids[b]])
+
+
+@ti.kernel
+def planes(cl: ti.template(), count: ti.i32, x0: ti.template(), thickness: float):
+    """Each candidate's unit normal and delta at the step's start x0 into ``cl.plane_n``
+    and ``cl.plane_delta`` (0 where it has no normal), for ``project`` and
+    ``violations``: the closest points cost more than the sweeps' checks."""
+    ti.loop_config(serialize=ti.static(serial(cl.ids)))
+    for c in range(count):
+        n, d0, delta = _normal_margin(cl.ids[c], cl.kind[c], x0, thickness)
+        cl.plane_n[c] = n
+        cl.plane_delta[c] = delta if d0 > LEAST_GAP else 0.0
+
+
+@ti.func
+def _project_row(cl, c, x1, v1, inv_mass, held, inv_dt):
+    """Correct the violated vertex pairs of candidate c in place; the number corrected."""
+    ids, kind = cl.ids[c], cl.kind[c]
+    n, delta = cl.plane_n[c], cl.plane_delta[c]
+    corrected = 0
+    if delta > 0.0:
+        if kind == POINT_TRIANGLE:
+            for a, b in ti.static(POINT_TRIANGLE_PAIRS):
+                corrected += _correct(ids, a, b, n, delta, x1, v1, inv_mass, held, inv_dt)
+        else:
+            for a, b in ti.static(EDGE_EDGE_PAIRS):
+                corrected += _correct(ids, a, b, n, delta, x1, v1, inv_mass, held, inv_dt)
+    return corrected
+
+
+@ti.kernel
+def project(cl: ti.template(), count: ti.i32, x1: ti.template(), v1: ti.template(),
+            inv_mass: ti.template(), held: ti.template(), sweeps: ti.i32,
+            inv_dt: float) -> ti.types.vector(2, ti.i32):
+    """Gauss-Seidel sweeps over the candidates (their ``planes``) until one corrects
+    nothing, at most ``sweeps``. Returns (corrections, the sweeps run); the last sweep
+    corrected nothing when fewer than ``sweeps`` ran."""
+    total = 0
+    ran = 0
+    ti.loop_config(serialize=True)
+    for _ in range(sweeps):
+        corrected = 0
+        for c in range(count):
+            corrected += _project_row(cl, c, x1, v1, inv_mass, held, inv_dt)
+        total += corrected
+        ran += 1
+        if corrected == 0:
+            break
+    return ti.Vector([total, ran])
+
+
+@ti.kernel
+def violations(cl: ti.template(), count: ti.i32, x1: ti.template()) -> ti.i32:
+    """How many candidates have a vertex pair closer along their normal than delta
+    (their ``planes``)."""
+    bad = 0
+    ti.loop_config(serialize=ti.static(serial(cl.ids)))
+    for c in range(count):
+        ids, kind = cl.ids[c], cl.kind[c]
+        n, delta = cl.plane_n[c], cl.plane_delta[c]
+        if delta > 0.0:
+            worst = 0.0
+            if kind == POINT_TRIANGLE:
+                for a, b in ti.static(POINT_TRIANGLE_PAIRS):
+                    worst = ti.max(worst, _worst(ids, a, b, n, delta, x1))
+            else:
+                for a, b in ti.static(EDGE_EDGE_PAIRS):
+                    worst = ti.max(worst, _worst(ids, a, b, n, delta, x1))
+            if worst > SLACK * delta:
+                bad += 1
+    return bad
+
+
+@ti.func
+def _cut(x0, x1, n, plane, side, inv_mass, t_out, p):
+    """Lower t_out[p] so that vertex p (on ``side`` = +1 or -1 of the plane n . y =
+    plane) stops KEEP of its way to the plane."""
+    start = side * (n.dot(x0[p]) - plane)
+    approach = -side * n.dot(x1[p] - x0[p])
+    if inv_mass[p] > 0.0 and approach > (1.0 - KEEP) * start:
+        ti.atomic_min(t_out[p], KEEP * start / approach)
+
+
+@ti.kernel
+def truncate(cl: ti.template(), count: ti.i32, x0: ti.template(), x1: ti.template(),
+             v1: ti.template(), inv_mass: ti.template(), t_out: ti.template(),
+             inv_dt: float) -> ti.i32:
+    """The fail-safe (module docstring): every vertex kept on its side of every
+    candidate's dividing plane. Returns how many vertices were cut short."""
+    ti.loop_config(serialize=ti.static(serial(x1)))
+    for p in range(x1.shape[0]):
+        t_out[p] = 1.0
+    ti.loop_config(serialize=ti.static(serial(cl.ids)))
+    for c in range(count):
+        ids, kind = cl.ids[c], cl.kind[c]
+        alpha, g = gap(ids, kind, x0)
+        d0 = g.norm()
+        if d0 > LEAST_GAP:
+            n = g / d0
+            first = 1 if kind == POINT_TRIANGLE else 2
+            # the sides' extents along n at x0, and how fast each approaches the other
+            low_a, high_b = 1e30, -1e30
+            a_speed, b_speed = 0.0, 0.0
+            for k in ti.static(range(4)):
+                along = n.dot(x0[ids[k]])
+                if k < first:
+                    low_a = ti.min(low_a, along)
+                    a_speed = ti.max(a_speed, -n.dot(x1[ids[k]] - x0[ids[k]]))
+                else:
+                    high_b = ti.max(high_b, along)
+                    b_speed = ti.max(b_speed, n.dot(x1[ids[k]] - x0[ids[k]]))
+            if low_a - high_b > LEAST_GAP:      # a plane normal to n divides the sides
+                share = 0.5
+                if a_speed + b_speed > 0.0:
+                    share = ti.math.clamp(b_speed / (a_speed + b_speed), 0.05, 0.95)
+                plane = high_b + share * (low_a - high_b)
+                for k in ti.static(range(4)):
+                    _cut(x0, x1, n, plane, 1.0 if k < first else -1.0, inv_mass, t_out,
+                         ids[k])
+    cut = 0
+    ti.loop_config(serialize=ti.static(serial(x1)))
+    for p in range(x1.shape[0]):
+        if t_out[p] < 1.0:
+            moved = x0[p] + t_out[p] * (x1[p] - x0[p])
+            v1[p] += (moved - x1[p]) * inv_dt
+            x1[p] = moved
+            cut += 1
+    return cut
+
+
+@ti.func
+def sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held):
+    """Each free particle's path from x0 to x1 against every switched-on collider, in the
+    collider's frame (it moves by dt times its velocity): a path from outside that enters
+    it ends at the entry, riding with the collider, its velocity into it removed; a
+    particle that started inside may not end deeper. Returns how many paths were cut;
+    ``held`` gets 1 for each particle cut."""
+    clamped = 0
+    ti.loop_config(serialize=ti.static(serial(x1)))
+    for p in range(x1.shape[0]):
+        if inv_mass[p] > 0.0:
+            for g in ti.static(table.groups):
+                for k in range(g.first, g.first + g.count):
+                    col = table.data[k]
+                    if col.stiffness > 0.0:
+                        u = col.velocity
+                        start = x0[p]
+                        rel = x1[p] - dt * u - start
+                        length = rel.norm()
+                        phi0, n0 = SHAPES[g.shape].signed_distance(col, start, t0)
+                        if phi0 >= 0.0:
+                            if length > phi0:
+                                d = rel / length
+                                hit = SHAPES[g.shape].ray_hit(col, start, d, t0)
+                                if 0.0 <= hit < length - BACK_OFF:
+                                    entry = start + ti.max(hit - BACK_OFF, 0.0) * d
+                                    _, n = SHAPES[g.shape].signed_distance(col, entry, t0)
+                                    x1[p] = entry + dt * u
+                                    vn = (v1[p] - u).dot(n)
+                                    if vn < 0.0:
+                                        v1[p] -= vn * n
+                                    clamped += 1
+                                    held[p] = ti.u8(1)
+                        else:
+                            phi1, n1 = SHAPES[g.shape].signed_distance(col, x1[p], t0 + dt)
+                            if phi1 < phi0:
+                                x1[p] += (phi0 - phi1) * n1
+                                vn = (v1[p] - u).dot(n1)
+                                if vn < 0.0:
+                                    v1[p] -= vn * n1
+                                clamped += 1
+                                held[p] = ti.u8(1)
+    return clamped
+
+
+@ti.kernel
+def sweep_colliders_kernel(table: ti.template(), inv_mass: ti.template(), x0: ti.template(),
+                           x1: ti.template(), v1: ti.template(), t0: float, dt: float,
+                           held: ti.template(), first: ti.template()) -> ti.i32:
+    """``sweep_colliders``; ``first``: held = 0 before (the step's first sweep)."""
+    if ti.static(first):
+        ti.loop_config(serialize=ti.static(serial(held)))
+        for p in range(held.shape[0]):
+            held[p] = ti.u8(0)
+    return sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held)

@@ -1,0 +1,187 @@
+"""The contact stage: one per simulator, the contact set every consumer reads, and the
+guarantee that no step takes cloth through cloth or a particle into a collider.
+
+It is built with the model (``Model.contact``) of a scene with self-collision or
+colliders, and updated only at named points, all called by the ``Simulator``:
+
+  - ``refresh(x)``: after the state was set from outside (``set_state``, ``reset``, a
+    checkpoint, the simulator's start): the proximity list covers x.
+  - ``end_step(x0, x1, v1, t0, dt)``: after the integrator and the strain limit: the
+    guard (``guard.py``) on the step's motion from x0 to x1, over the proximity list
+    where it covers that motion, else over the step's swept-box candidates
+    (``swept.py``); then the colliders; then, where pairs are still too close, the
+    fail-safe. Afterwards the proximity list covers x1 (rebuilt at x1 if not, with
+    the default skin).
+So the proximity list always covers the current state (a rebuild at most once a step),
+and the self-contact term (explicit forces, backward Euler's potential and Hessian,
+projective's projection) and the diagnostics read it; nothing rebuilds it inside a solve
+or an ``energy()``. A step's force evaluations away from its start (Runge-Kutta stages,
+Newton iterates) see the pairs near the start; what they miss, the guard catches.
+
+``stats`` (``Simulator.contact_stats``): see ``STATS``.
+"""
+import time
+
+import taichi as ti
+
+from .. import runtime
+from . import guard
+from .broad import BroadPhase
+from .swept import SweptSearch, search_step
+
+SWEEPS = 20          # Gauss-Seidel sweeps of the pairs' projection a round
+ROUNDS = 4           # rounds of the projection and the colliders' sweep before the fail-safe
+STATS = {
+    "candidates": "rows of the proximity list (pairs within thickness + skin)",
+    "rebuilds": "builds of the proximity list so far",
+    "swept_searches": "steps whose motion needed the swept-box search",
+    "guard_corrections": "vertex pairs the guard moved apart so far",
+    "guard_sweeps": "Gauss-Seidel sweeps the guard ran so far",
+    "failsafe_steps": "steps that needed the fail-safe (cuts conserve no momentum)",
+    "failsafe_vertices": "vertex paths the fail-safe cut short so far",
+    "collider_paths_cut": "particle paths that entered a collider and were stopped",
+    "seconds": ("wall time spent in the stage so far (outside batch kernels, which run "
+                "the colliders' sweep inside)"),
+}
+
+
+@ti.data_oriented
+class ContactStage:
+    """The contact set and the guard of one model (module docstring).
+
+    Attributes:
+        table: the model's ``topology.SelfCollisionTable`` or None.
+        broad: the proximity list (``broad.BroadPhase``) or None without self-collision.
+        colliders: the model's ``ColliderTable`` or None without colliders.
+        x_start: the step's start positions where a batch of substeps needs them.
+        batch_cuts: (paths the collider sweep cut inside batches, in their last step).
+    """
+
+    def __init__(self, model):
+        self.model = model
+        self.table = model.self_collision
+        self.colliders = model.colliders if model.colliders.count else None
+        self.inv_mass = model.inv_mass
+        n, real = model.particle_count, runtime.real()
+        self.broad = self.swept = None
+        if self.table is not None:
+            self.broad = BroadPhase(self.table, model.inv_mass, n)
+            self.swept = SweptSearch(self.table, model.inv_mass)
+            self.thickness = float(self.table.settings["thickness"])
+            self.skin = float(self.table.settings["skin"])
+            self.cut = ti.field(real, shape=n)
+        self.x_start = ti.Vector.field(3, real, shape=n) if self.colliders else None
+        # 1 where a collider stopped a particle's path this step
+        self.held = ti.field(ti.u8, shape=n)
+        # paths the collider sweep cut inside batches of substeps: in all, in the last step
+        self.batch_cuts = ti.field(ti.i32, shape=2)
+        self.stats = {key: 0 for key in STATS}
+        self.stats["seconds"] = 0.0
+
+    # -- the proximity list ------------------------------------------------------------------
+    @property
+    def candidates(self):
+        return self.broad.candidates
+
+    @property
+    def count(self):
+        return self.broad.count
+
+    def refresh(self, x):
+        """Make the proximity list cover x (after the state was set from outside)."""
+        if self.broad is not None:
+            self.broad.invalidate()
+            self._cover(x)
+
+    def _cover(self, x):
+        if not self.broad.covers(x):
+            self.broad.build(x, self.skin)
+
+    # -- the guard ---------------------------------------------------------------------------
+    def end_step(self, x0, x1, v1, t0, dt):
+        """The guard on the motion x0 -> x1 (v1 changed with x1); afterwards the proximity
+        list covers x1. Returns whether it changed x1 and v1.
+
+        Where no candidate is too close at x1 and no path enters a collider (most steps
+        of an explicit integrator), that is one pass over the candidates and one over the
+        particles. Else rounds of the colliders' sweep and the pairs' projection, in which
+        a particle a collider stopped stays where it is (the collider takes its share),
+        until the projection corrects nothing or the sweep cuts nothing new, at most
+        ROUNDS; then the fail-safe where a pair of the candidates of the final motion is
+        still too close, and a last sweep (its cuts move particles back along their
+        paths, which keeps every pair on its side)."""
+        start = time.perf_counter()
+        changed = 0
+        if self.broad is None:
+            changed = self._sweep(x0, x1, v1, t0, dt, True)
+        else:
+            cl, count, covered = self._step_candidates(x0, x1)
+            cut = self._sweep(x0, x1, v1, t0, dt, True)
+            if cut or guard.violations(cl, count, x1):
+                changed = cut + self._resolve(cl, count, x0, x1, v1, t0, dt)
+            if changed or not covered:
+                self._cover(x1)
+        self.stats["seconds"] += time.perf_counter() - start
+        return changed > 0
+
+    def _resolve(self, cl, count, x0, x1, v1, t0, dt):
+        """The rounds, the fail-safe and the last sweep of ``end_step``; returns how much
+        they changed. A round that moved anything ends with the candidates of the motion
+        as it now is (the projection moves particles off their paths, where they can meet
+        pairs the first candidates did not hold)."""
+        inv_dt = 1.0 / dt
+        changed = 0
+        for round_ in range(ROUNDS):
+            if round_:
+                cut = self._sweep(x0, x1, v1, t0, dt, False)
+                changed += cut
+                cl, count, _ = self._step_candidates(x0, x1)
+                if not cut and not guard.violations(cl, count, x1):
+                    break
+            corrected, sweeps = (int(v) for v in guard.project(
+                cl, count, x1, v1, self.inv_mass, self.held, SWEEPS, inv_dt))
+            self.stats["guard_corrections"] += corrected
+            self.stats["guard_sweeps"] += sweeps
+            changed += corrected
+        else:
+            cl, count, _ = self._step_candidates(x0, x1)
+            if guard.violations(cl, count, x1):
+                self.stats["failsafe_steps"] += 1
+                cut = int(guard.truncate(cl, count, x0, x1, v1, self.inv_mass, self.cut,
+                                         inv_dt))
+                self.stats["failsafe_vertices"] += cut
+                changed += cut + self._sweep(x0, x1, v1, t0, dt, False)
+        return changed
+
+    def _sweep(self, x0, x1, v1, t0, dt, first):
+        """The colliders' sweep (``guard.sweep_colliders``; ``first``: the step's first,
+        which forgets who was held); the paths it cut."""
+        if self.colliders is None:
+            return 0
+        cut = int(guard.sweep_colliders_kernel(self.colliders, self.inv_mass, x0, x1, v1, t0,
+                                               dt, self.held, first))
+        self.stats["collider_paths_cut"] += cut
+        return cut
+
+    def _step_candidates(self, x0, x1):
+        """(list, rows, whether it is the proximity list) holding every pair that can come
+        within the thickness on the motion x0 -> x1, with their separating planes at x0:
+        the proximity list where it covers the motion (then it covers x1 too), else the
+        swept search's."""
+        if self.broad.covers(x0, x1):
+            cl, count, covered = self.broad.candidates, self.broad.count, True
+        else:
+            self.stats["swept_searches"] += 1
+            count = search_step(self.swept, x0, x1, self.thickness)
+            cl, covered = self.swept.candidates, False
+        guard.planes(cl, count, x0, self.thickness)
+        return cl, count, covered
+
+    def contact_stats(self):
+        """A copy of ``stats`` with the current candidate and rebuild counts."""
+        out = dict(self.stats)
+        out["collider_paths_cut"] += int(self.batch_cuts[0])
+        if self.broad is not None:
+            out["candidates"] = self.broad.count
+            out["rebuilds"] = self.broad.rebuilds
+        return out

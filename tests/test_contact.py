@@ -1,0 +1,208 @@
+"""The contact stage's guarantee (tcloth/contact/): no cloth edge crosses a cloth triangle
+between two steps and no particle ends a step inside or through a collider, whatever the
+integrator and dt. Checked with NumPy alone: tools/crossings.py (itself checked here
+against a brute force), signed distances and slab tests of the particle paths
+(tools/bench_contact.py, whose stress set these are small versions of), the thrown
+cloths' layer order and their momentum."""
+import os
+import sys
+
+import numpy as np
+import pytest
+import taichi as ti
+
+import tcloth
+from tcloth.contact import stage as stage_module
+from tcloth.viewer import contact_lines
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.join(HERE, "..", "tools"))
+from bench_contact import (CLOTH, centre, falling, order_kept, run_case, side,  # noqa: E402
+                           signed_distances, thrown)
+from crossings import count_crossings, crossing_pairs, triangle_edges  # noqa: E402
+
+
+# -- the independent counter -----------------------------------------------------------------
+def brute_force_crossings(x, triangles):
+    """Every (edge, triangle) pair sharing no particle, tested by solving
+    a + u (b - a) + w (c - a) = p + s (q - p) for (u, w, s)."""
+    hits = set()
+    edges = triangle_edges(triangles)
+    for e, (i, j) in enumerate(edges):
+        for t, tri in enumerate(triangles):
+            if i in tri or j in tri:
+                continue
+            a, b, c = x[tri]
+            m = np.column_stack([b - a, c - a, x[i] - x[j]])
+            if abs(np.linalg.det(m)) < 1e-14:
+                continue
+            u, w, s = np.linalg.solve(m, x[i] - a)
+            if u >= 0 and w >= 0 and u + w <= 1 and 0 < s < 1:
+                hits.add((e, t))
+    return hits
+
+
+def test_crossing_counter_matches_a_brute_force():
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        x = rng.uniform(-1.0, 1.0, size=(30, 3))
+        triangles = np.array([rng.choice(30, 3, replace=False) for _ in range(25)])
+        found = {tuple(p) for p in crossing_pairs(x, triangles)}
+        assert found == brute_force_crossings(x, triangles)
+        assert len(found) > 5
+    # two flat cloths, one through the other: each crossing edge is counted once
+    scene = tcloth.Scene()
+    scene.add_cloth(resolution=(4, 4), size=(1.0, 1.0), plane="xz", **CLOTH)
+    scene.add_cloth(resolution=(4, 4), size=(1.0, 1.0), plane="xy", **CLOTH)
+    x, tri = scene.positions.astype(np.float64), scene.triangles
+    assert count_crossings(x, tri) == len(brute_force_crossings(x, tri)) > 0
+
+
+# -- the guard on one step's motion ----------------------------------------------------------
+def flight(masses, res=12):
+    """Two cloths 0.1 m apart thrown at each other at 20 m/s relative: one free-flight step
+    of 1/60 s would take each wholly through the other (the layers swapped, no crossing
+    at either end)."""
+    scene, x, v, cloths = thrown(20.0, res=res, masses=masses)
+    sim = tcloth.Simulator(scene, "symplectic_euler", dt=1.0 / 60.0)
+    sim.set_state(positions=x, velocities=v)
+    return sim, scene, x, v, cloths
+
+
+def guard_step(sim, x, v, dt):
+    """The contact stage on the free-flight motion x -> x + dt v; returns (x1, v1)."""
+    real = sim.state.x.dtype
+    fields = [ti.Vector.field(3, real, shape=len(x)) for _ in range(3)]
+    for f, value in zip(fields, (x, x + dt * v, v)):
+        f.from_numpy(value.astype(np.float64 if real == ti.f64 else np.float32))
+    sim.model.contact.end_step(*fields, 0.0, dt)
+    return fields[1].to_numpy().astype(np.float64), fields[2].to_numpy().astype(np.float64)
+
+
+def test_guard_stops_cloths_passing_wholly_through_each_other(f64, monkeypatch):
+    """The projection, and the fail-safe alone (no rounds of projection), each turn a step
+    that would swap the layers of two cloths of unequal mass into one that keeps them
+    apart: zero crossings, the order kept. The projection's corrections are equal and
+    opposite: momentum conserved to rounding."""
+    sim, scene, x, v, cloths = flight((0.05, 0.1))
+    sides = (side(x, centre(cloths[0]), cloths[1]), side(x, centre(cloths[1]), cloths[0]))
+    free = x + v / 60.0
+    assert count_crossings(free, scene.triangles) == 0
+    assert not order_kept(free, cloths, sides)           # free flight swaps them
+    for rounds in (stage_module.ROUNDS, 0):
+        monkeypatch.setattr(stage_module, "ROUNDS", rounds)
+        before = sim.contact_stats()
+        x1, v1 = guard_step(sim, x, v, 1.0 / 60.0)
+        assert count_crossings(x1, scene.triangles) == 0
+        assert order_kept(x1, cloths, sides)
+        stats = {k: sim.contact_stats()[k] - before[k]
+                 for k in ("guard_corrections", "failsafe_steps", "failsafe_vertices")}
+        if rounds:
+            assert stats["guard_corrections"] > 0 and stats["failsafe_steps"] == 0
+            m = scene.masses[:, None]
+            scale = float(np.sum(scene.masses)) * 10.0
+            np.testing.assert_allclose((m * v1).sum(0), (m * v).sum(0), atol=1e-12 * scale)
+        else:
+            assert stats["failsafe_steps"] == 1 and stats["failsafe_vertices"] > 0
+
+
+# -- the stress set, small ------------------------------------------------------------------
+def small_thrown(speed):
+    return lambda: thrown(speed, res=12)
+
+
+@pytest.mark.parametrize("integrator,dt", [
+    ("backward_euler", 1.0 / 60.0), ("projective", 1.0 / 60.0), ("projective", 1.0 / 240.0),
+    ("symplectic_euler", None), ("forward_euler", None), ("verlet", None), ("rk4", None)])
+def test_thrown_cloths_never_cross_at_any_step(integrator, dt):
+    """Two 12 x 12 cloths thrown at each other at 10 m/s relative: zero crossings at every
+    step (every 20th for the explicit integrators at their own dt, 5e-5 s), the layer
+    order kept, no blow-up (float32)."""
+    tcloth.init()
+    r = run_case("thrown_10", integrator, dt, seconds=0.1 if dt else 0.03,
+                 build=small_thrown(10.0), chunk=1 if dt else 20)
+    assert r["blew_up"] is None
+    assert r["crossings_start"] == 0 and r["crossings_max"] == 0, r
+    assert r["order_kept"], r
+    assert r["guard_corrections"] + r["contacts_max"] > 10, "the cloths never met"
+
+
+@pytest.mark.parametrize("integrator,dt,collider", [
+    ("backward_euler", 1.0 / 60.0, "box"), ("backward_euler", 1.0 / 60.0, "sphere"),
+    ("projective", 1.0 / 60.0, "box"), ("projective", 1.0 / 60.0, "sphere"),
+    ("symplectic_euler", 1e-4, "box")])
+def test_cloth_falling_at_10_m_per_s_stays_out_of_thin_colliders(integrator, dt, collider):
+    """A cloth thrown down at 10 m/s onto a box 1 cm thick or a sphere: no particle ends a
+    step inside a collider, no path goes through the box (each step's, at dt = 1/60), no
+    cloth crossing."""
+    tcloth.init()
+    r = run_case(f"{collider}_10", integrator, dt, seconds=0.1 if dt > 1e-3 else 0.03,
+                 build=lambda: falling(collider, res=12), chunk=1 if dt > 1e-3 else 20)
+    assert r["blew_up"] is None
+    assert r["collider_paths_cut"] > 0, "the cloth never reached the collider"
+    assert r["inside_max"] <= 1e-6, r
+    assert r["through"] == 0 and r["crossings_max"] == 0, r
+
+
+def crossed_at_start():
+    """Two 12 x 12 cloths through each other (one in xz, one in xy), sliding apart."""
+    scene = tcloth.Scene(gravity=(0.0, 0.0, 0.0))
+    a = scene.add_cloth(resolution=(12, 12), size=(0.4, 0.4), center=(0.0, 0.0, 0.0),
+                        mass=0.1, **CLOTH)
+    b = scene.add_cloth(resolution=(12, 12), size=(0.4, 0.4), center=(0.05, 0.0, 0.0),
+                        plane="xy", mass=0.1, **CLOTH)
+    scene.set_self_collision(thickness=0.006)
+    v = np.zeros_like(scene.positions)
+    v[a.particles.ravel(), 0] = 1.0
+    v[b.particles.ravel(), 1] = 1.0
+    return scene, scene.positions, v, (a, b)
+
+
+@pytest.mark.parametrize("integrator,dt", [("backward_euler", 1.0 / 60.0)])
+def test_a_scene_that_starts_crossed_gets_no_worse(integrator, dt):
+    """Pairs that touch or cross at a step's start have no separating plane and are left
+    as they are; the others are kept apart: the crossing count never grows, nothing blows
+    up, and the fail-safe is not needed."""
+    tcloth.init()
+    r = run_case("thrown_3", integrator, dt, seconds=0.2, build=crossed_at_start)
+    assert r["crossings_start"] > 0
+    assert r["blew_up"] is None
+    assert r["crossings_max"] <= r["crossings_start"], r
+    assert r["failsafe_steps"] == 0
+
+
+# -- statistics -----------------------------------------------------------------------------
+def test_contact_stats_count_what_the_stage_did():
+    """A cloth thrown onto a box in batches of substeps (the collider sweep runs inside the
+    batch kernel), then two crossed cloths: the statistics and the viewer's lines."""
+    tcloth.init()
+    scene = tcloth.Scene()
+    scene.add_cloth(resolution=(8, 8), size=(0.6, 0.6), center=(0.0, 0.3, 0.0), mass=0.2,
+                    **CLOTH)
+    scene.add_box((0.0, 0.1, 0.0), (0.25, 0.005, 0.25), friction=0.3)
+    sim = tcloth.Simulator(scene, dt=1e-4)
+    sim.set_state(velocities=np.tile([0.0, -10.0, 0.0], (scene.num_particles, 1)))
+    assert sim.fusion() is None
+    sim.step(600)
+    stats = sim.contact_stats()
+    assert set(stage_module.STATS) <= set(stats)
+    assert stats["collider_paths_cut"] > 0
+    # the cloth lies on the box: the particles within a collider's thickness, by NumPy
+    phi = signed_distances(scene, sim.positions().astype(np.float64), sim.time)
+    thickness = np.array([c["thickness"] for c in scene.colliders])
+    assert stats["collider"] == int((phi < thickness).any(axis=1).sum()) > 0
+    lines = contact_lines(stats)
+    assert any("collider contacts" in line for line in lines)
+    assert not any("self-contacts" in line for line in lines)
+
+    crossed, x, v, _ = crossed_at_start()
+    sim = tcloth.Simulator(crossed, dt=1e-4)
+    sim.step()
+    stats = sim.contact_stats()
+    assert stats["rebuilds"] >= 1 and stats["candidates"] > 0 and stats["seconds"] > 0.0
+    assert stats["point_triangle"] + stats["edge_edge"] > 0 and stats["collider"] == 0
+    assert any("self-contacts" in line for line in contact_lines(stats))
+    no_contact = tcloth.Scene()
+    no_contact.add_cloth(resolution=(4, 4), size=(0.2, 0.2), **CLOTH)
+    assert tcloth.Simulator(no_contact).contact_stats() == {}
+    assert contact_lines({}) == []

@@ -1,0 +1,281 @@
+"""The contact stress set: cloth that must never pass through cloth or a collider, at one
+step per frame and at the explicit integrators' own steps (issue "contact that holds at any
+step size"; docs/contact.md).
+
+Cases (``CASES``; each a scene builder with its time span):
+  - ``thrown_3``, ``thrown_10``: two 24 x 24 cloths of 0.5 m thrown at each other at 3 and
+    10 m/s relative, no gravity, thickness 6 mm; ``thrown_unequal``: 12 x 12 cloths of 0.05
+    and 0.1 kg at 1 m/s each;
+  - ``twist``: a 32 x 32 cloth whose two ends turn in opposite directions (its pinned rows
+    are moved from Python every step) until it wrinkles onto itself;
+  - ``fold``, ``pile``: scenes/fold.py and scenes/cloth_pile.py;
+  - ``box_10``, ``sphere_10``: a 24 x 24 cloth falling at 10 m/s onto a box 1 cm thick and
+    onto a sphere.
+Each runs with backward Euler and projective at dt = 1/60 and 1/240, and with the explicit
+integrators at the scene's own dt (``--integrators``, ``--dts``). Checked with NumPy alone,
+at every step: edge-triangle crossings (``crossings.py``; zero unless the scene started
+crossed), particles inside a collider or whose path went through a thin box, the thrown
+cloths' order (each cloth's centre particle stays on the side of the other it started on,
+by the normal of the other's nearest triangle: they may tumble together), their linear
+momentum, and no blow-up.
+
+Prints ``contact.<case>.<integrator>.<dt>.<metric>: value`` lines (crossings_max,
+inside_max, through, order_kept, momentum_drift, ms_per_step, failsafe_steps, ...).
+
+Usage: python tools/bench_contact.py [--cases thrown_3,fold] [--integrators backward_euler]
+                                     [--dts 1/60,1/240] [--seconds S] [--explicit-chunk K]
+"""
+import argparse
+import math
+import os
+import sys
+import time
+
+import numpy as np
+
+import tcloth
+from crossings import count_crossings, triangle_edges
+from tcloth.script import load_script
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+SCENES = os.path.join(HERE, "..", "scenes")
+CLOTH = {"structural": (400.0, 0.05), "shear": (80.0, 0.02), "flexion": (10.0, 0.005),
+         "pinned": []}
+
+
+# -- scenes ---------------------------------------------------------------------------------
+def thrown(speed, res=24, masses=(0.1, 0.1), size=0.5):
+    """Two cloths facing each other 0.1 m apart, the upper one shifted and turned a little,
+    thrown together at ``speed`` relative. Returns (scene, positions, velocities, the two
+    cloths)."""
+    scene = tcloth.Scene(gravity=(0.0, 0.0, 0.0))
+    a = scene.add_cloth(resolution=(res, res), size=(size, size), center=(0.0, 0.05, 0.0),
+                        mass=masses[0], **CLOTH)
+    b = scene.add_cloth(resolution=(res, res), size=(size, size), center=(0.02, -0.05, 0.03),
+                        mass=masses[1], **CLOTH)
+    scene.set_self_collision(thickness=0.006)
+    x = scene.positions
+    ids = b.particles.ravel()
+    c, s = math.cos(0.3), math.sin(0.3)
+    centre = x[ids].mean(axis=0)
+    x[ids] = (x[ids] - centre) @ np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]]).T + centre
+    v = np.zeros_like(x)
+    v[a.particles.ravel(), 1] = -speed / 2
+    v[ids, 1] = speed / 2
+    return scene, x, v, (a, b)
+
+
+def falling(collider, speed=10.0, res=24):
+    """A 24 x 24 cloth falling at ``speed`` onto a box 1 cm thick or a sphere on a plane."""
+    scene = tcloth.Scene(gravity=(0.0, -9.81, 0.0))
+    cloth = scene.add_cloth(resolution=(res, res), size=(0.6, 0.6), center=(0.0, 0.3, 0.0),
+                            mass=0.2, **CLOTH)
+    if collider == "box":
+        scene.add_box((0.0, 0.1, 0.0), (0.25, 0.005, 0.25), friction=0.3)
+    else:
+        scene.add_sphere((0.0, 0.1, 0.0), 0.12, friction=0.3)
+    scene.add_plane((0.0, -0.3, 0.0), (0.0, 1.0, 0.0), friction=0.3)
+    scene.set_self_collision(thickness=0.006)
+    v = np.zeros_like(scene.positions)
+    v[cloth.particles.ravel(), 1] = -speed
+    return scene, scene.positions, v, (cloth,)
+
+
+def twisted(res=32):
+    """A 32 x 32 cloth hanging between two rows held at its ends, which turn in opposite
+    directions (``twist_rows``)."""
+    scene = tcloth.Scene(gravity=(0.0, -9.81, 0.0))
+    cloth = scene.add_cloth(resolution=(res, res), size=(0.6, 0.6), center=(0.0, 0.5, 0.0),
+                            mass=0.2, plane="xz", **{**CLOTH, "pinned": [
+                                (i, j) for i in range(res) for j in (0, res - 1)]})
+    scene.set_self_collision(thickness=0.004)
+    return scene, scene.positions, scene.velocities, (cloth,)
+
+
+TWIST_RATE = 2.0 * math.pi * 0.75       # rad/s each end, in opposite directions
+
+
+def twist_rows(sim, cloth, x_rest, t):
+    """Move the held end rows of ``twisted`` to their turned positions at time t (about
+    the cloth's axis along z), with the matching velocities."""
+    res = cloth.particles.shape[0]
+    x, v = sim.positions(), sim.velocities()
+    for j, sign in ((0, 1.0), (res - 1, -1.0)):
+        ids = cloth.particles[j]
+        angle = sign * TWIST_RATE * t
+        c, s = math.cos(angle), math.sin(angle)
+        rest = x_rest[ids] - [0.0, 0.5, 0.0]
+        x[ids, 0] = c * rest[:, 0] - s * rest[:, 1]
+        x[ids, 1] = s * rest[:, 0] + c * rest[:, 1] + 0.5
+        x[ids, 2] = rest[:, 2]
+        v[ids, 0] = -sign * TWIST_RATE * (x[ids, 1] - 0.5)
+        v[ids, 1] = sign * TWIST_RATE * x[ids, 0]
+        v[ids, 2] = 0.0
+    sim.set_state(positions=x, velocities=v)
+
+
+def script_scene(name):
+    module, cfg = load_script(os.path.join(SCENES, name + ".py"))
+    scene = module.build()
+    return scene, scene.positions, scene.velocities, tuple(scene.cloths)
+
+
+CASES = {
+    "thrown_3": (lambda: thrown(3.0), 0.3, 1e-4),
+    "thrown_10": (lambda: thrown(10.0), 0.2, 5e-5),
+    "thrown_unequal": (lambda: thrown(2.0, res=12, masses=(0.05, 0.1)), 0.3, 1e-4),
+    "twist": (twisted, 1.0, 1e-4),
+    "fold": (lambda: script_scene("fold"), 1.5, 2.5e-4),
+    "pile": (lambda: script_scene("cloth_pile"), 1.5, 2.5e-4),
+    "box_10": (lambda: falling("box"), 0.4, 5e-5),
+    "sphere_10": (lambda: falling("sphere"), 0.4, 5e-5),
+}
+EXPLICIT = ("forward_euler", "symplectic_euler", "verlet", "rk4")
+
+
+# -- checks (NumPy only) --------------------------------------------------------------------
+def signed_distances(scene, x, t):
+    """(N, colliders) signed distance of every particle to every collider at time t."""
+    out = np.zeros((len(x), len(scene.colliders)))
+    for k, c in enumerate(scene.colliders):
+        centre = np.asarray(c["center"]) + t * np.asarray(c["velocity"])
+        if c["kind"] == "sphere":
+            out[:, k] = np.linalg.norm(x - centre, axis=1) - c["radius"]
+        elif c["kind"] == "plane":
+            out[:, k] = (x - centre) @ np.asarray(c["normal"])
+        elif c["kind"] == "box":
+            q = (x - centre) @ np.asarray(c["rotation"])
+            d = np.abs(q) - np.asarray(c["half_extents"])
+            outside = np.linalg.norm(np.maximum(d, 0.0), axis=1)
+            out[:, k] = np.where(outside > 0.0, outside, d.max(axis=1))
+        else:
+            raise ValueError(f"no NumPy distance for a {c['kind']}")
+    return out
+
+
+def passes_through_boxes(scene, x0, x1, t0, dt):
+    """How many particle paths x0 -> x1 cross a box collider from one side to the other
+    (slab test on the segment in the box's frame, moving with it)."""
+    through = 0
+    for c in scene.colliders:
+        if c["kind"] != "box":
+            continue
+        rot, half = np.asarray(c["rotation"]), np.asarray(c["half_extents"])
+        o = (x0 - (np.asarray(c["center"]) + t0 * np.asarray(c["velocity"]))) @ rot
+        d = (x1 - x0 - dt * np.asarray(c["velocity"])) @ rot
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t_a, t_b = (-half - o) / d, (half - o) / d
+        lo = np.nanmax(np.minimum(t_a, t_b), axis=1)
+        hi = np.nanmin(np.maximum(t_a, t_b), axis=1)
+        outside_start = (np.abs(o) > half).any(axis=1)
+        outside_end = (np.abs(o + d) > half).any(axis=1)
+        through += int((outside_start & outside_end & (lo <= hi) & (lo > 0) & (hi < 1)).sum())
+    return through
+
+
+def side(x, point, cloth):
+    """+1 or -1: the side of ``cloth`` particle ``point`` lies on, by the normal of the
+    cloth's triangle nearest to it (its centroid nearest; the winding is the cloth's
+    own, so the sign is comparable from one state to the next)."""
+    tri = cloth.triangles
+    centroids = x[tri].mean(axis=1)
+    k = int(np.argmin(np.linalg.norm(centroids - x[point], axis=1)))
+    a, b, c = x[tri[k]]
+    return 1 if np.dot(x[point] - a, np.cross(b - a, c - a)) >= 0 else -1
+
+
+def centre(cloth):
+    return cloth.particles[cloth.particles.shape[0] // 2, cloth.particles.shape[1] // 2]
+
+
+def order_kept(x, cloths, sides):
+    """Each thrown cloth's centre particle is on the side of the other cloth it started
+    on (``sides``: the start's ``side`` values): a cloth that passed wholly through the
+    other in one step shows no crossing at either end, but is on the other side."""
+    a, b = cloths[0], cloths[1]
+    return (side(x, centre(a), b), side(x, centre(b), a)) == sides
+
+
+def run_case(name, integrator, dt, seconds=None, chunk=1, build=None):
+    """Run one case (dt None: the case's explicit dt; ``build``: a smaller version of the
+    case's scene, as the tests run); returns a dict of metrics. ``chunk`` > 1 steps that
+    many steps in one call (a batch) and checks the state after each chunk only, without
+    the paths through a box (which need each step's start)."""
+    if chunk > 1 and name == "twist":
+        raise ValueError("the twist case moves its rows every step: chunk must be 1")
+    case_build, span, explicit_dt = CASES[name]
+    scene, x, v, cloths = (build or case_build)()
+    dt = explicit_dt if dt is None else dt
+    steps = int(round((seconds or span) / dt))
+    sim = tcloth.Simulator(scene, integrator, dt=dt)
+    sim.set_state(positions=x, velocities=v)
+    triangles = scene.triangles
+    edges = triangle_edges(triangles)
+    momentum0 = sim.momentum()[0]
+    x_rest = scene.positions
+    crossings = [count_crossings(sim.positions(), triangles, edges)]
+    inside, through, order, times, blew_up, contacts = 0.0, 0, True, [], None, 0
+    stepped = 0
+    sides = None
+    if name.startswith("thrown"):
+        sides = (side(x, centre(cloths[0]), cloths[1]), side(x, centre(cloths[1]), cloths[0]))
+    for k in range(0, steps, chunk):
+        if name == "twist":
+            twist_rows(sim, cloths[0], x_rest, sim.time)
+        x0, t0 = sim.positions(), sim.time
+        n = min(chunk, steps - k)
+        start = time.perf_counter()
+        try:
+            sim.step(n)
+        except tcloth.InstabilityError as e:
+            blew_up = str(e)
+            break
+        times.append((time.perf_counter() - start) / n)
+        stepped += n
+        x1 = sim.positions().astype(np.float64)
+        crossings.append(count_crossings(x1, triangles, edges))
+        contacts = max(contacts, sum(sim.self_contacts().values()))
+        if scene.colliders:
+            inside = max(inside, float(-min(signed_distances(scene, x1, sim.time).min(), 0.0)))
+            if n == 1:
+                through += passes_through_boxes(scene, x0, x1, t0, dt)
+        if sides is not None:
+            order &= order_kept(x1, cloths, sides)
+    stats = sim.contact_stats()
+    scale = float(np.sum(scene.masses)) * float(np.abs(v).max())
+    return {"crossings_start": crossings[0], "crossings_max": max(crossings[1:] or [0]),
+            "inside_max": inside, "through": through, "order_kept": order,
+            "momentum_drift": float(np.abs(sim.momentum()[0] - momentum0).max() / scale)
+            if sides is not None else None,
+            "ms_per_step": 1e3 * float(np.median(times)) if times else math.nan,
+            "steps": stepped, "blew_up": blew_up, "contacts_max": contacts,
+            **{key: stats.get(key) for key in ("failsafe_steps", "failsafe_vertices",
+                                               "guard_corrections", "collider_paths_cut",
+                                               "swept_searches", "rebuilds")}}
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--cases", default=",".join(CASES))
+    ap.add_argument("--integrators", default="backward_euler,projective," + ",".join(EXPLICIT))
+    ap.add_argument("--dts", default="1/60,1/240", help="implicit integrators' steps")
+    ap.add_argument("--seconds", type=float, default=None, help="shorter runs than CASES'")
+    ap.add_argument("--precision", default="f32")
+    ap.add_argument("--explicit-chunk", type=int, default=1,
+                    help="the explicit integrators' steps per check (1: every step)")
+    args = ap.parse_args(argv)
+    tcloth.init(arch="cpu", precision=args.precision)
+    for name in args.cases.split(","):
+        for integrator in args.integrators.split(","):
+            dts = [None] if integrator in EXPLICIT else [eval(d, {}) for d in args.dts.split(",")]
+            for dt in dts:
+                chunk = args.explicit_chunk if dt is None and name != "twist" else 1
+                result = run_case(name, integrator, dt, args.seconds, chunk=chunk)
+                label = "own" if dt is None else f"{dt:.4g}"
+                for key, value in result.items():
+                    print(f"contact.{name}.{integrator}.{label}.{key}: {value}")
+                sys.stdout.flush()
+
+
+if __name__ == "__main__":
+    main()
