@@ -69,6 +69,7 @@ class Renderer:
 
         tris = [c.triangles for c in scene.cloths]
         self.tri_count = sum(len(t) for t in tris)
+        self.push = collider_push(x0, tris) if self.colliders.count else 0.0
         palette = cloth_palette(cloth_colours, len(tris))
         spheres, self.radius = particle_spheres(scene, particle_radius, extent)
         self.sphere_count = len(spheres)
@@ -192,9 +193,12 @@ class Renderer:
     # -- passes ------------------------------------------------------------------------------
     @ti.kernel
     def _analytic(self, depth: ti.template(), camera: ti.template(), has_ground: ti.template()):
-        """Clear to sky, then the ground plane and the colliders, hit analytically."""
+        """Clear to sky, then the ground plane and the colliders, hit analytically; seen
+        from the camera, a collider's depth is ``push`` farther than it is (cloth resting
+        on it is drawn in front of it; ``_shade`` uses the true hit)."""
         h, w = depth.shape
         time = self.time[None]
+        push = ti.static(self.push if camera else 0.0)
         for r, c in ti.ndrange(h, w):
             o, d = self._ray(camera, r, c, h, w)
             best, best_id = 1e30, SKY_ID
@@ -209,8 +213,8 @@ class Renderer:
                     for k in range(g.first, g.first + g.count):
                         t = ti.cast(SHAPES[g.shape].ray_hit(self.colliders.data[k], o, d,
                                                             time), ti.f32)
-                        if 0.0 < t < best:
-                            best, best_id = t, COLLIDER_ID + k
+                        if 0.0 < t and t + push < best:
+                            best, best_id = t + push, COLLIDER_ID + k
             key = ti.i64(SKY_KEY)
             if best_id != SKY_ID:
                 key = raycast.key(best, best_id)
@@ -244,10 +248,9 @@ class Renderer:
 
     @ti.func
     def _splat(self, depth: ti.template(), camera: ti.template(), sphere: ti.template(), h, w,
-               lo, hi, prim_id, a, b, c, radius, pull=0.0):
+               lo, hi, prim_id, a, b, c, radius):
         """Test the rays of the pixels in [lo, hi] (col, row) against one triangle (a, b, c)
-        or one sphere (centre a, radius); ``pull`` (m) moves the hit towards the eye in
-        the depth test only."""
+        or one sphere (centre a, radius)."""
         for r in range(ti.max(ti.cast(ti.floor(lo[1]), ti.i32), 0),
                        ti.min(ti.cast(ti.ceil(hi[1]), ti.i32), h - 1) + 1):
             for col in range(ti.max(ti.cast(ti.floor(lo[0]), ti.i32), 0),
@@ -259,17 +262,15 @@ class Renderer:
                 else:
                     hit = raycast.hit_triangle(o, d, a, b, c)[0]
                 if hit > 0.0:
-                    ti.atomic_min(depth[r, col], raycast.key(ti.max(hit - pull, 1e-6),
-                                                             prim_id))
+                    ti.atomic_min(depth[r, col], raycast.key(hit, prim_id))
 
     @ti.func
     def _pull(self, i, a, b, c):
-        """How far triangle i = (a, b, c) is drawn nearer than it is (m): 0, or, where one
-        of its particles rests on a collider, half its longest edge. Flat between its
+        """How deep triangle i = (a, b, c) may cut into a collider (m): 0, or, where one of
+        its particles rests on a collider, half its longest edge. Flat between its
         particles, which rest a thickness out, such a triangle cuts into a round or
-        edged collider by up to a fraction of its size; drawn nearer by the chord's depth
-        it hides the collider's rim; in the shadow lookup the collider does not shade it
-        from within that depth either (``_lit``)."""
+        edged collider by up to a fraction of its size: the collider does not shade it
+        from within that depth (``_lit``), and is drawn behind it (``collider_push``)."""
         pull = 0.0
         if ti.static(self.colliders.count > 0):
             if self.near_collider[i[0]] + self.near_collider[i[1]] \
@@ -279,8 +280,7 @@ class Renderer:
 
     @ti.kernel
     def _splat_triangles(self, x: ti.template(), depth: ti.template(), camera: ti.template()):
-        """Cloth triangles; id k for triangle k, drawn ``_pull`` nearer the camera than
-        they are (the shadow map has them where they are); shading uses the true hit."""
+        """Cloth triangles; id k for triangle k."""
         h, w = depth.shape
         for k in range(self.tri_count):
             i = self.tris[k]
@@ -291,11 +291,8 @@ class Renderer:
             pb = self._project(camera, b, h, w)
             pc = self._project(camera, c, h, w)
             if pa[2] > 1e-3 and pb[2] > 1e-3 and pc[2] > 1e-3:
-                pull = 0.0
-                if ti.static(camera):
-                    pull = self._pull(i, a, b, c)
                 self._splat(depth, camera, False, h, w, ti.min(pa, pb, pc),
-                            ti.max(pa, pb, pc), k, a, b, c, 0.0, pull)
+                            ti.max(pa, pb, pc), k, a, b, c, 0.0)
 
     @ti.func
     def _sphere_centre(self, x, k):
@@ -366,6 +363,8 @@ class Renderer:
             o, d = self._ray(True, r, c, h, w)
             k = raycast.key_id(self.depth[r, c])
             t = raycast.key_t(self.depth[r, c])
+            if k >= COLLIDER_ID:
+                t -= ti.static(self.push)       # the true hit (``_analytic``)
             p = o + t * d
             base = ti.math.vec3(0.0)
             n = ti.math.vec3(0.0, 1.0, 0.0)
@@ -396,7 +395,6 @@ class Renderer:
                 b = ti.cast(x[i[1]], ti.f32)
                 cv = ti.cast(x[i[2]], ti.f32)
                 hit = raycast.hit_triangle(o, d, a, b, cv)
-                p = o + hit[0] * d              # the true hit (the depth key may be pulled)
                 pull = self._pull(i, a, b, cv)
                 u, v = hit[1], hit[2]
                 ns = ((1.0 - u - v) * self.normals[i[0]] + u * self.normals[i[1]]
@@ -454,6 +452,20 @@ class Renderer:
 
 
 HANG_STRETCH = 1.25
+
+
+def collider_push(x, tris):
+    """How much farther than they are colliders are drawn from the camera (m): half the
+    longest edge of the cloth triangles at x, the deepest a triangle resting on a collider
+    can cut into it (``Renderer._pull``). Moving the colliders, not the cloth, keeps the
+    cloth layers' depth order among themselves."""
+    tris = [t for t in tris if len(t)]
+    if not tris:
+        return 0.0
+    t = np.concatenate(tris)
+    edges = np.concatenate([x[t[:, 1]] - x[t[:, 0]], x[t[:, 2]] - x[t[:, 1]],
+                            x[t[:, 0]] - x[t[:, 2]]])
+    return float(0.5 * np.linalg.norm(edges, axis=1).max())
 
 
 def lowest_reach(scene):

@@ -302,6 +302,36 @@ def test_cloth_resting_on_a_collider_hides_its_rim(f32):
     assert (inside < r.tri_count).mean() > 0.99 and not (inside >= COLLIDER_ID).any()
 
 
+def test_a_cloth_over_a_cloth_resting_on_a_collider_stays_in_front(f32):
+    """Two flat cloths on a box: the lower rests on it, the upper 1.2 cm higher, beyond
+    the renderer's reach of a collider. Drawing cloth that rests on a collider nearer
+    than it is (by half its longest edge, 6 cm here) put the lower cloth in front of the
+    upper (cloth_pile's lower layers showed through); the collider drawn farther keeps
+    the layers in their order. Seen from above, the upper cloth's pixels are its own."""
+    scene = tcloth.Scene(gravity=(0, 0, 0))
+    top, thickness = 0.05, 0.005
+    lower = scene.add_cloth(resolution=(8, 8), size=(0.6, 0.6), center=(0, top + thickness, 0),
+                            structural=None, shear=None, flexion=None, pinned=[])
+    scene.add_cloth(resolution=(8, 8), size=(0.4, 0.4), center=(0, top + thickness + 0.012, 0),
+                    structural=None, shear=None, flexion=None, pinned=[])
+    scene.add_box((0, 0, 0), (0.5, top, 0.5), thickness=thickness)
+    sim = tcloth.Simulator(scene)
+    r = tcloth.Renderer(sim, 120, 120, camera={"eye": (0, 2, 0.6), "target": (0, 0, 0),
+                                               "fov": 25}, supersample=1, ground=False)
+    r.render()
+    ids = r.ids()
+    col, row = project(r.camera, np.array([[-0.15, 0.067, -0.15], [0.15, 0.067, 0.15]]),
+                       120, 120)
+    inside = ids[int(min(row)):int(max(row)), int(min(col)):int(max(col))]
+    lower_triangles = len(lower.triangles)
+    assert ((inside >= lower_triangles) & (inside < r.tri_count)).all()
+    # and the lower cloth still hides the box where the upper one does not cover it
+    col, row = project(r.camera, np.array([[0.22, 0.055, -0.05], [0.27, 0.055, 0.05]]),
+                       120, 120)
+    rim = ids[int(min(row)):int(max(row)), int(min(col)):int(max(col))]
+    assert rim.size and (rim < lower_triangles).all()
+
+
 def test_shadow_edges_ramp_smoothly(f32):
     """The shadow lookup weighs the 2 x 2 shadow-map texels bilinearly by the point's
     position between their centres: along a line across a cloth's straight shadow edge
