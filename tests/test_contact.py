@@ -106,6 +106,24 @@ def test_guard_stops_cloths_passing_wholly_through_each_other(f64, monkeypatch):
             assert stats["failsafe_steps"] == 1 and stats["failsafe_vertices"] > 0
 
 
+def test_a_particle_that_started_inside_a_collider_is_not_pushed_round_its_edge(f64):
+    """A particle 0.1 mm inside a box under its top face, 5 mm from a side face, that a
+    step would take 1 cm deeper: pushed out along the nearest face's normal at its end,
+    it left by the side face, a centimetre below where it was, dragging its cloth round
+    the box's edge through the cloth lying there (the 64 x 64 fold's crossings). It stays
+    where it was instead, its velocity into the box removed."""
+    scene = tcloth.Scene(gravity=(0.0, 0.0, 0.0))
+    scene.add_particles([[0.0, 0.0999, 0.095]])
+    scene.add_box((0.0, 0.0, 0.0), (0.1, 0.1, 0.1))
+    sim = tcloth.Simulator(scene, dt=1.0 / 60.0)
+    x = scene.positions
+    v = np.array([[0.0, -0.6, 0.27]])
+    x1, v1 = guard_step(sim, x, v, 1.0 / 60.0)
+    assert np.array_equal(x1, x)
+    np.testing.assert_allclose(v1, [[0.0, 0.0, 0.27]], atol=1e-15)
+    assert sim.contact_stats()["collider_paths_cut"] == 1
+
+
 # -- the stress set, small ------------------------------------------------------------------
 def small_thrown(speed):
     return lambda: thrown(speed, res=12)

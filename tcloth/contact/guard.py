@@ -18,7 +18,10 @@ x1. Kernels here change x1 (and v1 by the same change over dt) until that motion
   - ``sweep_colliders``: a particle's path (relative to a moving collider) that enters a
     collider ends at the entry point, BACK_OFF before it (a ray cast, so a thin box cannot
     be stepped over), its normal velocity into the collider removed; one that started
-    inside may not end deeper.
+    inside (by rounding, or a scene that started so) and would end deeper stays where it
+    was relative to the collider: pushed out along the surface's normal at its end, it
+    went round the collider's edges, off its path, through cloth the pairs' guard had
+    cleared.
   - ``truncate`` (the fail-safe, where the sweeps left violations): every vertex of every
     candidate pair is kept on its side of a plane normal to n between the pair's two
     sides at x0, placed by how fast each side approaches (planar Divide and Truncate,
@@ -217,7 +220,8 @@ def sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held):
     """Each free particle's path from x0 to x1 against every switched-on collider, in the
     collider's frame (it moves by dt times its velocity): a path from outside that enters
     it ends at the entry, riding with the collider, its velocity into it removed; a
-    particle that started inside may not end deeper. Returns how many paths were cut;
+    particle that started inside and would end deeper stays where it was relative to it.
+    Returns how many paths were cut;
     ``held`` gets 1 for each particle cut."""
     clamped = 0
     ti.loop_config(serialize=ti.static(serial(x1)))
@@ -246,12 +250,12 @@ def sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held):
                                     clamped += 1
                                     held[p] = ti.u8(1)
                         else:
-                            phi1, n1 = SHAPES[g.shape].signed_distance(col, x1[p], t0 + dt)
+                            phi1, _ = SHAPES[g.shape].signed_distance(col, x1[p], t0 + dt)
                             if phi1 < phi0:
-                                x1[p] += (phi0 - phi1) * n1
-                                vn = (v1[p] - u).dot(n1)
+                                x1[p] = start + dt * u
+                                vn = (v1[p] - u).dot(n0)
                                 if vn < 0.0:
-                                    v1[p] -= vn * n1
+                                    v1[p] -= vn * n0
                                 clamped += 1
                                 held[p] = ti.u8(1)
     return clamped
