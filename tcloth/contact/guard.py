@@ -236,28 +236,32 @@ def sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held):
                         rel = x1[p] - dt * u - start
                         length = rel.norm()
                         phi0, n0 = SHAPES[g.shape].signed_distance(col, start, t0)
-                        if phi0 >= 0.0:
-                            if length > phi0:
-                                d = rel / length
-                                hit = SHAPES[g.shape].ray_hit(col, start, d, t0)
-                                if 0.0 <= hit < length - BACK_OFF:
-                                    entry = start + ti.max(hit - BACK_OFF, 0.0) * d
-                                    _, n = SHAPES[g.shape].signed_distance(col, entry, t0)
-                                    x1[p] = entry + dt * u
-                                    vn = (v1[p] - u).dot(n)
-                                    if vn < 0.0:
-                                        v1[p] -= vn * n
-                                    clamped += 1
-                                    held[p] = ti.u8(1)
-                        else:
+                        entered = False
+                        if phi0 >= 0.0 and length > phi0:
+                            d = rel / length
+                            hit = SHAPES[g.shape].ray_hit(col, start, d, t0)
+                            if 0.0 <= hit < length - BACK_OFF:
+                                entry = start + ti.max(hit - BACK_OFF, 0.0) * d
+                                _, n = SHAPES[g.shape].signed_distance(col, entry, t0)
+                                x1[p] = entry + dt * u
+                                vn = (v1[p] - u).dot(n)
+                                if vn < 0.0:
+                                    v1[p] -= vn * n
+                                entered = True
+                        if not entered:
+                            # a path that ends inside without a hit the ray cast resolves
+                            # (a start on the surface within rounding), or one that started
+                            # inside and goes deeper: the particle stays where it was
                             phi1, _ = SHAPES[g.shape].signed_distance(col, x1[p], t0 + dt)
-                            if phi1 < phi0:
+                            if phi1 < ti.min(phi0, 0.0):
                                 x1[p] = start + dt * u
                                 vn = (v1[p] - u).dot(n0)
                                 if vn < 0.0:
                                     v1[p] -= vn * n0
-                                clamped += 1
-                                held[p] = ti.u8(1)
+                                entered = True
+                        if entered:
+                            clamped += 1
+                            held[p] = ti.u8(1)
     return clamped
 
 

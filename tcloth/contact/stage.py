@@ -150,7 +150,9 @@ class ContactStage:
                 cut = int(guard.truncate(cl, count, x0, x1, v1, self.inv_mass, self.cut,
                                          inv_dt))
                 self.stats["failsafe_vertices"] += cut
-                changed += cut + self._sweep(x0, x1, v1, t0, dt, False)
+                changed += cut
+            # the last round's projection can push a vertex the collider holds into it
+            changed += self._sweep(x0, x1, v1, t0, dt, False)
         return changed
 
     def _sweep(self, x0, x1, v1, t0, dt, first):
