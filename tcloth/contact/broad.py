@@ -246,44 +246,6 @@ def _spread(broad: ti.template(), x: ti.template(), y: ti.template(),
 
 
 @ti.kernel
-def _spread_between(broad: ti.template(), x: ti.template(), y: ti.template()) -> ti.f64:
-    """``_spread`` of the displacements y - x (from x, not x_ref): twice the largest
-    relative motion of a step from x to y."""
-    P = ti.static(broad.table.point_count)
-    B = ti.static(blocks_for(P, DISPLACEMENT_BLOCK))
-    ti.loop_config(serialize=ti.static(serial_count(P)))
-    for blk in range(B):
-        lo = ti.Vector([1e30, 1e30, 1e30], ti.f64)
-        hi = ti.Vector([-1e30, -1e30, -1e30], ti.f64)
-        for i in range(blk * DISPLACEMENT_BLOCK, ti.min((blk + 1) * DISPLACEMENT_BLOCK, P)):
-            p = broad.table.points[i]
-            d = ti.cast(y[p] - x[p], ti.f64)
-            lo, hi = ti.min(lo, d), ti.max(hi, d)
-        broad.moved_lo[blk], broad.moved_hi[blk] = lo, hi
-    ti.loop_config(serialize=True)
-    for _ in range(1):
-        lo, hi = broad.moved_lo[0], broad.moved_hi[0]
-        for blk in range(1, B):
-            lo, hi = ti.min(lo, broad.moved_lo[blk]), ti.max(hi, broad.moved_hi[blk])
-        broad.centre[None] = 0.5 * (lo + hi)
-    ti.loop_config(serialize=ti.static(serial_count(P)))
-    for blk in range(B):
-        c = broad.centre[None]
-        farthest = ti.cast(0.0, ti.f64)
-        for i in range(blk * DISPLACEMENT_BLOCK, ti.min((blk + 1) * DISPLACEMENT_BLOCK, P)):
-            p = broad.table.points[i]
-            farthest = ti.max(farthest, (ti.cast(y[p] - x[p], ti.f64) - c).norm_sqr())
-        broad.moved_far[blk] = farthest
-    ti.loop_config(serialize=True)
-    for _ in range(1):
-        farthest = broad.moved_far[0]
-        for blk in range(1, B):
-            farthest = ti.max(farthest, broad.moved_far[blk])
-        broad.moved_far[0] = farthest
-    return 2.0 * ti.sqrt(broad.moved_far[0])
-
-
-@ti.kernel
 def _rebuild(broad: ti.template(), search: ti.template(), cl: ti.template(),
              x: ti.template()) -> ti.types.vector(2, ti.i32):
     """Bin the particles and edge midpoints at x and list the candidate contacts within
@@ -371,10 +333,6 @@ class BroadPhase:
         if self.skin is None:
             return False
         return _spread(self, x, x if y is None else y, y is not None) <= self.skin
-
-    def motion(self, x, y):
-        """Twice the largest motion from x to y relative to the others' (m)."""
-        return _spread_between(self, x, y)
 
     def build(self, x, skin):
         """List the pairs within thickness + skin at x."""
