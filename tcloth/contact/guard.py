@@ -14,7 +14,11 @@ x1. Kernels here change x1 (and v1 by the same change over dt) until that motion
     one closer than a quarter of the thickness ends the step that far apart (float32
     resolves no gap of a few ulps of the coordinates). Violated vertex pairs are
     moved apart along n in proportion to their inverse masses (Gauss-Seidel sweeps over
-    the candidates): each correction moves equal and opposite momenta.
+    the candidates): each correction moves equal and opposite momenta, except where a
+    collider stopped one of the two this step and the correction would move it into the
+    collider: then that one moves only along the collider's surface (not at all where
+    that would take it far for little), and the collider takes the rest of the
+    reaction.
   - ``sweep_colliders``: a particle's path (relative to a moving collider) that enters a
     collider ends at the entry point, BACK_OFF before it (a ray cast, so a thin box cannot
     be stepped over), its normal velocity into the collider removed; one that started
@@ -42,10 +46,11 @@ from .broad import POINT_TRIANGLE, gap
 POINT_TRIANGLE_PAIRS = ((0, 1), (0, 2), (0, 3))
 EDGE_EDGE_PAIRS = ((0, 2), (0, 3), (1, 2), (1, 3))
 SLACK = 1e-3             # a violation below this fraction of delta is no violation
+HELD_ALONG = 0.5         # a held vertex moves along a normal only if this much is left
 KEEP = 0.9               # the fail-safe stops a vertex at this fraction of its way to a plane
 FLOOR = 0.25             # pairs end a step at least this fraction of the thickness apart
-HELD_WEIGHT = 1e-3       # the inverse-mass factor of a vertex a collider holds
 BACK_OFF = 1e-6          # m: a path a collider stops ends this far before the surface
+FAR_APART = -1.0         # the delta of a candidate that cannot come within reach
 LEAST_GAP = 1e-6         # m: a pair closer than this at x0 has no normal (float32 rounds
                          # coordinates near 1 m to 6e-8 m)
 
@@ -60,24 +65,34 @@ def _normal_margin(ids, kind, x0, thickness):
 
 
 @ti.func
+def _allowed(m, d):
+    """Unit direction d less its part into a collider whose outward normal is m (m = 0:
+    none); zero where less than HELD_ALONG of d's length along d is left (the vertex
+    would slide far along the collider for a small gain along d)."""
+    free = d - ti.min(d.dot(m), 0.0) * m
+    return free if free.dot(d) >= HELD_ALONG else ti.Vector.zero(float, 3)
+
+
+@ti.func
 def _correct(ids, a: ti.template(), b: ti.template(), n, delta, x1, v1, inv_mass, held,
              inv_dt):
     """Move vertices a and b of a candidate apart along n until n . (x_a - x_b) = delta,
     in proportion to their inverse masses (equal and opposite momenta), their velocities
-    by the same over dt; a vertex a collider holds this step moves as if HELD_WEIGHT
-    times as heavy (the collider takes its share; two held vertices share it equally).
-    1 if they were closer, else 0."""
+    by the same over dt; a vertex a collider holds this step (``held``: the collider's
+    outward normal m where it stopped, else 0) moves only along the part of its
+    direction (+n for a, -n for b) that does not point into the collider (the collider
+    takes the rest). 1 if they were closer, else 0."""
     pa, pb = ids[a], ids[b]
     violation = delta - n.dot(x1[pa] - x1[pb])
-    wa = inv_mass[pa] * (HELD_WEIGHT if held[pa] else 1.0)
-    wb = inv_mass[pb] * (HELD_WEIGHT if held[pb] else 1.0)
+    da, db = _allowed(held[pa], n), _allowed(held[pb], -n)
+    wa, wb = inv_mass[pa] * n.dot(da), -inv_mass[pb] * n.dot(db)
     corrected = 0
     if violation > SLACK * delta and wa + wb > 0.0:
         lam = violation / (wa + wb)
-        x1[pa] += wa * lam * n
-        x1[pb] -= wb * lam * n
-        v1[pa] += wa * lam * inv_dt * n
-        v1[pb] -= wb * lam * inv_dt * n
+        x1[pa] += inv_mass[pa] * lam * da
+        x1[pb] += inv_mass[pb] * lam * db
+        v1[pa] += inv_mass[pa] * lam * inv_dt * da
+        v1[pb] += inv_mass[pb] * lam * inv_dt * db
         corrected = 1
     return corrected
 
@@ -87,16 +102,41 @@ def _worst(ids, a: ti.template(), b: ti.template(), n, delta, x1):
     return delta - n.dot(x1[ids[a]] - x1[ids[b]])
 
 
+@ti.func
+def _relative_path(ids, pairs: ti.template(), x0, x1):
+    """The longest relative displacement from x0 to x1 of a vertex pair across a
+    candidate's sides: along straight paths its gap closes by at most that much."""
+    most = 0.0
+    for a, b in ti.static(pairs):
+        most = ti.max(most, ((x1[ids[a]] - x0[ids[a]]) - (x1[ids[b]] - x0[ids[b]])).norm())
+    return most
+
+
 @ti.kernel
-def planes(cl: ti.template(), count: ti.i32, x0: ti.template(), thickness: float):
+def planes(cl: ti.template(), count: ti.i32, x0: ti.template(), x1: ti.template(),
+           thickness: float, reach: float):
     """Each candidate's unit normal and delta at the step's start x0 into ``cl.plane_n``
-    and ``cl.plane_delta`` (0 where it has no normal), for ``project`` and
-    ``violations``: the closest points cost more than the sweeps' checks."""
+    and ``cl.plane_delta``, for ``project``, ``violations`` and ``truncate`` (the closest
+    points cost more than the sweeps' checks). delta is 0 where it has no normal, and
+    FAR_APART where its gap at x0 less the longest relative displacement of its vertex
+    pairs from x0 to x1 stays above ``reach``: the gap of a point and a triangle (of
+    two edges) is the length of a convex combination of those pairs' differences, so it
+    cannot close by more on the motion, and such a pair stays farther apart than
+    ``reach`` all along (the projection skips it; the fail-safe, whose cuts change the
+    motion, does not)."""
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
-        n, d0, delta = _normal_margin(cl.ids[c], cl.kind[c], x0, thickness)
+        ids, kind = cl.ids[c], cl.kind[c]
+        n, d0, delta = _normal_margin(ids, kind, x0, thickness)
+        closing = 0.0
+        if kind == POINT_TRIANGLE:
+            closing = _relative_path(ids, POINT_TRIANGLE_PAIRS, x0, x1)
+        else:
+            closing = _relative_path(ids, EDGE_EDGE_PAIRS, x0, x1)
         cl.plane_n[c] = n
-        cl.plane_delta[c] = delta if d0 > LEAST_GAP else 0.0
+        cl.plane_delta[c] = 0.0
+        if d0 > LEAST_GAP:
+            cl.plane_delta[c] = delta if d0 - closing <= reach else FAR_APART
 
 
 @ti.func
@@ -172,18 +212,17 @@ def _cut(x0, x1, n, plane, side, inv_mass, t_out, p):
 def truncate(cl: ti.template(), count: ti.i32, x0: ti.template(), x1: ti.template(),
              v1: ti.template(), inv_mass: ti.template(), t_out: ti.template(),
              inv_dt: float) -> ti.i32:
-    """The fail-safe (module docstring): every vertex kept on its side of every
-    candidate's dividing plane. Returns how many vertices were cut short."""
+    """The fail-safe (module docstring): every vertex kept on its side of the dividing
+    plane of every candidate with a normal (``planes``). Returns how many vertices were
+    cut short."""
     ti.loop_config(serialize=ti.static(serial(x1)))
     for p in range(x1.shape[0]):
         t_out[p] = 1.0
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
         ids, kind = cl.ids[c], cl.kind[c]
-        alpha, g = gap(ids, kind, x0)
-        d0 = g.norm()
-        if d0 > LEAST_GAP:
-            n = g / d0
+        if cl.plane_delta[c] != 0.0:
+            n = cl.plane_n[c]
             first = 1 if kind == POINT_TRIANGLE else 2
             # the sides' extents along n at x0, and how fast each approaches the other
             low_a, high_b = 1e30, -1e30
@@ -222,7 +261,7 @@ def sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held):
     it ends at the entry, riding with the collider, its velocity into it removed; a
     particle that started inside and would end deeper stays where it was relative to it.
     Returns how many paths were cut;
-    ``held`` gets 1 for each particle cut."""
+    ``held`` gets the collider's outward normal at the stop of each particle cut."""
     clamped = 0
     ti.loop_config(serialize=ti.static(serial(x1)))
     for p in range(x1.shape[0]):
@@ -247,6 +286,7 @@ def sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held):
                                 vn = (v1[p] - u).dot(n)
                                 if vn < 0.0:
                                     v1[p] -= vn * n
+                                held[p] = n
                                 entered = True
                         if not entered:
                             # a path that ends inside without a hit the ray cast resolves
@@ -258,10 +298,10 @@ def sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held):
                                 vn = (v1[p] - u).dot(n0)
                                 if vn < 0.0:
                                     v1[p] -= vn * n0
+                                held[p] = n0
                                 entered = True
                         if entered:
                             clamped += 1
-                            held[p] = ti.u8(1)
     return clamped
 
 
@@ -273,5 +313,5 @@ def sweep_colliders_kernel(table: ti.template(), inv_mass: ti.template(), x0: ti
     if ti.static(first):
         ti.loop_config(serialize=ti.static(serial(held)))
         for p in range(held.shape[0]):
-            held[p] = ti.u8(0)
+            held[p] = ti.Vector([0.0, 0.0, 0.0])
     return sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held)

@@ -31,6 +31,8 @@ from .swept import SweptSearch, search_step
 
 SWEEPS = 20          # Gauss-Seidel sweeps of the pairs' projection a round
 ROUNDS = 4           # rounds of the projection and the colliders' sweep before the fail-safe
+MARGIN = 0.5         # the swept boxes' margin for the guard's moves, in thicknesses
+FAR = 1e30           # m: a reach that keeps every candidate of the proximity list
 STATS = {
     "candidates": "rows of the proximity list (pairs within thickness + skin)",
     "rebuilds": "builds of the proximity list so far",
@@ -70,9 +72,12 @@ class ContactStage:
             self.thickness = float(self.table.settings["thickness"])
             self.skin = float(self.table.settings["skin"])
             self.cut = ti.field(real, shape=n)
+        # x1 after the step's first collider sweep, where later sweeps start
+        self.x_swept = ti.Vector.field(3, real, shape=n) \
+            if self.colliders and self.table is not None else None
         self.x_start = ti.Vector.field(3, real, shape=n) if self.colliders else None
-        # 1 where a collider stopped a particle's path this step
-        self.held = ti.field(ti.u8, shape=n)
+        # the collider's outward normal where it stopped a particle's path this step, else 0
+        self.held = ti.Vector.field(3, real, shape=n)
         # paths the collider sweep cut inside batches of substeps: in all, in the last step
         self.batch_cuts = ti.field(ti.i32, shape=2)
         self.stats = {key: 0 for key in STATS}
@@ -104,19 +109,24 @@ class ContactStage:
 
         Where no candidate is too close at x1 and no path enters a collider (most steps
         of an explicit integrator), that is one pass over the candidates and one over the
-        particles. Else rounds of the colliders' sweep and the pairs' projection, in which
-        a particle a collider stopped stays where it is (the collider takes its share),
-        until the projection corrects nothing or the sweep cuts nothing new, at most
-        ROUNDS; then the fail-safe where a pair of the candidates of the final motion is
-        still too close, and a last sweep (its cuts move particles back along their
-        paths, which keeps every pair on its side)."""
+        particles. Else rounds of the pairs' projection and the colliders' sweep, in which
+        a particle a collider stopped moves only along its surface (the collider takes
+        the rest), until the projection corrects nothing or the sweep cuts nothing new,
+        at most ROUNDS. The first sweep follows the integrator's paths from x0; later
+        ones the projection's moves from where the first left x1 (a path that the
+        projection pushed into a collider is cut where it entered, not back near x0).
+        Then the fail-safe where a pair of the candidates of the final motion is still
+        too close, and a last sweep along the paths from x0 (its cuts move particles
+        back along them, which keeps every pair on its side)."""
         start = time.perf_counter()
         changed = 0
         if self.broad is None:
             changed = self._sweep(x0, x1, v1, t0, dt, True)
         else:
-            cl, count, covered = self._step_candidates(x0, x1)
             cut = self._sweep(x0, x1, v1, t0, dt, True)
+            if self.x_swept is not None:
+                self.x_swept.copy_from(x1)
+            cl, count, covered = self._step_candidates(x0, x1)
             if cut or guard.violations(cl, count, x1):
                 changed = cut + self._resolve(cl, count, x0, x1, v1, t0, dt)
             if changed or not covered:
@@ -126,16 +136,16 @@ class ContactStage:
 
     def _resolve(self, cl, count, x0, x1, v1, t0, dt):
         """The rounds, the fail-safe and the last sweep of ``end_step``; returns how much
-        they changed. A round that moved anything ends with the candidates of the motion
-        as it now is (the projection moves particles off their paths, where they can meet
-        pairs the first candidates did not hold)."""
+        they changed. The projection and the sweep move particles off their paths, where
+        they can meet pairs the candidates do not hold: a round whose motion the list no
+        longer covers takes the candidates of the motion as it now is."""
         inv_dt = 1.0 / dt
         changed = 0
         for round_ in range(ROUNDS):
             if round_:
-                cut = self._sweep(x0, x1, v1, t0, dt, False)
+                cut = self._sweep_moves(x0, x1, v1, t0, dt)
                 changed += cut
-                cl, count, _ = self._step_candidates(x0, x1)
+                cl, count = self._still_covering(cl, count, x0, x1)
                 if not cut and not guard.violations(cl, count, x1):
                     break
             corrected, sweeps = (int(v) for v in guard.project(
@@ -144,15 +154,15 @@ class ContactStage:
             self.stats["guard_sweeps"] += sweeps
             changed += corrected
         else:
-            cl, count, _ = self._step_candidates(x0, x1)
+            # the last round's projection can push a particle into a collider
+            changed += self._sweep_moves(x0, x1, v1, t0, dt)
+            cl, count = self._still_covering(cl, count, x0, x1)
             if guard.violations(cl, count, x1):
                 self.stats["failsafe_steps"] += 1
                 cut = int(guard.truncate(cl, count, x0, x1, v1, self.inv_mass, self.cut,
                                          inv_dt))
                 self.stats["failsafe_vertices"] += cut
-                changed += cut
-            # the last round's projection can push a vertex the collider holds into it
-            changed += self._sweep(x0, x1, v1, t0, dt, False)
+                changed += cut + self._sweep(x0, x1, v1, t0, dt, False)
         return changed
 
     def _sweep(self, x0, x1, v1, t0, dt, first):
@@ -165,18 +175,42 @@ class ContactStage:
         self.stats["collider_paths_cut"] += cut
         return cut
 
+    def _sweep_moves(self, x0, x1, v1, t0, dt):
+        """The colliders' sweep of the guard's moves: from x1 as the step's first sweep
+        left it to x1 now, at the step's end, then the whole path from x0 (a move can
+        take a path that went round a collider's edge through it) (``_sweep``)."""
+        if self.colliders is None:
+            return 0
+        return (self._sweep(self.x_swept, x1, v1, t0 + dt, 0.0, False)
+                + self._sweep(x0, x1, v1, t0, dt, False))
+
+    def _still_covering(self, cl, count, x0, x1):
+        """(list, rows) of ``_step_candidates``: cl while it still holds the motion
+        x0 -> x1 (the swept list's planes computed again for it), else searched anew."""
+        if cl is self.broad.candidates:
+            if self.broad.covers(x0, x1):
+                return cl, count
+        elif self.swept.holds(x0, x1):
+            guard.planes(cl, count, x0, x1, self.thickness, self.thickness)
+            return cl, count
+        cl, count, _ = self._step_candidates(x0, x1)
+        return cl, count
+
     def _step_candidates(self, x0, x1):
         """(list, rows, whether it is the proximity list) holding every pair that can come
         within the thickness on the motion x0 -> x1, with their separating planes at x0:
         the proximity list where it covers the motion (then it covers x1 too), else the
-        swept search's."""
+        swept search's, grown by MARGIN thicknesses for the guard's moves, less the pairs
+        that cannot come within the thickness on this motion (``guard.planes``: the
+        rounds compute them again for the motion as it then is)."""
         if self.broad.covers(x0, x1):
             cl, count, covered = self.broad.candidates, self.broad.count, True
+            reach = FAR
         else:
             self.stats["swept_searches"] += 1
-            count = search_step(self.swept, x0, x1, self.thickness)
-            cl, covered = self.swept.candidates, False
-        guard.planes(cl, count, x0, self.thickness)
+            count = search_step(self.swept, x0, x1, self.thickness, MARGIN * self.thickness)
+            cl, covered, reach = self.swept.candidates, False, self.thickness
+        guard.planes(cl, count, x0, x1, self.thickness, reach)
         return cl, count, covered
 
     def contact_stats(self):

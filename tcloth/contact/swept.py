@@ -18,6 +18,12 @@ found in several cells is kept only in the first cell of their overlap (the corn
 the two cell ranges' intersection), so each pair is listed once. The cell is the larger of
 the longest edge, T and a third of the longest path, so a box spans at most a few cells a
 side.
+
+The guard then moves end positions off their paths (its projection, the colliders'
+sweep), mostly back toward where they started. The boxes are grown by a margin besides,
+so one search serves every motion whose ends stay within the margin of the searched
+paths' boxes (``SweptSearch.holds``), and a step searches again only where the guard moved
+a particle farther.
 """
 import taichi as ti
 
@@ -147,10 +153,13 @@ class SweptStore:
 
 class SweptSearch:
     """The swept-box candidates of one step (module docstring): ``candidates`` (a
-    ``ContactList``) and ``count``."""
+    ``ContactList``) and ``count``; ``anchor`` the end positions and ``margin`` the
+    margin it was searched with."""
 
     def __init__(self, table, inv_mass):
         self.table, self.inv_mass = table, inv_mass
+        self.anchor = ti.Vector.field(3, inv_mass.dtype, shape=inv_mass.shape[0])
+        self.margin = 0.0
         self.store = SweptStore(table, inv_mass, 8 * (table.point_count + table.edge_count),
                                 4 * QUERY_BLOCK, 16 * (table.point_count + table.edge_count))
         self.count = 0
@@ -158,6 +167,12 @@ class SweptSearch:
     @property
     def candidates(self):
         return self.store.candidates
+
+    def holds(self, x0, x1):
+        """Whether the candidates still hold every pair that can come within the thickness
+        on the motion x0 -> x1 (x0: the searched start): each point's x1 within the
+        margin of the box of its searched path."""
+        return float(excess(self.table.points, x0, self.anchor, x1)) <= self.margin
 
     def grow(self, capacity, block_slots, entries):
         old = self.store
@@ -179,16 +194,17 @@ def _box(x0, x1, ids: ti.template(), grow):
 
 @ti.kernel
 def sweep_search(search: ti.template(), x0: ti.template(), x1: ti.template(),
-                 thickness: float, cell: float) -> ti.types.vector(4, ti.i32):
-    """List the swept-box candidates of the step x0 -> x1 into the store ``search``.
-    Returns (candidates, the most a block of queries found, point-grid entries, edge-grid
-    entries): any above its capacity means a larger store and another search."""
+                 thickness: float, margin: float, cell: float) -> ti.types.vector(4, ti.i32):
+    """List the swept-box candidates of the step x0 -> x1, boxes grown by ``margin``
+    besides, into the store ``search``. Returns (candidates, the most a block of queries
+    found, point-grid entries, edge-grid entries): any above its capacity means a larger
+    store and another search."""
     P, E, T = ti.static(search.table.point_count, search.table.edge_count,
                         search.table.triangle_count)
     Q, B, slots = ti.static(search.queries, search.blocks, search.block_slots)
     # the boxes are grown by half the thickness each: two meet where the primitives can
     # come within the thickness
-    half = ti.cast(0.5 * thickness, ti.f32)
+    half = ti.cast(0.5 * thickness + margin, ti.f32)
     search.points.inv_cell[None] = ti.cast(1.0 / cell, ti.f32)
     search.edges.inv_cell[None] = ti.cast(1.0 / cell, ti.f32)
     ti.loop_config(serialize=ti.static(serial_count(P)))
@@ -252,16 +268,33 @@ def longest_edge(table: ti.template(), x: ti.template()) -> ti.f64:
     return longest
 
 
-def search_step(search, x0, x1, thickness):
-    """Fill ``search.candidates`` with the step's swept-box candidates; returns their
-    number (also ``search.count``)."""
+@ti.kernel
+def excess(points: ti.template(), x0: ti.template(), anchor: ti.template(),
+           x: ti.template()) -> ti.f64:
+    """How far x lies outside the box of x0 and anchor, in the largest coordinate, over
+    ``points`` (m)."""
+    most = ti.cast(0.0, ti.f64)
+    ti.loop_config(serialize=ti.static(serial_count(points.shape[0])))
+    for i in range(points.shape[0]):
+        p = points[i]
+        lo, hi = ti.min(x0[p], anchor[p]), ti.max(x0[p], anchor[p])
+        out = ti.max(lo - x[p], x[p] - hi, 0.0).max()
+        ti.atomic_max(most, ti.cast(out, ti.f64))
+    return most
+
+
+def search_step(search, x0, x1, thickness, margin):
+    """Fill ``search.candidates`` with the step's swept-box candidates, boxes grown by
+    ``margin`` (m) besides; returns their number (also ``search.count``)."""
     table = search.table
     path = float(longest_path(table.points, x0, x1))
-    cell = max(float(longest_edge(table, x0)), thickness, path / 3.0, 1e-9)
+    cell = max(float(longest_edge(table, x0)), thickness + 2.0 * margin, path / 3.0, 1e-9)
+    search.anchor.copy_from(x1)
+    search.margin = margin
     while True:
         store = search.store
         count, most, point_entries, edge_entries = (int(v) for v in sweep_search(
-            store, x0, x1, thickness, cell))
+            store, x0, x1, thickness, margin, cell))
         entries = max(point_entries, edge_entries)
         if entries > store.points.capacity or most > store.block_slots \
                 or count > store.candidates.capacity:
