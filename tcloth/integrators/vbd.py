@@ -1,0 +1,264 @@
+"""Vertex Block Descent (Chen, Liu, Yang & Yuksel, ACM TOG 43(4), 2024).
+
+Backward Euler's step minimises the incremental potential E(x) (``potential.py``). VBD
+minimises it by block coordinate descent: one vertex at a time, all others held, E as a
+function of that vertex's position alone is its inertia m/(2h^2) |x_i - x_hat_i|^2 plus
+the terms touching it, and one Newton step on it,
+
+    x_i <- x_i - H_i^-1 g_i,
+
+with g_i its gradient and H_i its 3 x 3 Hessian block (the springs' blocks projected to
+positive semi-definite, as backward Euler's preconditioner has them), lowers E when H_i is
+positive definite. Vertices that share no spring do not change each other's block, so
+they are updated together: the particle graph (an edge per spring, every family) is
+coloured greedily once per model, and an iteration is one parallel pass per colour.
+Since E is backward Euler's own potential, VBD's iterates converge to backward Euler's
+step (tested), and damping, friction, colliders and the grab spring enter as they do
+there.
+
+Self-contact couples vertices through the contact list, which changes every step: its
+gradient and diagonal blocks are evaluated once per iteration, before the colour passes,
+and held through them (a Jacobi update for contacts, Gauss-Seidel for springs), and the
+contact stage's guard (``contact/guard.py``) keeps the step's motion free of crossings as
+for every integrator.
+
+Chebyshev acceleration (the paper's Section 3.7; Wang 2015) mixes each iterate with the
+one two iterations back, x^(n) = w_n (x^(n) - x^(n-2)) + x^(n-2), with w_1 = 1,
+w_2 = 2 / (2 - rho^2), w_n = 4 / (4 - rho^2 w_(n-1)), rho the estimated spectral radius of
+the plain iteration (0: off).
+"""
+import numpy as np
+import taichi as ti
+
+from ..errors import SceneError
+from ..runtime import serial
+from ..terms import springs as spring_term
+from ..terms.springs import Springs
+from .base import Integrator
+from .potential import IncrementalPotential
+
+GUESSES = ("start", "inertia", "gravity", "adaptive")
+
+
+def colour_graph(start, neighbours, n):
+    """Greedy colouring of a graph given as CSR adjacency (neighbours[start[i]:start[i+1]]
+    of vertex i): each vertex in index order takes the smallest colour none of its
+    coloured neighbours has. Returns (n,) int colours; no two neighbours share one."""
+    colours = np.full(n, -1, dtype=np.int64)
+    for i in range(n):
+        taken = colours[neighbours[start[i]:start[i + 1]]]
+        free = np.ones(len(taken) + 1, dtype=bool)
+        free[taken[(taken >= 0) & (taken <= len(taken))]] = False
+        colours[i] = int(np.argmax(free))
+    return colours
+
+
+@ti.data_oriented
+class VBD(Integrator):
+    """Vertex Block Descent on backward Euler's incremental potential. Options (defaults):
+
+    iterations (10): colour sweeps a step (VBD does not test convergence: the count is
+        its accuracy; docs/benchmarks.md measures the error each reaches).
+    rho (0.9): Chebyshev acceleration's spectral radius estimate, in [0, 1); 0 is off.
+    initial_guess ("adaptive"): where the iterations start: "start" (x_t), "inertia"
+        (x_t + h v_t), "gravity" (x_t + h v_t + h^2 g), or "adaptive" (the paper's:
+        gravity scaled by how much of it the last step's acceleration had, in [0, 1]).
+
+    ``colours`` (the greedy colouring's count) and, after each step, ``stats``
+    (iterations; potential: E at the initial guess and at the end where
+    ``track_potential`` is set, which costs two evaluations of E a step) describe the
+    solve.
+    """
+    name = "vbd"
+    defaults = {"iterations": 10, "rho": 0.9, "initial_guess": "adaptive"}
+
+    def __init__(self, model, **options):
+        super().__init__(model, **options)
+        opt = self.options
+        if not (isinstance(opt["iterations"], int) and opt["iterations"] >= 1):
+            raise SceneError(f"vbd's iterations must be an int >= 1 (got {opt['iterations']!r})")
+        if not 0.0 <= float(opt["rho"]) < 1.0:
+            raise SceneError(f"vbd's rho must be in [0, 1) (got {opt['rho']!r})")
+        if opt["initial_guess"] not in GUESSES:
+            raise SceneError(f"vbd's initial_guess must be one of {GUESSES} "
+                             f"(got {opt['initial_guess']!r})")
+        n, real = model.particle_count, model.mass.dtype
+        self.model = model
+        self.potential = IncrementalPotential(model)
+        self.springs = self.potential.springs
+        self.has_springs = self.springs is not None
+        self.adj_start, self.adj = (self.springs or Springs(model)).adjacency()
+        if self.has_springs:
+            self.pairs, self.rest = self.springs.pairs, self.springs.rest
+            self.ks, self.kd = self.springs.ks, self.springs.kd
+        self.pair_terms = self.potential.pair_terms
+        self.mass, self.params = model.mass, model.params
+        self.order, self.colour_start = self._colouring(n)
+        self.colours = len(self.colour_start) - 1
+        self.prev, self.prev2, self.v_last, self.contact_grad = (
+            ti.Vector.field(3, real, shape=n) for _ in range(4))
+        self.acc = ti.field(real, shape=2)
+        self._has_history = False
+        self.track_potential = False
+        self.stats = {}
+
+    def _colouring(self, n):
+        """(order, colour_start): the particles sorted by colour as an i32 field, and the
+        Python list of each colour's first entry in it (and the end)."""
+        start = self.adj_start.to_numpy().astype(np.int64)
+        others = self.adj.to_numpy()[:, 1].astype(np.int64) if start[-1] else np.zeros(0, int)
+        colours = colour_graph(start, others, n)
+        order = np.argsort(colours, kind="stable").astype(np.int32)
+        counts = np.bincount(colours, minlength=colours.max() + 1 if n else 0)
+        colour_start = [0] + np.cumsum(counts).tolist()
+        field = ti.field(ti.i32, shape=max(n, 1))
+        field.from_numpy(order if n else np.zeros(1, np.int32))
+        return field, colour_start
+
+    def invalidate(self):
+        self._has_history = False
+
+    def simulate(self, model, state_in, state_out, dt):
+        h, t1 = dt, state_in.t + dt
+        opt = self.options
+        x, e = state_out.x, self.potential
+        e.begin(state_in.x, state_in.v, h, state_in.t, x)
+        guess = opt["initial_guess"]
+        if guess == "adaptive" and not self._has_history:
+            guess = "gravity"
+        self._guess(x, state_in.v, h, GUESSES.index(guess))
+        energies = [e.evaluate(x, h, t1, False)[0]] if self.track_potential else []
+        rho = float(opt["rho"])
+        omega = 1.0
+        for it in range(1, opt["iterations"] + 1):
+            if rho > 0.0:
+                omega = 1.0 if it == 1 else (2.0 / (2.0 - rho * rho) if it == 2
+                                             else 4.0 / (4.0 - rho * rho * omega))
+                self._remember(x)
+            self._contacts(x, h)
+            for c in range(self.colours):
+                self._sweep(x, h, t1, self.colour_start[c], self.colour_start[c + 1])
+            if rho > 0.0 and it > 1:
+                self._accelerate(x, omega)
+        if self.track_potential:
+            energies.append(e.evaluate(x, h, t1, False)[0])
+        self._finish(x, 1.0 / h, state_out.v)
+        self._has_history = True
+        state_out.t = t1
+        self.stats = {"iterations": opt["iterations"], "potential": energies}
+
+    def _contacts(self, x, h):
+        """The pair terms' (self-contact's) gradient and diagonal blocks at x, held through
+        the iteration's colour passes."""
+        if not self.pair_terms:
+            return
+        self._zero(self.contact_grad)
+        for term in self.pair_terms:
+            term.add_incremental(x, self.potential.x0, h, True, self.acc, self.contact_grad)
+        self.potential.prepare_blocks(x, h)
+
+    @ti.kernel
+    def _zero(self, f: ti.template()):
+        ti.loop_config(serialize=ti.static(serial(f)))
+        for p in range(f.shape[0]):
+            f[p] = ti.Vector.zero(float, 3)
+
+    @ti.kernel
+    def _guess(self, x: ti.template(), v: ti.template(), h: float, kind: ti.i32):
+        """x at the initial guess (GUESSES[kind]); pinned particles at x_hat = x0 + h v0
+        (they move with their velocity)."""
+        g = ti.Vector([self.params[0], self.params[1], self.params[2]])
+        g_norm = g.norm()
+        ti.loop_config(serialize=ti.static(serial(self.mass)))
+        for p in range(self.mass.shape[0]):
+            y = self.potential.x_hat[p]
+            if self.potential.inv_mass[p] > 0.0:
+                if kind == 0:
+                    y = self.potential.x0[p]
+                elif kind == 2:
+                    y += h * h * g
+                elif kind == 3 and g_norm > 0.0:
+                    # the last step's acceleration along gravity, as a fraction of it
+                    along = ((v[p] - self.v_last[p]) / h).dot(g) / (g_norm * g_norm)
+                    y += h * h * ti.math.clamp(along, 0.0, 1.0) * g
+            self.prev[p] = y
+        ti.loop_config(serialize=ti.static(serial(self.mass)))
+        for p in range(self.mass.shape[0]):
+            x[p] = self.prev[p]
+            self.v_last[p] = v[p]
+
+    @ti.func
+    def _local(self, p, x, h, t):
+        """(g_i, H_i): vertex p's gradient of E and its 3 x 3 Hessian block, the springs'
+        projected (the self-contacts' from the iteration's start)."""
+        g = self.mass[p] / (h * h) * (x[p] - self.potential.x_hat[p])
+        for term in ti.static(self.potential.particle_terms):
+            _, _, g_t = term.incremental(p, x, self.potential.x0, h, t)
+            g += g_t
+        if ti.static(self.potential.has_lagged):
+            g -= self.potential.f_lag[p]
+        if ti.static(bool(self.pair_terms)):
+            g += self.contact_grad[p]
+        block = self.potential.particle_block(p, x, h, t)
+        if ti.static(self.has_springs):
+            d0 = ti.static(self.springs.d0)
+            for a in range(self.adj_start[p], self.adj_start[p + 1]):
+                s, q = self.adj[a][0], self.adj[a][1]
+                sign = 1.0 if self.pairs[s][0] == p else -1.0
+                _, g_s = spring_term.incremental(x[p], x[q], self.potential.x0[p], self.potential.x0[q], sign * d0[s],
+                                                 self.ks[s], self.kd[s], self.rest[s], h)
+                g += g_s
+                _, projected = spring_term.hessian_blocks(x[p], x[q], self.ks[s], self.kd[s],
+                                                          self.rest[s], d0[s], h)
+                block += projected
+        return g, block
+
+    @ti.kernel
+    def _sweep(self, x: ti.template(), h: float, t: float, first: ti.i32, end: ti.i32):
+        """One Newton step on each free vertex of one colour (module docstring)."""
+        for k in range(first, end):
+            p = self.order[k]
+            if self.potential.inv_mass[p] > 0.0:
+                g, block = self._local(p, x, h, t)
+                x[p] -= block.inverse() @ g
+
+    def local_system(self, x, h, t, p):
+        """(g_i, H_i) of vertex p at positions x (a field) within the step begun last, as
+        NumPy; for tests."""
+        self._contacts(x, h)
+        out = self._local_kernel(x, h, t, p)
+        out = np.asarray(out)
+        return out[0], out[1:]
+
+    @ti.kernel
+    def _local_kernel(self, x: ti.template(), h: float, t: float,
+                      p: ti.i32) -> ti.types.matrix(4, 3, ti.f64):
+        g, block = self._local(p, x, h, t)
+        out = ti.Matrix.zero(ti.f64, 4, 3)
+        for j in ti.static(range(3)):
+            out[0, j] = g[j]
+            for i in ti.static(range(3)):
+                out[1 + i, j] = block[i, j]
+        return out
+
+    @ti.kernel
+    def _remember(self, x: ti.template()):
+        """prev2 <- prev <- x: the iterates one and two iterations back."""
+        ti.loop_config(serialize=ti.static(serial(x)))
+        for p in range(x.shape[0]):
+            self.prev2[p] = self.prev[p]
+            self.prev[p] = x[p]
+
+    @ti.kernel
+    def _accelerate(self, x: ti.template(), omega: float):
+        ti.loop_config(serialize=ti.static(serial(x)))
+        for p in range(x.shape[0]):
+            if self.potential.inv_mass[p] > 0.0:
+                x[p] = omega * (x[p] - self.prev2[p]) + self.prev2[p]
+
+    @ti.kernel
+    def _finish(self, x: ti.template(), inv_h: float, v_out: ti.template()):
+        """v = (x - x0) / h."""
+        ti.loop_config(serialize=ti.static(serial(x)))
+        for p in range(x.shape[0]):
+            v_out[p] = (x[p] - self.potential.x0[p]) * inv_h
