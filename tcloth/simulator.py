@@ -250,7 +250,7 @@ class Simulator:
             step=step, time=t, integrator=self.integrator_name)
 
     def _hint(self):
-        if self.integrator_name in ("backward_euler", "projective", "vbd"):
+        if self.integrator_name in ("backward_euler", "projective", "vbd", "xpbd"):
             return ("try a smaller dt, more solver iterations (newton_iterations, "
                     "iterations) or more damping")
         if self.integrator_name != "forward_euler":

@@ -27,7 +27,8 @@ Lines: ``self_collision.<n>x<n>.{off,on}.ms_per_substep``, ``.ratio``,
 --implicit backward_euler,projective instead runs one simulated second of the same fold
 at one step per frame (--dt 1/60), self-collision on and off, with the worst crossing count
 over every step: ``self_collision.<n>x<n>.<integrator>.{on,off}_wall_s``, ``.ratio``,
-``.crossings_max``, ``.stage_*`` (the contact stage's statistics).
+``.{on,off}_mean_height_m`` (the particles' mean height at the end), ``.crossings_max``,
+``.stage_*`` (the contact stage's statistics).
 
 Usage: python tools/bench_self_collision.py [--sizes 64,128,256,512] [--steps 600]
                                             [--settle 0.04] [--skin M]
@@ -148,6 +149,8 @@ def one_second(module, x40, v40, n, integrator, dt, seconds):
             if mode == "on":
                 worst = max(worst, count_crossings(sim.positions(), scene.triangles))
         out[f"{mode}_wall_s"] = wall
+        # how far the cloth came down, to see whether contact held it back
+        out[f"{mode}_mean_height_m"] = float(sim.positions()[:, 1].mean())
         if mode == "on":
             out["crossings_max"] = worst
             stats = sim.contact_stats()

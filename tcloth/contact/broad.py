@@ -334,6 +334,12 @@ class BroadPhase:
             return False
         return _spread(self, x, x if y is None else y, y is not None) <= self.skin
 
+    def unlisted_distance(self, x):
+        """A lower bound on the distance at x of every pair the list leaves out: its
+        reach less how far particles moved relative to each other since the build
+        (``covers``)."""
+        return float(self.reach[None]) - _spread(self, x, x, False)
+
     def build(self, x, skin):
         """List the pairs within thickness + skin at x."""
         self.reach[None] = float(self.table.settings["thickness"] + skin)

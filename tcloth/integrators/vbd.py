@@ -18,9 +18,11 @@ there.
 
 Self-contact couples vertices through the contact list, which changes every step: its
 gradient and diagonal blocks are evaluated once per iteration, before the colour passes,
-and held through them (a Jacobi update for contacts, Gauss-Seidel for springs), and the
-contact stage's guard (``contact/guard.py``) keeps the step's motion free of crossings as
-for every integrator.
+and held through them (a Jacobi update for contacts, Gauss-Seidel for springs). Every
+move is kept inside its vertex's conservative displacement bound (``contact/bounds.py``,
+as Offset Geometric Contact does), detected at the step's start and again after an
+iteration that clamped a move, so the iterations never take cloth through cloth; the
+contact stage's guard (``contact/guard.py``) checks the step as for every integrator.
 
 Chebyshev acceleration (the paper's Section 3.7; Wang 2015) mixes each iterate with the
 one two iterations back, x^(n) = w_n (x^(n) - x^(n-2)) + x^(n-2), with w_1 = 1,
@@ -30,6 +32,7 @@ the plain iteration (0: off).
 import numpy as np
 import taichi as ti
 
+from ..contact.bounds import DisplacementBounds
 from ..errors import SceneError
 from ..runtime import serial
 from ..terms import springs as spring_term
@@ -98,6 +101,10 @@ class VBD(Integrator):
         self.prev, self.prev2, self.v_last, self.contact_grad = (
             ti.Vector.field(3, real, shape=n) for _ in range(4))
         self.acc = ti.field(real, shape=2)
+        stage = model.contact
+        self.bounds = (DisplacementBounds(stage.broad, model.inv_mass)
+                       if stage is not None and stage.broad is not None else None)
+        self.bounded = self.bounds is not None
         self._has_history = False
         self.track_potential = False
         self.stats = {}
@@ -127,6 +134,9 @@ class VBD(Integrator):
         if guess == "adaptive" and not self._has_history:
             guess = "gravity"
         self._guess(x, state_in.v, h, GUESSES.index(guess))
+        if self.bounds is not None:
+            self.bounds.detect(state_in.x)
+            self._clamp(x)
         energies = [e.evaluate(x, h, t1, False)[0]] if self.track_potential else []
         rho = float(opt["rho"])
         omega = 1.0
@@ -140,6 +150,8 @@ class VBD(Integrator):
                 self._sweep(x, h, t1, self.colour_start[c], self.colour_start[c + 1])
             if rho > 0.0 and it > 1:
                 self._accelerate(x, omega)
+            if self.bounds is not None and self.bounds.any_clamped() and it < opt["iterations"]:
+                self.bounds.detect(x)
         if self.track_potential:
             energies.append(e.evaluate(x, h, t1, False)[0])
         self._finish(x, 1.0 / h, state_out.v)
@@ -220,7 +232,22 @@ class VBD(Integrator):
             p = self.order[k]
             if self.potential.inv_mass[p] > 0.0:
                 g, block = self._local(p, x, h, t)
-                x[p] -= block.inverse() @ g
+                x[p] = self._bounded(p, x[p] - block.inverse() @ g)
+
+    @ti.func
+    def _bounded(self, p, y):
+        """y, or with self-collision y clamped into p's displacement bound."""
+        out = y
+        if ti.static(self.bounded):
+            out = self.bounds.clamp(p, y)
+        return out
+
+    @ti.kernel
+    def _clamp(self, x: ti.template()):
+        ti.loop_config(serialize=ti.static(serial(x)))
+        for p in range(x.shape[0]):
+            if self.potential.inv_mass[p] > 0.0:
+                x[p] = self._bounded(p, x[p])
 
     def local_system(self, x, h, t, p):
         """(g_i, H_i) of vertex p at positions x (a field) within the step begun last, as
@@ -254,7 +281,7 @@ class VBD(Integrator):
         ti.loop_config(serialize=ti.static(serial(x)))
         for p in range(x.shape[0]):
             if self.potential.inv_mass[p] > 0.0:
-                x[p] = omega * (x[p] - self.prev2[p]) + self.prev2[p]
+                x[p] = self._bounded(p, omega * (x[p] - self.prev2[p]) + self.prev2[p])
 
     @ti.kernel
     def _finish(self, x: ti.template(), inv_h: float, v_out: ti.template()):
