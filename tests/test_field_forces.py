@@ -17,7 +17,7 @@ import pytest
 import tcloth
 
 INTEGRATORS = ["forward_euler", "symplectic_euler", "verlet", "rk4", "backward_euler",
-               "projective"]
+               "projective", "vbd", "xpbd"]
 DT, STEPS = 1e-3, 20
 
 

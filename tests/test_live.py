@@ -87,7 +87,7 @@ def continue_like(sim, scene, integrator="symplectic_euler", steps=40, **setting
     return ref.positions(), sim.positions()
 
 
-@pytest.mark.parametrize("integrator", ["symplectic_euler", "projective"])
+@pytest.mark.parametrize("integrator", ["symplectic_euler", "projective", "vbd", "xpbd"])
 def test_live_parameters_act_as_a_scene_built_with_them(f64, integrator):
     """Springs, gravity, drag and wind changed live continue exactly as a simulator whose
     scene was built with those values (projective: its matrix is rebuilt)."""

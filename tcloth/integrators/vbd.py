@@ -67,7 +67,10 @@ class VBD(Integrator):
         (x_t + h v_t), "gravity" (x_t + h v_t + h^2 g), or "adaptive" (the paper's:
         gravity scaled by how much of it the last step's acceleration had, in [0, 1]).
 
-    ``colours`` (the greedy colouring's count) and, after each step, ``stats``
+    A step leaves its net force m (v - v0) / h in the state's force accumulator, for the
+    adaptive guess of the next (like Verlet's cached forces, dropped when the state is
+    changed from outside, and kept by checkpoints). ``colours`` (the greedy colouring's
+    count) and, after each step, ``stats``
     (iterations; potential: E at the initial guess and at the end where
     ``track_potential`` is set, which costs two evaluations of E a step) describe the
     solve.
@@ -98,14 +101,14 @@ class VBD(Integrator):
         self.mass, self.params = model.mass, model.params
         self.order, self.colour_start = self._colouring(n)
         self.colours = len(self.colour_start) - 1
-        self.prev, self.prev2, self.v_last, self.contact_grad = (
-            ti.Vector.field(3, real, shape=n) for _ in range(4))
+        self.prev, self.prev2, self.contact_grad = (
+            ti.Vector.field(3, real, shape=n) for _ in range(3))
         self.acc = ti.field(real, shape=2)
         stage = model.contact
         self.bounds = (DisplacementBounds(stage.broad, model.inv_mass)
                        if stage is not None and stage.broad is not None else None)
         self.bounded = self.bounds is not None
-        self._has_history = False
+        self._cached = None          # the State whose f holds the last step's m a
         self.track_potential = False
         self.stats = {}
 
@@ -123,7 +126,13 @@ class VBD(Integrator):
         return field, colour_start
 
     def invalidate(self):
-        self._has_history = False
+        self._cached = None
+
+    def holds_forces(self, state):
+        return self._cached is state
+
+    def adopt_forces(self, state):
+        self._cached = state
 
     def simulate(self, model, state_in, state_out, dt):
         h, t1 = dt, state_in.t + dt
@@ -131,9 +140,9 @@ class VBD(Integrator):
         x, e = state_out.x, self.potential
         e.begin(state_in.x, state_in.v, h, state_in.t, x)
         guess = opt["initial_guess"]
-        if guess == "adaptive" and not self._has_history:
+        if guess == "adaptive" and self._cached is not state_in:
             guess = "gravity"
-        self._guess(x, state_in.v, h, GUESSES.index(guess))
+        self._guess(x, state_in.f, h, GUESSES.index(guess))
         if self.bounds is not None:
             self.bounds.detect(state_in.x)
             self._clamp(x)
@@ -151,11 +160,13 @@ class VBD(Integrator):
             if rho > 0.0 and it > 1:
                 self._accelerate(x, omega)
             if self.bounds is not None and self.bounds.any_clamped() and it < opt["iterations"]:
-                self.bounds.detect(x)
+                if self.bounds.detect(x):
+                    for term in self.pair_terms:        # the list's rows changed
+                        term.begin_step(state_in.x, state_in.t)
         if self.track_potential:
             energies.append(e.evaluate(x, h, t1, False)[0])
-        self._finish(x, 1.0 / h, state_out.v)
-        self._has_history = True
+        self._finish(x, state_in.v, 1.0 / h, state_out.v, state_out.f)
+        self._cached = state_out
         state_out.t = t1
         self.stats = {"iterations": opt["iterations"], "potential": energies}
 
@@ -176,9 +187,9 @@ class VBD(Integrator):
             f[p] = ti.Vector.zero(float, 3)
 
     @ti.kernel
-    def _guess(self, x: ti.template(), v: ti.template(), h: float, kind: ti.i32):
-        """x at the initial guess (GUESSES[kind]); pinned particles at x_hat = x0 + h v0
-        (they move with their velocity)."""
+    def _guess(self, x: ti.template(), f: ti.template(), h: float, kind: ti.i32):
+        """x at the initial guess (GUESSES[kind]; "adaptive" reads the last step's m a in
+        f); pinned particles at x_hat = x0 + h v0 (they move with their velocity)."""
         g = ti.Vector([self.params[0], self.params[1], self.params[2]])
         g_norm = g.norm()
         ti.loop_config(serialize=ti.static(serial(self.mass)))
@@ -191,13 +202,12 @@ class VBD(Integrator):
                     y += h * h * g
                 elif kind == 3 and g_norm > 0.0:
                     # the last step's acceleration along gravity, as a fraction of it
-                    along = ((v[p] - self.v_last[p]) / h).dot(g) / (g_norm * g_norm)
+                    along = (f[p] * self.potential.inv_mass[p]).dot(g) / (g_norm * g_norm)
                     y += h * h * ti.math.clamp(along, 0.0, 1.0) * g
             self.prev[p] = y
         ti.loop_config(serialize=ti.static(serial(self.mass)))
         for p in range(self.mass.shape[0]):
             x[p] = self.prev[p]
-            self.v_last[p] = v[p]
 
     @ti.func
     def _local(self, p, x, h, t):
@@ -284,8 +294,11 @@ class VBD(Integrator):
                 x[p] = self._bounded(p, omega * (x[p] - self.prev2[p]) + self.prev2[p])
 
     @ti.kernel
-    def _finish(self, x: ti.template(), inv_h: float, v_out: ti.template()):
-        """v = (x - x0) / h."""
+    def _finish(self, x: ti.template(), v0: ti.template(), inv_h: float,
+                v_out: ti.template(), f_out: ti.template()):
+        """v = (x - x0) / h, and f = m (v - v0) / h: the step's net force, which the
+        adaptive guess of the next step reads (``holds_forces``)."""
         ti.loop_config(serialize=ti.static(serial(x)))
         for p in range(x.shape[0]):
             v_out[p] = (x[p] - self.potential.x0[p]) * inv_h
+            f_out[p] = self.mass[p] * (v_out[p] - v0[p]) * inv_h
