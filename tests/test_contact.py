@@ -160,8 +160,10 @@ def test_cloth_falling_at_10_m_per_s_stays_out_of_thin_colliders(integrator, dt,
     no entry, ended 2.7 cm inside it."""
     tcloth.init()
     frame = dt > 1e-3
+    # the real-time solvers on the 12 x 12 cloth (their own tests cover the solve)
+    res = 24 if frame and integrator not in ("vbd", "xpbd") else 12
     r = run_case(f"{collider}_10", integrator, dt, seconds=0.4 if frame else 0.03,
-                 build=lambda: falling(collider, res=24 if frame else 12),
+                 build=lambda: falling(collider, res=res),
                  chunk=1 if frame else 20)
     assert r["blew_up"] is None
     # it reached the collider: paths cut by the guard, or (VBD, whose solve takes the

@@ -34,7 +34,7 @@ def rich_scene():
     return scene
 
 
-@pytest.mark.parametrize("integrator", ["symplectic_euler", "verlet", "vbd", "xpbd"])
+@pytest.mark.parametrize("integrator", ["symplectic_euler", "verlet"])   # verlet: cached forces
 def test_save_load_continue_is_bit_identical(f64, tmp_path, integrator):
     path = str(tmp_path / "ck.npz")
     sim = tcloth.Simulator(rich_scene(), integrator, dt=2e-4)

@@ -155,8 +155,7 @@ class VBD(Integrator):
                                              else 4.0 / (4.0 - rho * rho * omega))
                 self._remember(x)
             self._contacts(x, h)
-            for c in range(self.colours):
-                self._sweep(x, h, t1, self.colour_start[c], self.colour_start[c + 1])
+            self._sweep(x, h, t1)
             if rho > 0.0 and it > 1:
                 self._accelerate(x, omega)
             if self.bounds is not None and self.bounds.any_clamped() and it < opt["iterations"]:
@@ -236,13 +235,16 @@ class VBD(Integrator):
         return g, block
 
     @ti.kernel
-    def _sweep(self, x: ti.template(), h: float, t: float, first: ti.i32, end: ti.i32):
-        """One Newton step on each free vertex of one colour (module docstring)."""
-        for k in range(first, end):
-            p = self.order[k]
-            if self.potential.inv_mass[p] > 0.0:
-                g, block = self._local(p, x, h, t)
-                x[p] = self._bounded(p, x[p] - block.inverse() @ g)
+    def _sweep(self, x: ti.template(), h: float, t: float):
+        """One iteration: a Newton step on each free vertex, colour after colour, the
+        vertices of a colour in parallel (one launch: the colours' loops are unrolled,
+        each a top-level loop)."""
+        for c in ti.static(range(self.colours)):
+            for k in range(ti.static(self.colour_start[c]), ti.static(self.colour_start[c + 1])):
+                p = self.order[k]
+                if self.potential.inv_mass[p] > 0.0:
+                    g, block = self._local(p, x, h, t)
+                    x[p] = self._bounded(p, x[p] - block.inverse() @ g)
 
     @ti.func
     def _bounded(self, p, y):

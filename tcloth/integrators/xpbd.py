@@ -100,8 +100,7 @@ class XPBD(Integrator):
             if self.has_springs:
                 self.lam.fill(0)
                 for _ in range(opt["iterations"]):
-                    for c in range(self.colours):
-                        self._springs(x, h, self.colour_start[c], self.colour_start[c + 1])
+                    self._springs(x, h)
             self._velocities(x, v, 1.0 / h)
             t += h
             for term in self.projections:
@@ -125,24 +124,30 @@ class XPBD(Integrator):
             x[p] += h * v[p]
 
     @ti.kernel
-    def _springs(self, x: ti.template(), h: float, first: ti.i32, end: ti.i32):
-        """One Gauss-Seidel pass over the springs of one colour (module docstring)."""
-        for k in range(first, end):
-            s = self.order[k]
-            i, j = self.pairs[s][0], self.pairs[s][1]
-            wi, wj = self.inv_mass[i], self.inv_mass[j]
-            d = x[i] - x[j]
-            length = d.norm()
-            if length > 0.0 and self.ks[s] > 0.0 and wi + wj > 0.0:
-                n = d / length
-                alpha = 1.0 / (self.ks[s] * h * h)
-                gamma = self.kd[s] / (self.ks[s] * h)
-                rate = n.dot((x[i] - self.x_prev[i]) - (x[j] - self.x_prev[j]))
-                dlam = (-(length - self.rest[s]) - alpha * self.lam[s] - gamma * rate) \
-                    / ((1.0 + gamma) * (wi + wj) + alpha)
-                x[i] += wi * dlam * n
-                x[j] -= wj * dlam * n
-                self.lam[s] += dlam
+    def _springs(self, x: ti.template(), h: float):
+        """One Gauss-Seidel pass over the springs, colour after colour, the springs of a
+        colour in parallel (module docstring; one launch: the colours' loops are unrolled,
+        each a top-level loop)."""
+        for c in ti.static(range(self.colours)):
+            for k in range(ti.static(self.colour_start[c]), ti.static(self.colour_start[c + 1])):
+                self._spring(x, h, self.order[k])
+
+    @ti.func
+    def _spring(self, x, h, s):
+        i, j = self.pairs[s][0], self.pairs[s][1]
+        wi, wj = self.inv_mass[i], self.inv_mass[j]
+        d = x[i] - x[j]
+        length = d.norm()
+        if length > 0.0 and self.ks[s] > 0.0 and wi + wj > 0.0:
+            n = d / length
+            alpha = 1.0 / (self.ks[s] * h * h)
+            gamma = self.kd[s] / (self.ks[s] * h)
+            rate = n.dot((x[i] - self.x_prev[i]) - (x[j] - self.x_prev[j]))
+            dlam = (-(length - self.rest[s]) - alpha * self.lam[s] - gamma * rate) \
+                / ((1.0 + gamma) * (wi + wj) + alpha)
+            x[i] += wi * dlam * n
+            x[j] -= wj * dlam * n
+            self.lam[s] += dlam
 
     @ti.kernel
     def _velocities(self, x: ti.template(), v: ti.template(), inv_h: float):
