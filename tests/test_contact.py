@@ -131,15 +131,17 @@ def small_thrown(speed):
 
 @pytest.mark.parametrize("integrator,dt", [
     ("backward_euler", 1.0 / 60.0), ("projective", 1.0 / 60.0), ("projective", 1.0 / 240.0),
-    ("vbd", 1.0 / 60.0), ("xpbd", 1.0 / 60.0),
+    ("vbd", 1.0 / 60.0), ("vbd:bounds", 1.0 / 60.0), ("xpbd", 1.0 / 60.0),
     ("symplectic_euler", None), ("forward_euler", None), ("verlet", None), ("rk4", None)])
 def test_thrown_cloths_never_cross_at_any_step(integrator, dt):
     """Two 12 x 12 cloths thrown at each other at 10 m/s relative: zero crossings at every
     step (every 20th for the explicit integrators at their own dt, 5e-5 s: they meet
     after 9 ms), the layer order kept, no blow-up (float32)."""
     tcloth.init()
+    integrator, _, flag = integrator.partition(":")      # vbd:bounds: VBD with bounds=True
     r = run_case("thrown_10", integrator, dt, seconds=0.1 if dt else 0.02,
-                 build=small_thrown(10.0), chunk=1 if dt else 20)
+                 build=small_thrown(10.0), chunk=1 if dt else 20,
+                 options={flag: True} if flag else None)
     assert r["blew_up"] is None
     assert r["crossings_start"] == 0 and r["crossings_max"] == 0, r
     assert r["order_kept"], r

@@ -196,7 +196,7 @@ def order_kept(x, cloths, sides):
     return (side(x, centre(a), b), side(x, centre(b), a)) == sides
 
 
-def run_case(name, integrator, dt, seconds=None, chunk=1, build=None):
+def run_case(name, integrator, dt, seconds=None, chunk=1, build=None, options=None):
     """Run one case (dt None: the case's explicit dt; ``build``: a smaller version of the
     case's scene, as the tests run); returns a dict of metrics. ``chunk`` > 1 steps that
     many steps in one call (a batch) and checks the state after each chunk only, without
@@ -207,7 +207,7 @@ def run_case(name, integrator, dt, seconds=None, chunk=1, build=None):
     scene, x, v, cloths = (build or case_build)()
     dt = explicit_dt if dt is None else dt
     steps = int(round((seconds or span) / dt))
-    sim = tcloth.Simulator(scene, integrator, dt=dt)
+    sim = tcloth.Simulator(scene, integrator, dt=dt, **(options or {}))
     sim.set_state(positions=x, velocities=v)
     triangles = scene.triangles
     edges = triangle_edges(triangles)

@@ -36,6 +36,7 @@ Usage: python tools/bench_self_collision.py [--sizes 64,128,256,512] [--steps 60
                                             [--state tools/data/fold_40x40.npz]
 """
 import argparse
+import ast
 import os
 import time
 
@@ -124,7 +125,7 @@ def warp_hashgrid_ms(x, reach, repeats=5):
     return float(np.median(times[1:]))
 
 
-def one_second(module, x40, v40, n, integrator, dt, seconds):
+def one_second(module, x40, v40, n, integrator, dt, seconds, options):
     """The n x n fold from the saved state, ``seconds`` of simulated time at one step of
     dt per frame with ``integrator``, self-collision on and off: wall time (after four steps
     that compile, from the same start), the worst crossing count over every step (NumPy,
@@ -136,7 +137,7 @@ def one_second(module, x40, v40, n, integrator, dt, seconds):
         scene = module.build(resolution=(n, n), thickness=0.006 * 40 / n)
         if mode == "off":
             scene.self_collision = None
-        sim = tcloth.Simulator(scene, integrator, dt=dt)
+        sim = tcloth.Simulator(scene, integrator, dt=dt, **options)
         sim.set_state(positions=x, velocities=v)
         sim.step(4)                     # compiles the kernels of both states' alternation
         sim.set_state(positions=x, velocities=v)
@@ -186,12 +187,19 @@ def main():
     module = load_script(os.path.join(HERE, "..", "scenes", "fold.py"))[0]
     x40, v40 = folded_state(module, args.state)
     if args.implicit:
-        for integrator in args.implicit.split(","):
+        for spec in args.implicit.split(","):
+            # NAME or NAME:OPTION=VALUE (e.g. vbd:bounds=True), VALUE a Python literal
+            integrator, _, option = spec.partition(":")
+            options = {}
+            if option:
+                key, value = option.split("=")
+                options[key] = ast.literal_eval(value)
+            label = integrator + (f".{option}" if option else "")
             for n in (int(s) for s in args.sizes.split(",")):
                 result = one_second(module, x40, v40, n, integrator, eval(args.dt, {}),
-                                    args.seconds)
+                                    args.seconds, options)
                 for key, value in result.items():
-                    print(f"self_collision.{n}x{n}.{integrator}.{key}: {value:.6g}")
+                    print(f"self_collision.{n}x{n}.{label}.{key}: {value:.6g}")
         return
     rows = []
     for n in (int(s) for s in args.sizes.split(",")):
