@@ -37,6 +37,20 @@ def random_network(n=7, seed=0, k=(50.0, 200.0), kd=0.0, pin=None, gravity=(0.0,
     return scene
 
 
+def hanging_chain(n=10, m=0.01, k=50.0, l0=0.05, g=9.81):
+    """A chain of n masses hanging from a pinned end, starting at rest length, and its
+    closed-form equilibrium: spring i from the top carries the weight of the masses below
+    it, (n - i + 1) m g, and stretches by that over k. Returns (scene, the particles'
+    heights at equilibrium, the total stretch)."""
+    scene = tcloth.Scene(gravity=(0.0, -g, 0.0), air_drag=0.02)
+    x = np.zeros((n + 1, 3))
+    x[:, 1] = -l0 * np.arange(n + 1)
+    scene.add_particles(x, mass=m, pinned=[True] + [False] * n)
+    scene.add_springs([[i, i + 1] for i in range(n)], stiffness=k, damping=0.05)
+    stretch = (n - np.arange(n)) * m * g / k
+    return scene, -np.concatenate([[0.0], np.cumsum(l0 + stretch)]), stretch.sum()
+
+
 def energy_gradient(sim, x0, term, entries=None, h=1e-6):
     """Central finite differences of sim.energy()[term] at positions x0, (N,3); entries:
     the (particle, coordinate) pairs to difference (default all)."""

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import tcloth
+from conftest import hanging_chain
 from tcloth.integrators.vbd import colour_graph
 from tcloth.contact.topology import contact_topology
 
@@ -172,20 +173,12 @@ def test_vbd_keeps_the_momentum_of_a_free_cloth_as_it_converges(f64):
 
 
 def test_vbd_reaches_the_hanging_chain_closed_form(f64):
-    """A chain of n masses hanging from a pinned end: spring i from the top carries the
-    weight of the masses below it, (n - i + 1) m g, and stretches by that over k."""
-    n, m, k, l0, g = 10, 0.01, 50.0, 0.05, 9.81
-    scene = tcloth.Scene(gravity=(0.0, -g, 0.0), air_drag=0.02)
-    x = np.zeros((n + 1, 3))
-    x[:, 1] = -l0 * np.arange(n + 1)
-    scene.add_particles(x, mass=m, pinned=[True] + [False] * n)
-    scene.add_springs([[i, i + 1] for i in range(n)], stiffness=k, damping=0.05)
+    """A chain of masses hanging from a pinned end (conftest.hanging_chain): each spring
+    stretched by the weight below it over k."""
+    scene, expected, stretch = hanging_chain()
     sim = tcloth.Simulator(scene, "vbd", dt=1 / 60, iterations=30)
     sim.step(600)
-    stretch = (n - np.arange(n)) * m * g / k
-    expected = -np.concatenate([[0.0], np.cumsum(l0 + stretch)])
-    drop = sim.positions()[:, 1]
-    assert np.abs(drop - expected).max() < 0.02 * np.abs(stretch).sum()
+    assert np.abs(sim.positions()[:, 1] - expected).max() < 0.02 * stretch
     assert np.abs(sim.positions()[:, [0, 2]]).max() < 1e-9
 
 

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import tcloth
+from conftest import hanging_chain
 from tcloth.integrators.xpbd import colour_springs
 
 
@@ -101,18 +102,12 @@ def test_xpbd_is_stable_on_stiff_cloth_at_one_step_per_frame(f64, k):
 
 
 def test_xpbd_reaches_the_hanging_chain_closed_form(f64):
-    """Spring i from the top of a hanging chain carries (n - i + 1) m g."""
-    n, m, k, l0, g = 10, 0.01, 50.0, 0.05, 9.81
-    scene = tcloth.Scene(gravity=(0.0, -g, 0.0), air_drag=0.02)
-    x = np.zeros((n + 1, 3))
-    x[:, 1] = -l0 * np.arange(n + 1)
-    scene.add_particles(x, mass=m, pinned=[True] + [False] * n)
-    scene.add_springs([[i, i + 1] for i in range(n)], stiffness=k, damping=0.05)
+    """Each spring of a hanging chain (conftest.hanging_chain) stretched by the weight
+    below it over k."""
+    scene, expected, stretch = hanging_chain()
     sim = tcloth.Simulator(scene, "xpbd", dt=1 / 60, iterations=200)
     sim.step(600)
-    stretch = (n - np.arange(n)) * m * g / k
-    expected = -np.concatenate([[0.0], np.cumsum(l0 + stretch)])
-    assert np.abs(sim.positions()[:, 1] - expected).max() < 0.02 * stretch.sum()
+    assert np.abs(sim.positions()[:, 1] - expected).max() < 0.02 * stretch
 
 
 def test_spring_colouring_separates_springs_at_a_particle():

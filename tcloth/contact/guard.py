@@ -255,6 +255,18 @@ def truncate(cl: ti.template(), count: ti.i32, x0: ti.template(), x1: ti.templat
 
 
 @ti.func
+def _stop(p, at, n, u, dt, x1, v1, held):
+    """Particle p stopped at ``at`` (at the step's start, in the frame of a collider moving
+    at u, outward normal n there): it ends at ``at`` carried by the collider, its velocity
+    into the collider removed, and held with n."""
+    x1[p] = at + dt * u
+    vn = (v1[p] - u).dot(n)
+    if vn < 0.0:
+        v1[p] -= vn * n
+    held[p] = n
+
+
+@ti.func
 def sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held):
     """Each free particle's path from x0 to x1 against every switched-on collider, in the
     collider's frame (it moves by dt times its velocity): a path from outside that enters
@@ -282,11 +294,7 @@ def sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held):
                             if 0.0 <= hit < length - BACK_OFF:
                                 entry = start + ti.max(hit - BACK_OFF, 0.0) * d
                                 _, n = SHAPES[g.shape].signed_distance(col, entry, t0)
-                                x1[p] = entry + dt * u
-                                vn = (v1[p] - u).dot(n)
-                                if vn < 0.0:
-                                    v1[p] -= vn * n
-                                held[p] = n
+                                _stop(p, entry, n, u, dt, x1, v1, held)
                                 entered = True
                         if not entered:
                             # a path that ends inside without a hit the ray cast resolves
@@ -294,11 +302,7 @@ def sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held):
                             # inside and goes deeper: the particle stays where it was
                             phi1, _ = SHAPES[g.shape].signed_distance(col, x1[p], t0 + dt)
                             if phi1 < ti.min(phi0, 0.0):
-                                x1[p] = start + dt * u
-                                vn = (v1[p] - u).dot(n0)
-                                if vn < 0.0:
-                                    v1[p] -= vn * n0
-                                held[p] = n0
+                                _stop(p, start, n0, u, dt, x1, v1, held)
                                 entered = True
                         if entered:
                             clamped += 1

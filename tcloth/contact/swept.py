@@ -202,8 +202,8 @@ def sweep_search(search: ti.template(), x0: ti.template(), x1: ti.template(),
     P, E, T = ti.static(search.table.point_count, search.table.edge_count,
                         search.table.triangle_count)
     Q, B, slots = ti.static(search.queries, search.blocks, search.block_slots)
-    # the boxes are grown by half the thickness each: two meet where the primitives can
-    # come within the thickness
+    # the boxes are grown by half the thickness each (and the margin): two meet where the
+    # primitives can come within the thickness
     half = ti.cast(0.5 * thickness + margin, ti.f32)
     search.points.inv_cell[None] = ti.cast(1.0 / cell, ti.f32)
     search.edges.inv_cell[None] = ti.cast(1.0 / cell, ti.f32)

@@ -47,3 +47,20 @@ class Integrator:
 
     def simulate(self, model, state_in, state_out, dt):
         raise NotImplementedError
+
+
+class ForceCache:
+    """For an integrator that leaves in ``state_out.f`` something its next step reuses
+    (Verlet: the forces at the step's end; VBD: the step's net force): ``_cached`` is the
+    State whose f holds it, forgotten when the state is changed from outside and kept by
+    checkpoints. Put before ``Integrator`` in the bases."""
+    _cached = None
+
+    def invalidate(self):
+        self._cached = None
+
+    def holds_forces(self, state):
+        return self._cached is state
+
+    def adopt_forces(self, state):
+        self._cached = state

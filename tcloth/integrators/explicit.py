@@ -20,7 +20,7 @@ import taichi as ti
 
 from .. import runtime
 from ..runtime import serial
-from .base import Integrator
+from .base import ForceCache, Integrator
 from .linalg import copy
 
 
@@ -83,29 +83,16 @@ def _kick(integrator: ti.template(), v: ti.template(), f_end: ti.template(),
 
 
 @ti.data_oriented
-class Verlet(Integrator):
+class Verlet(ForceCache, Integrator):
     """Velocity Verlet, second order. One force evaluation per step: the forces at the end
     of a step are kept in ``state_out.f`` and reused by the next step, unless the state was
     changed in between (``invalidate``)."""
     name = "verlet"
 
-    def __init__(self, model, **options):
-        super().__init__(model, **options)
-        self._cached = None          # the State whose f holds this integrator's forces
-
     def forces_at(self, state):
         if self._cached is not state:
             super().forces_at(state)
             self._cached = state
-
-    def invalidate(self):
-        self._cached = None
-
-    def holds_forces(self, state):
-        return self._cached is state
-
-    def adopt_forces(self, state):
-        self._cached = state
 
     @ti.func
     def drift(self, a, b, dt):

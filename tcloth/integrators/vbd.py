@@ -39,7 +39,7 @@ from ..errors import SceneError
 from ..runtime import serial
 from ..terms import springs as spring_term
 from ..terms.springs import Springs
-from .base import Integrator
+from .base import ForceCache, Integrator
 from .potential import IncrementalPotential
 
 GUESSES = ("start", "inertia", "gravity", "adaptive")
@@ -59,7 +59,7 @@ def colour_graph(start, neighbours, n):
 
 
 @ti.data_oriented
-class VBD(Integrator):
+class VBD(ForceCache, Integrator):
     """Vertex Block Descent on backward Euler's incremental potential. Options (defaults):
 
     iterations (10): colour sweeps a step (VBD does not test convergence: the count is
@@ -118,7 +118,6 @@ class VBD(Integrator):
                        if opt["bounds"] and stage is not None and stage.broad is not None
                        else None)
         self.bounded = self.bounds is not None
-        self._cached = None          # the State whose f holds the last step's m a
         self.track_potential = False
         self.stats = {}
 
@@ -134,15 +133,6 @@ class VBD(Integrator):
         field = ti.field(ti.i32, shape=max(n, 1))
         field.from_numpy(order if n else np.zeros(1, np.int32))
         return field, colour_start
-
-    def invalidate(self):
-        self._cached = None
-
-    def holds_forces(self, state):
-        return self._cached is state
-
-    def adopt_forces(self, state):
-        self._cached = state
 
     def simulate(self, model, state_in, state_out, dt):
         h, t1 = dt, state_in.t + dt
@@ -184,16 +174,10 @@ class VBD(Integrator):
         the iteration's colour passes."""
         if not self.pair_terms:
             return
-        self._zero(self.contact_grad)
+        self.contact_grad.fill(0)
         for term in self.pair_terms:
             term.add_incremental(x, self.potential.x0, h, True, self.acc, self.contact_grad)
         self.potential.prepare_blocks(x, h)
-
-    @ti.kernel
-    def _zero(self, f: ti.template()):
-        ti.loop_config(serialize=ti.static(serial(f)))
-        for p in range(f.shape[0]):
-            f[p] = ti.Vector.zero(float, 3)
 
     @ti.kernel
     def _guess(self, x: ti.template(), f: ti.template(), h: float, kind: ti.i32):
@@ -213,10 +197,7 @@ class VBD(Integrator):
                     # the last step's acceleration along gravity, as a fraction of it
                     along = (f[p] * self.potential.inv_mass[p]).dot(g) / (g_norm * g_norm)
                     y += h * h * ti.math.clamp(along, 0.0, 1.0) * g
-            self.prev[p] = y
-        ti.loop_config(serialize=ti.static(serial(self.mass)))
-        for p in range(self.mass.shape[0]):
-            x[p] = self.prev[p]
+            x[p] = y
 
     @ti.func
     def _local(self, p, x, h, t):
