@@ -13,7 +13,7 @@ import sys
 import traceback
 import warnings
 
-from .errors import InstabilityError, SceneError
+from .errors import DeviceWarning, InstabilityError, SceneError
 from .script import (ScriptError, build_scene, describe, load_script, parse_settings,
                      timing)
 
@@ -21,13 +21,13 @@ from .script import (ScriptError, build_scene, describe, load_script, parse_sett
 def init(arch, precision):
     """tcloth.init for the command line: one line on what it runs on, and any
     DeviceWarning (a GPU asked for, a CPU or software driver given) as a line of its own."""
-    import tcloth
+    from . import runtime
     with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", tcloth.DeviceWarning)
-        tcloth.init(arch=arch, precision=precision)
-    print(f"tcloth: running on {tcloth.device()} in {precision}", file=sys.stderr)
+        warnings.simplefilter("always", DeviceWarning)
+        runtime.init(arch=arch, precision=precision)
+    print(f"tcloth: running on {runtime.device()} in {precision}", file=sys.stderr)
     for w in caught:
-        if issubclass(w.category, tcloth.DeviceWarning):
+        if issubclass(w.category, DeviceWarning):
             print(f"tcloth: warning: {w.message}", file=sys.stderr)
         else:
             warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
@@ -59,7 +59,8 @@ def _render_parser(parser):
 
 def render_script(path, args):
     """Run one scene script as the command line asks. Returns the record() stats."""
-    import tcloth
+    from .simulator import Simulator
+    from .video import check_writable, record
 
     module, cfg = load_script(path)
     params = parse_settings(module, path, args.set)
@@ -69,20 +70,21 @@ def render_script(path, args):
             cfg[key] = getattr(args, key)
     name = os.path.splitext(os.path.basename(path))[0]
     out = args.out or os.path.join("out", name + ".mp4")
-    tcloth.video.check_writable(out)
+    check_writable(out)
     init(args.arch, cfg["precision"])
     scene = build_scene(module, path, params)
     dt, steps = timing(cfg, scene)
-    sim = tcloth.Simulator(scene, cfg["integrator"], dt=dt, **cfg["options"])
-    return tcloth.record(sim, out, frames=cfg["frames"], steps_per_frame=steps,
-                         fps=cfg["fps"], width=cfg["width"], height=cfg["height"],
-                         camera=cfg["camera"], supersample=cfg["supersample"],
-                         progress=not args.quiet, mesh_dir=args.meshes, **cfg["render"])
+    sim = Simulator(scene, cfg["integrator"], dt=dt, **cfg["options"])
+    return record(sim, out, frames=cfg["frames"], steps_per_frame=steps, fps=cfg["fps"],
+                  width=cfg["width"], height=cfg["height"], camera=cfg["camera"],
+                  supersample=cfg["supersample"], progress=not args.quiet,
+                  mesh_dir=args.meshes, **cfg["render"])
 
 
 def view_script(path, args):
     """``tcloth view``: the scene in the live sandbox window."""
-    import tcloth
+    from .simulator import Simulator
+    from .video import check_writable
     from .viewer import DisplayError, Viewer, check_display
 
     module, cfg = load_script(path)
@@ -91,7 +93,7 @@ def view_script(path, args):
         if getattr(args, key) is not None:
             cfg[key] = getattr(args, key)
     if args.screenshot is not None:
-        tcloth.video.check_writable(args.screenshot)
+        check_writable(args.screenshot)
         if args.frames is None:
             raise ScriptError("--screenshot needs --frames N (the frame to save)")
     try:
@@ -103,7 +105,7 @@ def view_script(path, args):
     if args.wind and scene.wind is None:
         scene.set_wind((0.0, 0.0, 0.0))
     dt, steps = timing(cfg, scene)
-    sim = tcloth.Simulator(scene, cfg["integrator"], dt=dt, grab=True, **cfg["options"])
+    sim = Simulator(scene, cfg["integrator"], dt=dt, grab=True, **cfg["options"])
     render = cfg["render"]
     try:
         viewer = Viewer(sim, substeps=args.substeps or steps,

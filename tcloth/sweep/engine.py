@@ -321,7 +321,7 @@ def _write_csv(path, rows):
 
 def _write_metadata(spec, store, backend, total, todo):
     import taichi
-    from .. import __version__
+    from ..version import __version__
     meta = {"tcloth": __version__, "taichi": ".".join(map(str, taichi.__version__)),
             "spec": spec.data, "scene": spec.scene, "backend": backend, "cases": total,
             "cases_to_run": todo,
