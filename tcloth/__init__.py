@@ -5,7 +5,7 @@ import os
 # unless the user asks for it.
 os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "False")
 
-from . import cli  # noqa: E402  (after the environment default above)
+from . import cli, features  # noqa: E402,F401  (after the environment default above)
 from .errors import (ConvergenceWarning, DeviceWarning, InstabilityError, SceneError,
                      StaleSimulatorError)
 from .mesh import export_mesh, write_obj, write_ply
@@ -17,9 +17,9 @@ from .objfile import load_obj
 from .scene import Scene
 from .simulator import Simulator
 from .video import record, write_png
+from .version import __version__
 from .viewer import view
 
-__version__ = "0.1.0"
 
 __all__ = ["cli", "init", "device", "Scene", "Cloth", "MeshCloth", "Rope", "load_obj", "Simulator", "SceneError", "InstabilityError", "ConvergenceWarning", "DeviceWarning",
            "StaleSimulatorError", "Camera", "Renderer", "render", "record", "write_png",

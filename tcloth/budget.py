@@ -5,13 +5,15 @@ position_bound and velocity_bound), or when it gives the particles more energy t
 scene can supply. After the *baseline* (the simulator's start, ``reset``, ``set_state``,
 a live change, a grab, a loaded checkpoint) at time t_b, with total energy E_b = S_b +
 P_b split into S = kinetic + gravity (a sum over particles, cheap to check every step)
-and P = everything else (springs, contacts, self-contacts, the grab spring, attraction):
+and P = everything else (springs, contacts, self-contacts, the grab spring, attraction,
+pressure):
 
     S(t) = E(t) - P(t) <= E_b + W(t) - P_min,
 
 where W(t) bounds what the scene's sources can add (damping, friction and drag only take
-energy away) and P_min is P's lower bound (0; with softened attraction its most negative
-value). Every step is checked against
+energy away) and P_min is P's lower bound, the sum of the scene features' ``floor``s (0
+but for softened attraction and pressure; a feature without one, such as unsoftened
+attraction or a gas without ambient pressure, turns the budget off). Every step is checked against
 
     S(t) <= limit(t) = S_b + P_b - P_min + margin + inflow + gain (t - t_b) + stretch (t - t_b)^2
 
@@ -38,6 +40,7 @@ import numpy as np
 import taichi as ti
 
 from . import runtime
+from .features import FEATURES
 from .runtime import serial
 
 NO_PARTICLE = 2147483647
@@ -54,17 +57,12 @@ class EnergyBudget:
         scene = model.scene
         self.model = model
         self.mass, self.params = model.mass, model.params
-        attraction = scene.attraction
-        self.enabled = enabled and (attraction is None or attraction[1] > 0.0)
+        floors = [f.floor(getattr(scene, f.name), scene) for f in FEATURES
+                  if getattr(scene, f.name) is not None]
+        self.enabled = enabled and None not in floors
+        self.floor = sum(f for f in floors if f is not None)
         free = ~np.asarray(scene.pinned, dtype=bool)
-        masses = scene.masses
-        self.free_mass = float(masses[free].sum())
-        self.attraction_floor = 0.0
-        if attraction is not None and attraction[1] > 0.0:
-            G, softening = attraction
-            total = masses.sum()
-            self.attraction_floor = -G * (total * total - np.sum(masses * masses)) / (
-                2.0 * softening)
+        self.free_mass = float(scene.masses[free].sum())
         springs = scene.springs
         pinned = np.asarray(scene.pinned, dtype=bool)
         self._pin_springs = pinned[springs["pairs"]].any(axis=1) if len(springs["pairs"]) \
@@ -113,8 +111,8 @@ class EnergyBudget:
         k_pin = float(scene.springs["stiffness"][self._pin_springs].sum()) if u_pin else 0.0
         self.values = {"baseline": s_b + p_b, "margin": margin, "inflow": inflow,
                        "gain": m * g * u_up, "stretch": 0.5 * k_pin * u_pin ** 2,
-                       "floor": self.attraction_floor, "time": float(t)}
-        self.limits.from_numpy(np.array([s_b + p_b - self.attraction_floor + margin + inflow,
+                       "floor": self.floor, "time": float(t)}
+        self.limits.from_numpy(np.array([s_b + p_b - self.floor + margin + inflow,
                                          m * g * u_up, 0.5 * k_pin * u_pin ** 2, t]).astype(
             np.float64 if self.limits.dtype == ti.f64 else np.float32))
 

@@ -2,7 +2,10 @@
 
 The scene is stored as plain arrays plus a JSON description and rebuilt through the same
 validating ``Scene`` methods a script uses, so a damaged or hand-edited file is refused
-with a ``SceneError`` naming what is wrong. Files are written to a temporary name, flushed
+with a ``SceneError`` naming what is wrong. Each scene feature (``features.FEATURES``) is
+stored as the arguments of its Scene method that rebuild it (its ``saved``): NumPy
+arrays as arrays named ``feature_<name>_<argument>``, the rest as JSON. Files of format
+version 1 (features under keys of their own) are read too. Files are written to a temporary name, flushed
 and renamed: a crash mid-write never leaves a corrupt checkpoint under the real name.
 """
 import json
@@ -13,38 +16,94 @@ import numpy as np
 
 from .errors import SceneError
 from .builders import Cloth, MeshCloth, Rope
+from .features import FEATURES
 from .scene import KIND_CODE, SPRING_KINDS, Scene
+from .shapes import COMMON, SHAPE_NAMES, shape_of
 
 FORMAT = "tcloth-checkpoint"
-VERSION = 1
-_COLLIDER_SHAPE = {"sphere": ("center", "radius"), "plane": ("center", "normal"),
-                   "box": ("center", "half_extents", "rotation"),
-                   "cylinder": ("center", "radius", "half_height", "rotation")}
-_COLLIDER_COMMON = ("friction", "velocity", "thickness", "stiffness", "damping",
-                    "stick_velocity")
+VERSION = 2
+READS = (1, 2)
 
 
 def _plain(value):
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
     return value.tolist() if isinstance(value, np.ndarray) else value
 
 
 def _plain_dict(d):
-    return None if d is None else {k: _plain(v) for k, v in d.items()}
+    return None if d is None else _plain(d)
+
+
+def _save_features(scene, desc, arrays):
+    """Each present feature's method arguments into desc["features"] and arrays."""
+    desc["features"] = {}
+    for feature in FEATURES:
+        value = getattr(scene, feature.name)
+        if value is None:
+            continue
+        args = feature.saved(value)
+        stored = sorted(k for k, v in args.items() if isinstance(v, np.ndarray))
+        for key in stored:
+            arrays[f"feature_{feature.name}_{key}"] = args[key]
+        desc["features"][feature.name] = {
+            "args": {k: _plain(v) for k, v in args.items() if k not in stored},
+            "arrays": stored}
+
+
+def _load_features(scene, desc, arrays):
+    """Call each stored feature's Scene method with its stored arguments."""
+    known = {feature.name: feature for feature in FEATURES}
+    unknown = sorted(set(desc["features"]) - set(known))
+    if unknown:
+        raise SceneError(f"checkpoint holds a scene feature this tcloth does not know: "
+                         f"{unknown[0]!r} (known: {', '.join(known)})")
+    for feature in FEATURES:
+        entry = desc["features"].get(feature.name)
+        if entry is None:
+            continue
+        args = dict(entry["args"])
+        args.update({key: arrays[f"feature_{feature.name}_{key}"] for key in entry["arrays"]})
+        try:
+            getattr(scene, feature.method)(**args)
+        except TypeError as e:
+            raise SceneError(f"checkpoint's {feature.name} arguments do not fit "
+                             f"Scene.{feature.method}: {e}") from None
+
+
+def _from_version_1(desc, files):
+    """Version 1's description and files in version 2's layout: its wind, attraction,
+    strain limit and self-collision, stored under keys of their own, move under
+    "features" as their Scene methods' arguments."""
+    features = {}
+    wind = desc.pop("wind", None)
+    if wind is not None:
+        gust = {k: wind.pop(k) for k in ("amplitude", "frequency", "phase")}
+        features["wind"] = {"args": {**wind, "gust": gust}, "arrays": []}
+    attraction = desc.pop("attraction", None)
+    if attraction is not None:
+        features["attraction"] = {"args": dict(zip(("G", "softening"), attraction)),
+                                  "arrays": []}
+    limit = desc.pop("strain_limit", None)
+    if limit is not None:
+        if "scene_strain_springs" in files:
+            files["scene_feature_strain_limit_springs"] = files.pop("scene_strain_springs")
+        features["strain_limit"] = {"args": limit, "arrays": ["springs"]}
+    settings = desc.pop("self_collision", None)
+    if settings is not None:
+        features["self_collision"] = {"args": settings, "arrays": []}
+    desc["features"] = features
 
 
 def scene_to_arrays(scene):
     """(JSON-able description, dict of arrays) of a Scene."""
-    if scene.wind is not None and scene.wind["callable"] is not None:
-        raise SceneError("a scene whose wind gust is a Python callable cannot be saved in a "
-                         "checkpoint; use gust=dict(amplitude=..., frequency=..., phase=...)")
     sp = scene.springs
     arrays = {"positions": scene.positions, "velocities": scene.velocities,
               "masses": scene.masses, "pinned": scene.pinned, "spring_pairs": sp["pairs"],
               "spring_stiffness": sp["stiffness"], "spring_damping": sp["damping"],
               "spring_rest": sp["rest_length"], "spring_kind": sp["kind"]}
     desc = {"gravity": scene.gravity.tolist(), "air_drag": scene.air_drag,
-            "cloths": [], "ropes": [], "colliders": [], "wind": None, "attraction": None,
-            "strain_limit": None}
+            "cloths": [], "ropes": [], "colliders": []}
     for k, c in enumerate(scene.cloths):
         if c.is_grid:
             desc["cloths"].append({"offset": int(c.offset), "resolution": list(c.resolution),
@@ -62,17 +121,7 @@ def scene_to_arrays(scene):
     desc["ropes"] = len(scene.ropes)
     for c in scene.colliders:
         desc["colliders"].append(_plain_dict(c))
-    if scene.wind is not None:
-        desc["wind"] = {k: _plain(v) for k, v in scene.wind.items() if k != "callable"}
-    if scene.attraction is not None:
-        desc["attraction"] = list(scene.attraction)
-    if scene.strain_limit is not None:
-        lim = scene.strain_limit
-        desc["strain_limit"] = {"max_stretch": lim["max_stretch"],
-                                "iterations": lim["iterations"]}
-        arrays["strain_springs"] = lim["springs"]
-    if scene.self_collision is not None:
-        desc["self_collision"] = dict(scene.self_collision)
+    _save_features(scene, desc, arrays)
     return desc, arrays
 
 
@@ -121,28 +170,15 @@ def scene_from_arrays(desc, arrays):
         scene.ropes.append(Rope(arrays[f"rope{k}_particles"], arrays[f"rope{k}_springs"]))
     for c in desc["colliders"]:
         kind = c.get("kind")
-        if kind not in _COLLIDER_SHAPE:
+        if kind not in SHAPE_NAMES:
             raise SceneError(f"checkpoint holds a collider of unknown kind {kind!r}")
-        args = {key: c[key] for key in _COLLIDER_COMMON}
-        shape = [c[key] for key in _COLLIDER_SHAPE[kind]]
-        if kind == "plane":
-            scene.add_plane(*shape, **args)
-        else:
-            getattr(scene, f"add_{kind}")(*shape, **args)
-    if desc["wind"] is not None:
-        w = desc["wind"]
-        scene.set_wind(w["velocity"], drag=w["drag"], lift=w["lift"],
-                       tangential=w["tangential"],
-                       gust={"amplitude": w["amplitude"], "frequency": w["frequency"],
-                             "phase": w["phase"]})
-    if desc["attraction"] is not None:
-        scene.add_attraction(*desc["attraction"])
-    if desc["strain_limit"] is not None:
-        scene.limit_strain(desc["strain_limit"]["max_stretch"],
-                           desc["strain_limit"]["iterations"],
-                           springs=arrays["strain_springs"])
-    if desc.get("self_collision") is not None:
-        scene.set_self_collision(**desc["self_collision"])
+        try:
+            getattr(scene, f"add_{kind}")(
+                **{p.name: c[p.stored] for p in shape_of(c).parameters},
+                **{name: c[name] for name, _ in COMMON})
+        except KeyError as e:
+            raise SceneError(f"checkpoint's {kind} collider lacks its {e.args[0]!r}") from None
+    _load_features(scene, desc, arrays)
     return scene
 
 
@@ -206,18 +242,20 @@ def read(path):
     if meta.get("format") != FORMAT:
         raise SceneError(f"checkpoint {path!r} is not a tcloth checkpoint "
                          f"(format {meta.get('format')!r})")
-    if meta.get("version") != VERSION:
+    if meta.get("version") not in READS:
         raise SceneError(f"checkpoint {path!r} has format version {meta.get('version')!r}; "
-                         f"this tcloth reads version {VERSION}")
+                         f"this tcloth reads versions {', '.join(map(str, READS))}")
     needed = ["state_x", "state_v", "state_f", "scene_positions", "scene_velocities",
               "scene_masses", "scene_pinned", "scene_spring_pairs", "scene_spring_stiffness",
               "scene_spring_damping", "scene_spring_rest", "scene_spring_kind"]
     desc = meta["scene"]
+    if meta["version"] == 1:
+        _from_version_1(desc, files)
     needed += [f"scene_cloth{k}_{f}" for k in range(len(desc["cloths"]))
                for f in ("structural", "shear", "flexion")]
     needed += [f"scene_rope{k}_{f}" for k in range(desc["ropes"]) for f in ("particles", "springs")]
-    if desc["strain_limit"] is not None:
-        needed.append("scene_strain_springs")
+    needed += [f"scene_feature_{name}_{key}" for name, entry in desc["features"].items()
+               for key in entry["arrays"]]
     missing = [k for k in needed if k not in files]
     if missing:
         raise SceneError(f"checkpoint {path!r} lacks field {missing[0]!r}")

@@ -4,7 +4,7 @@ Pinned particles are ordinary particles with inverse mass 0. Springs live in one
 ordered so that the springs the force kernels walk one by one come first
 (``list_spring_count`` of them); springs of cloths handled by the grid stencil follow and
 are only read by diagnostics and the implicit solvers. Cloth grids are described by
-``grid.GridBlock`` records, colliders by a ``ColliderTable``.
+``grid.GridBlock`` records, colliders by a ``collider_table.ColliderTable``.
 
 A Model's layout never changes after it is built: scratch buffers belong to the terms and
 integrators that use them. Its values may: ``refresh`` uploads the scene's current
@@ -16,13 +16,11 @@ import numpy as np
 import taichi as ti
 
 from . import runtime
-from .errors import SceneError
-from .grid import GridBlock, GridTable
-from .shapes import ColliderTable
-from .terms import wind as wind_term
-from .terms.grab import GrabSpring
 from .contact.stage import ContactStage
-from .contact.topology import SelfCollisionTable
+from .errors import SceneError
+from .features import FEATURES
+from .grid import GridBlock, GridTable
+from .collider_table import ColliderTable
 
 
 def _vec_field(n):
@@ -58,26 +56,27 @@ class Model:
         spring_rest, spring_ks, spring_kd: shape (spring_count,); m, N/m, N s/m.
         grids: list of GridBlock (empty when grid_stencil=False); grid_table: their
             numbers as fields (``grid.GridTable``).
-        wind: the scene's wind dict or None (None too without cloth triangles);
-            triangles: shape (triangle_count,) of 3 x i32 particle ids when set.
-        wind_params: shape (11,): (velocity (3), gust amplitude (3), frequency, phase,
-            drag, lift, tangential) when wind is set.
-        attraction: (G, softening) or None.
-        strain_limit: dict or None; limit_index: shape (limit_count,), the model rows
-            of the limited springs.
-        colliders: ``ColliderTable``.
-        self_collision: ``contact.topology.SelfCollisionTable`` or None.
+        spring_order: (spring_count,) the scene spring id of each model row.
+        colliders: ``collider_table.ColliderTable``.
+        one attribute per scene feature (``features.FEATURES``), named as the feature: what
+            its ``build`` made of the scene's value, or None. wind: the scene's wind dict
+            (None without cloth triangles), with ``triangles`` (shape (triangle_count,) of
+            3 x i32) and ``wind_params`` (11,); attraction: (G, softening); pressure: see
+            ``terms.pressure``; strain_limit: its dict, with ``limit_index`` (limit_count,),
+            the model rows of the limited springs; self_collision:
+            ``contact.topology.SelfCollisionTable``.
         contact: ``contact.stage.ContactStage`` (self-collision's candidates and the guard
             of every step) or None in a scene with neither self-collision nor colliders.
-        grab: ``terms.grab.GrabSpring`` (the mouse spring of the viewer) or None.
+        grab: the grab spring (``terms.grab.GrabSpring``, the mouse spring of the viewer)
+            or None.
 
     Args:
         scene: the Scene. grid_stencil: see ``Simulator``.
         colliders_off: scene indices of colliders switched off (stiffness 0).
-        grab: build the grab spring.
+        grab: the grab spring to carry, or None.
     """
 
-    def __init__(self, scene, grid_stencil=True, colliders_off=(), grab=False):
+    def __init__(self, scene, grid_stencil=True, colliders_off=(), grab=None):
         self.generation = runtime.ensure_init()
         self.scene = scene
         self.particle_count = n = scene.num_particles
@@ -103,7 +102,7 @@ class Model:
                     in_grid[sids] = True
                 self.grids.append(self._grid_block(cloth))
         self.grid_table = GridTable(self.grids)
-        self._order = order = np.argsort(in_grid, kind="stable")
+        self.spring_order = order = np.argsort(in_grid, kind="stable")
         self.spring_count = ns = scene.num_springs
         self.list_spring_count = int((~in_grid).sum())
         self.spring_pairs = ti.Vector.field(2, ti.i32, shape=max(ns, 1))
@@ -114,27 +113,11 @@ class Model:
             self.spring_pairs.from_numpy(springs["pairs"][order].astype(np.int32))
             self.spring_rest.from_numpy(springs["rest_length"][order].astype(npr))
 
-        t = scene.triangles
-        self.wind = scene.wind if scene.wind is not None and len(t) else None
-        if self.wind is not None:
-            self.triangle_count = len(t)
-            self.triangles = ti.Vector.field(3, ti.i32, shape=len(t))
-            self.triangles.from_numpy(t.astype(np.int32))
-            self.wind_params = ti.field(real, shape=11)
-        self.attraction = scene.attraction
-        self.strain_limit = scene.strain_limit
-        if self.strain_limit is not None:
-            position = np.empty(len(order), dtype=np.int64)
-            position[order] = np.arange(len(order))      # scene spring id -> model row
-            idx = position[self.strain_limit["springs"]].astype(np.int32)
-            self.limit_count = len(idx)
-            self.limit_index = ti.field(ti.i32, shape=max(len(idx), 1))
-            if len(idx):
-                self.limit_index.from_numpy(idx)
+        for feature in FEATURES:
+            value = getattr(scene, feature.name)
+            setattr(self, feature.name, None if value is None else feature.build(self, value))
         self.colliders = ColliderTable(scene.colliders, colliders_off)
-        self.self_collision = (SelfCollisionTable(scene) if scene.self_collision is not None
-                               else None)
-        self.grab = GrabSpring() if grab else None
+        self.grab = grab
         self.refresh(colliders_off)
         # the contact set and the guard, one per model (and so per simulator)
         self.contact = (ContactStage(self) if self.self_collision is not None
@@ -147,23 +130,24 @@ class Model:
                          p["structural"], p["shear"], p["flexion"])
 
     def refresh(self, colliders_off=()):
-        """Upload the scene's current gravity and drag, spring stiffness and damping, wind
-        and colliders (those in ``colliders_off`` switched off) into the model's fields.
+        """Upload the scene's current gravity and drag, spring stiffness and damping, live
+        features (the wind) and colliders (those in ``colliders_off`` switched off) into
+        the model's fields.
         The scene's layout (particles, springs, cloths, which terms exist) must be the one
         the model was built from."""
         scene, npr = self.scene, runtime.numpy_real()
         self.params.from_numpy(np.array([*scene.gravity, scene.air_drag], dtype=npr))
         if self.spring_count:
             springs = scene.springs
-            self.spring_ks.from_numpy(springs["stiffness"][self._order].astype(npr))
-            self.spring_kd.from_numpy(springs["damping"][self._order].astype(npr))
+            self.spring_ks.from_numpy(springs["stiffness"][self.spring_order].astype(npr))
+            self.spring_kd.from_numpy(springs["damping"][self.spring_order].astype(npr))
         if self.grids:
             grid_cloths = [c for c in scene.cloths if c.is_grid]
             self.grids = [self._grid_block(c) for c in grid_cloths]
             self.grid_table.upload(self.grids)
-        if self.wind is not None:
-            self.wind = scene.wind
-            self.wind_params.from_numpy(wind_term.pack(scene.wind, scene.wind["velocity"]))
+        for feature in FEATURES:
+            if feature.live and getattr(self, feature.name) is not None:
+                setattr(self, feature.name, feature.refresh(self, getattr(scene, feature.name)))
         self.colliders.upload(scene.colliders, colliders_off)
 
     def single_grid(self):

@@ -1,4 +1,5 @@
-"""Scene: a plain description of particles, springs and forces (NumPy only, no Taichi).
+"""Scene: a plain description of particles, springs and forces (NumPy data; it makes no
+Taichi fields).
 
 Units are SI throughout: metres, kilograms, seconds, newtons. A ``Scene`` validates every
 input when it is added, so that a ``Simulator`` built from it never sees bad data.
@@ -7,30 +8,21 @@ import numpy as np
 
 from . import builders
 from .errors import SceneError
-from .validate import as_int, as_per_item, as_points, as_rotation, as_scalar, as_vec3, fmt
+from .shapes import SHAPE_NAMES, SHAPES, collider_builder
+from .validate import as_per_item, as_points, as_scalar, as_vec3, fmt
 
 SPRING_KINDS = ("structural", "shear", "flexion", "custom")
 KIND_CODE = {name: code for code, name in enumerate(SPRING_KINDS)}
 
 
-def wind_velocity(wind, t):
-    """The wind velocity (3,) at time t of a ``Scene.wind`` dict (validated)."""
-    f = wind["callable"]
-    if f is None:
-        return wind["velocity"] + wind["amplitude"] * np.sin(
-            2 * np.pi * wind["frequency"] * t + wind["phase"])
-    try:
-        value = f(t)
-    except Exception as e:
-        raise SceneError(f"wind gust callable raised {type(e).__name__} at t = {t}: {e}") from e
-    try:
-        return as_vec3("wind gust callable's result", value)
-    except SceneError as e:
-        raise SceneError(f"{e} at t = {t}") from None
-
-
 class Scene:
     """A plain description of a mass-spring system.
+
+    Particles, springs, cloths and ropes are added here, and colliders by one builder per
+    shape (``add_sphere``, ``add_plane``, ... from ``shapes.SHAPES``); the optional features
+    (``set_wind``, ``add_attraction``, ``set_pressure``, ``limit_strain``,
+    ``set_self_collision``) are methods given by ``tcloth.features``, each defined in the
+    module of what it sets up.
 
     Args:
         gravity: (3,) acceleration, m/s^2.
@@ -48,10 +40,6 @@ class Scene:
         self.cloths = []
         self.ropes = []
         self.colliders = []
-        self.wind = None
-        self.attraction = None
-        self.strain_limit = None
-        self.self_collision = None
 
     # -- particles -------------------------------------------------------------------------
     def add_particles(self, positions, mass=1.0, velocities=None, pinned=False):
@@ -235,8 +223,15 @@ class Scene:
         return builders.add_rope(self, start, end, segments, mass, stiffness, damping, pinned)
 
     # -- colliders -------------------------------------------------------------------------
-    def _add_collider(self, kind, friction, velocity, thickness, stiffness, damping,
-                      stick_velocity, **shape):
+    def add_collider(self, kind, shape, friction=0.0, velocity=(0.0, 0.0, 0.0),
+                     thickness=0.005, stiffness=1000.0, damping=0.5, stick_velocity=1e-3):
+        """Add a collider of shape ``kind`` whose own values, ``shape`` (a dict keyed as
+        the collider dict stores them), its builder has checked; the builders
+        ``add_sphere``, ``add_plane``, ``add_box``, ``add_cylinder`` and ``add_capsule``
+        (one per entry of ``shapes.SHAPES``) call this. Other arguments as for add_sphere.
+        Returns the collider dict."""
+        if kind not in SHAPE_NAMES:
+            raise SceneError(f"unknown collider kind {kind!r} (known: {', '.join(SHAPE_NAMES)})")
         c = {"kind": kind, **shape,
              "friction": as_scalar("friction", friction, minimum=0.0),
              "velocity": as_vec3("velocity", velocity),
@@ -247,197 +242,6 @@ class Scene:
                                          strict=True)}
         self.colliders.append(c)
         return c
-
-    def add_sphere(self, center, radius, friction=0.0, velocity=(0.0, 0.0, 0.0),
-                   thickness=0.005, stiffness=1000.0, damping=0.5, stick_velocity=1e-3):
-        """Add a sphere collider (see tcloth.terms.colliders for the contact model).
-
-        Args:
-            center: (3,) m at t = 0; it moves with constant ``velocity`` (3,) m/s.
-            radius: m, > 0. friction: Coulomb mu >= 0.
-            thickness: contact offset (m, default 5 mm): particles rest this far out.
-            stiffness: penalty k (N/m, default 1000). damping: normal damping as a ratio
-                of critical for each particle (default 0.5). stick_velocity: friction
-                regularisation speed eps (m/s, default 1e-3).
-        Returns:
-            dict describing the collider.
-        """
-        return self._add_collider("sphere", friction, velocity, thickness, stiffness, damping,
-                                  stick_velocity, center=as_vec3("center", center),
-                                  radius=as_scalar("radius", radius, minimum=0.0, strict=True))
-
-    def add_plane(self, point=(0.0, 0.0, 0.0), normal=(0.0, 1.0, 0.0), friction=0.0,
-                  velocity=(0.0, 0.0, 0.0), thickness=0.005, stiffness=1000.0, damping=0.5,
-                  stick_velocity=1e-3):
-        """Add an infinite plane through ``point`` whose solid side is opposite ``normal``.
-
-        Other arguments as for add_sphere.
-        """
-        n = as_vec3("normal", normal)
-        length = np.linalg.norm(n)
-        if length < 1e-12:
-            raise SceneError(f"normal must be non-zero (got {n.tolist()})")
-        return self._add_collider("plane", friction, velocity, thickness, stiffness, damping,
-                                  stick_velocity, center=as_vec3("point", point),
-                                  normal=n / length)
-
-    def add_box(self, center, half_extents, rotation=None, friction=0.0,
-                velocity=(0.0, 0.0, 0.0), thickness=0.005, stiffness=1000.0, damping=0.5,
-                stick_velocity=1e-3):
-        """Add a box: ``half_extents`` (3,) > 0 along its local axes, the columns of
-        ``rotation`` (a 3x3 rotation matrix; None = axis-aligned).
-
-        Other arguments as for add_sphere.
-        """
-        h = as_vec3("half_extents", half_extents)
-        if (h <= 0).any():
-            raise SceneError(f"half_extents must all be > 0 (got {h.tolist()})")
-        r = as_rotation("rotation", rotation)
-        return self._add_collider("box", friction, velocity, thickness, stiffness, damping,
-                                  stick_velocity, center=as_vec3("center", center),
-                                  half_extents=h, rotation=r)
-
-    def add_cylinder(self, center, radius, half_height, rotation=None, friction=0.0,
-                     velocity=(0.0, 0.0, 0.0), thickness=0.005, stiffness=1000.0, damping=0.5,
-                     stick_velocity=1e-3):
-        """Add a capped cylinder: ``radius`` and ``half_height`` (m, > 0) along its local
-        y axis, the second column of ``rotation`` (None: vertical), centred at ``center``.
-
-        Other arguments as for add_sphere.
-        """
-        r = as_rotation("rotation", rotation)
-        return self._add_collider("cylinder", friction, velocity, thickness, stiffness,
-                                  damping, stick_velocity, center=as_vec3("center", center),
-                                  radius=as_scalar("radius", radius, minimum=0.0, strict=True),
-                                  half_height=as_scalar("half_height", half_height,
-                                                        minimum=0.0, strict=True),
-                                  rotation=r)
-
-    # -- wind, attraction, strain limiting ------------------------------------------------
-    def set_wind(self, velocity=(0.0, 0.0, 0.0), drag=0.5, lift=0.0, tangential=0.0,
-                 gust=None):
-        """Quadratic wind on cloth triangles (Wejchert & Haumann 1991).
-
-        On a triangle of area A and unit normal n, with relative velocity
-        v_rel = wind(t) - (mean velocity of its particles), u = v_rel . n and its in-plane
-        part v_t = v_rel - u n, the force is
-            drag * A * u |u| n                 (pressure drag, normal)
-          + tangential * A * |v_t| v_t         (skin friction, tangential)
-          + lift * A * |u| v_t                 (lift: tangential, largest at 45 degrees,
-                                                zero face-on and edge-on),
-        split equally onto its three particles. drag carries the air density and the 1/2
-        (kg/m^3): for air, 0.5 * 1.2 * C_d with C_d about 1 gives 0.6.
-
-        Args:
-            velocity: (3,) mean wind, m/s.
-            drag, lift, tangential: coefficients >= 0, kg/m^3.
-            gust: None; a dict(amplitude=(3,), frequency=Hz, phase=rad) adding
-                amplitude * sin(2 pi frequency t + phase) in the kernel; or a callable
-                t -> (3,) wind velocity evaluated once per force evaluation (velocity is
-                then ignored). Neither recompiles kernels.
-        """
-        wind = {"velocity": as_vec3("velocity", velocity),
-                "drag": as_scalar("drag", drag, minimum=0.0),
-                "lift": as_scalar("lift", lift, minimum=0.0),
-                "tangential": as_scalar("tangential", tangential, minimum=0.0),
-                "amplitude": np.zeros(3), "frequency": 0.0, "phase": 0.0, "callable": None}
-        if callable(gust):
-            wind["callable"] = gust
-            wind_velocity(wind, 0.0)
-        elif isinstance(gust, dict):
-            unknown = sorted(set(gust) - {"amplitude", "frequency", "phase"})
-            if unknown:
-                raise SceneError(f"gust has an unknown key {unknown[0]!r} "
-                                 "(keys: amplitude, frequency, phase)")
-            wind["amplitude"] = as_vec3("gust['amplitude']", gust.get("amplitude", (0, 0, 0)))
-            wind["frequency"] = as_scalar("gust['frequency']", gust.get("frequency", 0.0), 0.0)
-            wind["phase"] = as_scalar("gust['phase']", gust.get("phase", 0.0))
-        elif gust is not None:
-            raise SceneError(f"gust must be None, a dict or a callable t -> (3,) (got {gust!r})")
-        self.wind = wind
-        return wind
-
-    def add_attraction(self, G, softening=0.0):
-        """Inverse-square attraction between all particle pairs (O(n^2)):
-        f_i = sum_j G m_i m_j (x_j - x_i) / (|x_j - x_i|^2 + softening^2)^(3/2), with
-        potential -G m_i m_j / sqrt(r^2 + softening^2) reported as energy()["attraction"].
-
-        Args: G (N m^2/kg^2) >= 0; softening (m) >= 0 (Plummer).
-        """
-        self.attraction = (as_scalar("G", G, minimum=0.0),
-                           as_scalar("softening", softening, minimum=0.0))
-        return self.attraction
-
-    def limit_strain(self, max_stretch=0.1, iterations=20, kinds=("structural", "shear"),
-                     springs=None):
-        """Provot (1995) strain limiting, applied after every step.
-
-        Limited springs longer than (1 + max_stretch) rest length are shortened by moving
-        their ends (inverse-mass weighted: a pinned end stays put), ``iterations`` Jacobi
-        passes in parallel; velocities get the same correction divided by dt.
-
-        Args:
-            max_stretch: > 0 (0.1 = 10 %). iterations: passes per step, >= 1.
-            kinds: the spring kinds limited (default structural and shear).
-            springs: None, or spring ids to limit instead of whole kinds.
-        """
-        if springs is None:
-            if isinstance(kinds, str) or not kinds or any(k not in KIND_CODE for k in kinds):
-                raise SceneError(f"kinds must be a non-empty tuple of {SPRING_KINDS} "
-                                 f"(got {kinds!r})")
-            ids = np.flatnonzero(np.isin(self.springs["kind"], [KIND_CODE[k] for k in kinds]))
-        else:
-            ids = np.asarray(springs)
-            if ids.ndim != 1 or ids.dtype.kind not in "iu" or len(ids) == 0 or \
-                    ids.min() < 0 or ids.max() >= self.num_springs:
-                raise SceneError(f"springs must be a 1-D array of spring ids in "
-                                 f"[0, {self.num_springs}) (got {fmt(springs)})")
-        self.strain_limit = {"max_stretch": as_scalar("max_stretch", max_stretch, 0.0, strict=True),
-                             "iterations": as_int("iterations", iterations, 1),
-                             "springs": np.unique(ids)}
-        return self.strain_limit
-
-    def set_self_collision(self, thickness=0.005, stiffness=None, friction=0.0, damping=0.1,
-                           stick_velocity=1e-3, skin=None):
-        """Keep every cloth and rope out of itself and out of each other
-        (``tcloth.terms.self_contact`` has the contact model).
-
-        Contacts are point-triangle (a cloth or rope particle against a cloth triangle) and
-        edge-edge (two cloth edges or rope segments), each a penalty k/2 (thickness - d)^2
-        on their distance d below ``thickness``, with normal damping and Coulomb friction
-        as the colliders have them. Pairs that touch by construction never repel: a
-        particle and a triangle (or two edges) are skipped when they share a particle or
-        when a particle of one is a mesh neighbour (joined by a triangle edge or a rope
-        segment) of a particle of the other.
-
-        Args:
-            thickness: contact distance, m (default 5 mm). Keep it below the cloth's
-                spacing (a flat grid cloth has no contact at rest below sqrt(2) spacing)
-                and above the distance cloth moves in a step (a penalty sees only what
-                ends a step within it).
-            stiffness: penalty k, N/m; None (default): the mean stiffness of the scene's
-                structural springs, so that a contact is as stiff as one structural spring
-                and a dt stable without self-collision stays stable with it.
-            friction: Coulomb mu >= 0 (default 0).
-            damping: normal damping as a ratio of critical for the pair (default 0.1).
-            stick_velocity: friction regularisation speed eps, m/s (default 1e-3).
-            skin: the broad phase's margin, m (default: thickness): candidate pairs within
-                thickness + skin are listed, and the list is rebuilt only after two
-                particles may have moved relative to each other by more than the skin.
-        Returns:
-            dict of the settings (stiffness None until a Simulator resolves it).
-        """
-        t = as_scalar("thickness", thickness, minimum=0.0, strict=True)
-        self.self_collision = {
-            "thickness": t,
-            "stiffness": None if stiffness is None else
-            as_scalar("stiffness", stiffness, minimum=0.0, strict=True),
-            "friction": as_scalar("friction", friction, minimum=0.0),
-            "damping": as_scalar("damping", damping, minimum=0.0),
-            "stick_velocity": as_scalar("stick_velocity", stick_velocity, minimum=0.0,
-                                        strict=True),
-            "skin": t if skin is None else as_scalar("skin", skin, minimum=0.0, strict=True)}
-        return self.self_collision
 
     # -- concatenated views (read-only copies) ---------------------------------------------
     def _cat(self, parts, shape, dtype):
@@ -482,3 +286,7 @@ class Scene:
         """dict kind -> number of springs of that kind."""
         kinds = self.springs["kind"]
         return {name: int((kinds == code).sum()) for name, code in KIND_CODE.items()}
+
+
+for _shape in SHAPES:
+    setattr(Scene, f"add_{_shape.name}", collider_builder(_shape))

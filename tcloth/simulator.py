@@ -9,7 +9,9 @@ from .errors import InstabilityError, SceneError
 from .integrators import INTEGRATORS
 from .model import Model
 from .runtime import serial_count
-from .scene import Scene, wind_velocity
+from .scene import Scene
+from .terms.grab import GrabSpring
+from .terms.wind import wind_velocity
 from .validate import as_int, as_points, as_scalar, as_vec3
 
 _DEFAULT_HINT = ("try a smaller dt, more spring damping (k_d) or air drag, "
@@ -92,7 +94,7 @@ class Simulator:
                          "strain_limiting": bool(strain_limiting), "colliders_off": off,
                          "grab": bool(grab), "batch": bool(batch)}
         self.model = Model(scene, grid_stencil=bool(grid_stencil), colliders_off=off,
-                           grab=bool(grab))
+                           grab=GrabSpring() if grab else None)
         self.precision = runtime.precision()
         self.integrator = integrator_class(self.model, **options)
         self._generation = self.model.generation

@@ -1,8 +1,10 @@
 """Colliders: penalty contact and Coulomb friction against closed forms and bounds."""
 import numpy as np
 import pytest
+import taichi as ti
 
 import tcloth
+from tcloth.collider_table import ColliderTable
 from tcloth.shapes import SHAPES
 from tcloth.terms.colliders import Colliders
 from tcloth import SceneError
@@ -66,8 +68,13 @@ def box_rotation(seed=0):
 
 
 def numpy_sdf(collider, x):
-    """Independent signed distance and normal for the three shapes."""
+    """Independent signed distance and normal for every shape."""
     c = collider["center"]
+    if collider["kind"] == "capsule":
+        q = collider["rotation"].T @ (x - c)
+        d = q - [0.0, np.clip(q[1], -collider["half_height"], collider["half_height"]), 0.0]
+        return np.linalg.norm(d) - collider["radius"], collider["rotation"] @ (
+            d / np.linalg.norm(d))
     if collider["kind"] == "sphere":
         d = x - c
         return np.linalg.norm(d) - collider["radius"], d / np.linalg.norm(d)
@@ -97,7 +104,7 @@ def numpy_sdf(collider, x):
     return d[axis], r @ nl
 
 
-@pytest.mark.parametrize("kind", ["sphere", "plane", "box", "cylinder"])
+@pytest.mark.parametrize("kind", ["sphere", "plane", "box", "cylinder", "capsule"])
 def test_friction_bounded_by_mu_normal_and_never_accelerates(f64, kind):
     rng = np.random.default_rng(1)
     mu, n = 0.4, 300
@@ -111,7 +118,10 @@ def test_friction_bounded_by_mu_normal_and_never_accelerates(f64, kind):
                                              thickness=0.02),
                 "cylinder": lambda: scene.add_cylinder((0, 0, 0), 0.4, 0.3, box_rotation(5),
                                                        friction=mu, velocity=(0.1, 0, 0.2),
-                                                       thickness=0.02)}[kind]()
+                                                       thickness=0.02),
+                "capsule": lambda: scene.add_capsule((0, 0, 0), 0.3, 0.4, box_rotation(7),
+                                                     friction=mu, velocity=(0, 0.1, 0.2),
+                                                     thickness=0.02)}[kind]()
     # particles scattered around the surface, some inside, with random velocities
     dirs = rng.normal(size=(n, 3))
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
@@ -158,7 +168,7 @@ def test_sliding_particle_loses_kinetic_energy_monotonically(f64):
     assert slid == pytest.approx(1.25 / (2 * 0.3 * G), rel=0.01)
 
 
-@pytest.mark.parametrize("shape", ["sphere", "box", "cylinder"])
+@pytest.mark.parametrize("shape", ["sphere", "box", "cylinder", "capsule"])
 def test_dropped_particles_never_sink_deeper_than_energy_bound(f64, shape):
     m, k, thick, fall = 0.01, 5000.0, 0.005, 1.2      # fall: above any drop height here, m
     scene = tcloth.Scene(gravity=(0, -G, 0))
@@ -167,6 +177,9 @@ def test_dropped_particles_never_sink_deeper_than_energy_bound(f64, shape):
     elif shape == "cylinder":
         c = scene.add_cylinder((0, 0, 0), 0.5, 0.3, box_rotation(6), thickness=thick,
                                stiffness=k, damping=0.2)
+    elif shape == "capsule":
+        c = scene.add_capsule((0, 0, 0), 0.4, 0.3, box_rotation(6), thickness=thick,
+                              stiffness=k, damping=0.2)
     else:
         c = scene.add_box((0, 0, 0), (0.5, 0.4, 0.6), box_rotation(2) @ np.diag([1, 1, 1]),
                           thickness=thick, stiffness=k, damping=0.2)
@@ -270,3 +283,51 @@ def test_colliders_absent_from_scene_are_not_compiled(f64):
     sim = tcloth.Simulator(plain)
     assert sim.model.colliders.count == 0
     assert not any(isinstance(t, Colliders) for t in sim.integrator.forces.terms)
+
+
+@ti.kernel
+def _ray_hits(table: ti.template(), o: ti.types.ndarray(), d: ti.types.ndarray(),
+              out: ti.types.ndarray()):
+    for k in range(out.shape[0]):
+        origin = ti.Vector([o[k, 0], o[k, 1], o[k, 2]])
+        direction = ti.Vector([d[k, 0], d[k, 1], d[k, 2]])
+        out[k] = SHAPES[ti.static(table.groups[0].shape)].ray_hit(table.data[0], origin,
+                                                                  direction, 0.0)
+
+
+SHAPE_BUILDERS = {
+    "sphere": lambda s: s.add_sphere((0.1, 0.2, 0), 0.5),
+    "plane": lambda s: s.add_plane((0, 0.1, 0), (0.2, 1, 0.1)),
+    "box": lambda s: s.add_box((0, 0, 0.1), (0.5, 0.3, 0.4), box_rotation(1)),
+    "cylinder": lambda s: s.add_cylinder((0, 0.1, 0), 0.4, 0.3, box_rotation(5)),
+    "capsule": lambda s: s.add_capsule((0.1, 0, 0), 0.3, 0.4, box_rotation(7)),
+}
+
+
+@pytest.mark.parametrize("kind", [s.name for s in SHAPES])
+def test_every_shape_s_ray_hit_enters_where_its_distance_vanishes(f64, kind):
+    """The renderer and the contact stage's sweeps use each shape's ray hit: against the
+    NumPy signed distance, a ray from outside enters where phi = 0, nothing on it before
+    is inside, and a ray that misses stays outside all along."""
+    scene = tcloth.Scene()
+    collider = SHAPE_BUILDERS[kind](scene)
+    table = ColliderTable(scene.colliders)
+    rng = np.random.default_rng(8)
+    n = 400
+    dirs = rng.normal(size=(n, 3))
+    o = collider["center"] + 2.5 * dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+    aim = collider["center"] + rng.uniform(-0.8, 0.8, (n, 3)) - o
+    d = aim / np.linalg.norm(aim, axis=1, keepdims=True)
+    t = np.zeros(n)
+    _ray_hits(table, o, d, t)
+    hits = 0
+    for k in range(n):
+        if numpy_sdf(collider, o[k])[0] <= 0:
+            continue
+        before = [numpy_sdf(collider, o[k] + s * d[k])[0] for s in np.linspace(0, 4, 400)
+                  if t[k] < 0 or s < t[k] - 1e-9]
+        assert min(before) > -1e-9, (k, t[k])
+        if t[k] > 0:
+            hits += 1
+            assert abs(numpy_sdf(collider, o[k] + t[k] * d[k])[0]) < 1e-9
+    assert 0.2 * n < hits < n

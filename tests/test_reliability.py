@@ -27,6 +27,7 @@ def rich_scene():
     scene.add_sphere((0, 0.5, 0), 0.3, friction=0.3, velocity=(0.05, 0, 0))
     scene.add_plane((0, 0, 0), (0, 1, 0), friction=0.5)
     scene.add_box((0.8, 0.2, 0), (0.1, 0.2, 0.1), rotation=[[0, -1, 0], [1, 0, 0], [0, 0, 1]])
+    scene.add_capsule((-0.6, 0.3, 0), 0.05, 0.1, rotation=[[0, -1, 0], [1, 0, 0], [0, 0, 1]])
     scene.set_wind((1.0, 0, 0.5), drag=0.3, lift=0.1,
                    gust={"amplitude": (0.5, 0, 0), "frequency": 1.0, "phase": 0.3})
     scene.add_attraction(1e-4, softening=0.01)
@@ -50,6 +51,27 @@ def test_save_load_continue_is_bit_identical(f64, tmp_path, integrator):
     assert sim.energy() == loaded.energy()
 
 
+def test_a_checkpoint_of_format_version_1_still_loads_and_continues(f64):
+    """tests/data/checkpoint_v1.npz was written by the tcloth before scene features were
+    described once (format version 1: wind, attraction, strain limit and self-collision
+    under keys of their own), from a 6 x 6 cloth with all four, a collider of each shape
+    of the time, after 5 symplectic Euler steps; checkpoint_v1_after.npz holds that run's
+    positions 3 steps later. Loaded now, the scene has the same features and the run
+    continues to the same positions (the same kernels, so to rounding)."""
+    data = os.path.join(ROOT, "tests", "data")
+    sim = tcloth.Simulator.load(os.path.join(data, "checkpoint_v1.npz"))
+    scene = sim.scene
+    assert scene.wind["frequency"] == 2.0 and scene.wind["velocity"].tolist() == [0.5, 0, 1]
+    assert scene.attraction == (1e-4, 0.01)
+    assert scene.strain_limit["iterations"] == 5 and len(scene.strain_limit["springs"]) == 110
+    assert scene.self_collision["thickness"] == 0.004
+    assert [c["kind"] for c in scene.colliders] == ["sphere", "plane", "box", "cylinder"]
+    assert sim.num_steps == 5
+    sim.step(3)
+    after = np.load(os.path.join(data, "checkpoint_v1_after.npz"))["x"]
+    assert np.abs(sim.positions() - after).max() < 1e-12
+
+
 def test_damaged_checkpoints_are_refused_clearly(f64, tmp_path):
     path = str(tmp_path / "ck.npz")
     sim = tcloth.Simulator(rich_scene(), dt=2e-4)
@@ -59,7 +81,8 @@ def test_damaged_checkpoints_are_refused_clearly(f64, tmp_path):
     truncated.write_bytes(data[: len(data) // 2])
     with pytest.raises(SceneError, match="not a readable"):
         tcloth.Simulator.load(str(truncated))
-    for field in ("state_v", "scene_spring_pairs", "meta", "scene_cloth0_shear"):
+    for field in ("state_v", "scene_spring_pairs", "meta", "scene_cloth0_shear",
+                  "scene_feature_strain_limit_springs"):
         stripped = tmp_path / f"no_{field}.npz"
         with zipfile.ZipFile(path) as src, zipfile.ZipFile(stripped, "w") as dst:
             for item in src.infolist():

@@ -54,7 +54,7 @@ class ContactStage:
     Attributes:
         table: the model's ``topology.SelfCollisionTable`` or None.
         broad: the proximity list (``broad.BroadPhase``) or None without self-collision.
-        colliders: the model's ``ColliderTable`` or None without colliders.
+        colliders: the model's ``collider_table.ColliderTable`` or None without colliders.
         x_start: the step's start positions where a batch of substeps needs them.
         batch_cuts: (paths the collider sweep cut inside batches, in their last step).
     """

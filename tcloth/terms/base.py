@@ -36,15 +36,55 @@ a pass share one launch):
 
 Springs are a pair term: their per-spring functions live in ``springs.py`` and the
 solvers call them for each spring or grid offset.
+
+A term whose scene data is optional (wind, attraction, self-collision, pressure) names its
+``Feature`` (below) as ``feature``: the one description of that data from the scene's
+method to the model's fields and the checkpoint.
 """
 import taichi as ti
 
 from ..runtime import serial
 
 
+class Feature:
+    """Optional scene data that one module owns, described once.
+
+    ``tcloth.features`` gives ``Scene`` a method named ``method`` for each registered
+    feature: it calls ``set`` (validation; its docstring is the method's) and keeps the
+    result as ``scene.<name>`` (None until set). ``Model`` keeps ``build(model, value)`` as
+    ``model.<name>`` (making the feature's Taichi fields; None for nothing to simulate) and
+    ``Model.refresh`` keeps ``refresh(model, value)`` for a ``live`` feature (the
+    simulator's live setters change the scene's value, then refresh). A checkpoint stores
+    ``saved(value)``, keyword arguments of the scene method that rebuild the value (NumPy
+    arrays stored as arrays), and loads it by calling the method with them. ``floor``
+    bounds the feature's potential energy from below for the energy budget (``budget.py``).
+    """
+    name = None
+    method = None
+    live = False
+
+    def set(self, scene, *args, **kwargs):
+        raise NotImplementedError
+
+    def saved(self, value):
+        return dict(value)
+
+    def build(self, model, value):
+        return value
+
+    def refresh(self, model, value):
+        return value
+
+    def floor(self, value, scene):
+        """The least potential energy (J) the feature can have: 0 (none below zero), or
+        None where it has no lower bound."""
+        return 0.0
+
+
 class Term:
     """Defaults for the interface above."""
     name = None
+    feature = None
     implicit = "lagged"
     projective = "lagged"
     per_particle = False

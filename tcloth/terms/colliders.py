@@ -1,4 +1,5 @@
-"""Colliders: sphere, plane and box with penalty contact and Coulomb friction (lecture 4).
+"""Colliders (every shape of ``shapes.SHAPES``) with penalty contact and Coulomb friction
+(lecture 4).
 
 Detection: the signed distance phi(x) to each shape and its outward unit normal n.
 Resolution: a particle closer than the collider's ``thickness`` is pulled by a temporary

@@ -1,0 +1,73 @@
+"""Triangle meshes of the collider shapes and checkered tiles, in NumPy, for the viewer
+(each shape's ``mesh`` in ``shapes.SHAPES`` builds on these). Triangles are wound so that
+the outside (a tile's normal side) is the front."""
+import numpy as np
+
+
+def grid_triangles(rows, cols):
+    """Two triangles per cell of a (rows + 1) x (cols + 1) vertex grid, wound so that a
+    sphere's outside (and a tile's +y side) is the front."""
+    r, c = np.meshgrid(np.arange(rows), np.arange(cols), indexing="ij")
+    a = (r * (cols + 1) + c).ravel()
+    b, d = a + 1, a + cols + 1
+    return np.concatenate([np.stack([a, b, d], 1), np.stack([b, d + 1, d], 1)])
+
+
+def rings(theta, sectors):
+    """Unit-sphere rings at polar angles theta (rows,1): (rows * (sectors + 1), 3)."""
+    phi = np.linspace(0, 2 * np.pi, sectors + 1)[None, :]
+    return np.stack([np.sin(theta) * np.cos(phi), np.cos(theta) * np.ones_like(phi),
+                     np.sin(theta) * np.sin(phi)], -1).reshape(-1, 3)
+
+
+def sphere(radius, rings=16, sectors=32):
+    """(vertices, triangles) of a sphere about the origin."""
+    theta = np.linspace(0, np.pi, rings + 1)[:, None]
+    return radius * rings(theta, sectors), grid_triangles(rings, sectors)
+
+
+def cylinder(radius, half, sectors=32):
+    """A capped cylinder along y."""
+    phi = np.linspace(0, 2 * np.pi, sectors + 1)
+    ring = np.stack([radius * np.cos(phi), np.zeros_like(phi), radius * np.sin(phi)], 1)
+    side = np.concatenate([ring + (0, half, 0), ring - (0, half, 0)])
+    caps = np.array([[0, half, 0], [0, -half, 0]])
+    v = np.concatenate([side, caps])
+    n = sectors + 1
+    k = np.arange(sectors)
+    tris = np.concatenate([np.stack([k, k + 1, n + k], 1), np.stack([k + 1, n + k + 1, n + k], 1),
+                           np.stack([np.full(sectors, 2 * n), k + 1, k], 1),
+                           np.stack([np.full(sectors, 2 * n + 1), n + k, n + k + 1], 1)])
+    return v, tris
+
+
+def box(half):
+    """An axis-aligned box of half extents ``half`` (3,), four vertices a face."""
+    corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)]) * half
+    faces = ((0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3))
+    v = np.concatenate([corners[list(f)] for f in faces])
+    base = 4 * np.arange(6)[:, None]
+    tris = np.concatenate([base + (0, 1, 2), base + (0, 2, 3)])
+    return v, tris
+
+
+def tiles(centre, normal, half, size):
+    """A checkered square of side 2 half, centred on centre, facing normal: (vertices,
+    triangles, colours), tiles of side ``size`` with their own vertices."""
+    n = np.asarray(normal, dtype=np.float64) / np.linalg.norm(normal)
+    a = np.cross(n, (1.0, 0.0, 0.0) if abs(n[0]) < 0.9 else (0.0, 0.0, 1.0))
+    a /= np.linalg.norm(a)
+    b = np.cross(a, n)
+    k = max(1, min(int(2 * half / size), 32))
+    step = 2 * half / k
+    i, j = np.meshgrid(np.arange(k), np.arange(k), indexing="ij")
+    i, j = i.ravel(), j.ravel()
+    quad = np.array([(0, 0), (1, 0), (1, 1), (0, 1)])
+    s = (i[:, None] + quad[None, :, 0]) * step - half
+    t = (j[:, None] + quad[None, :, 1]) * step - half
+    v = (np.asarray(centre) + s[..., None] * a + t[..., None] * b).reshape(-1, 3)
+    base = 4 * np.arange(k * k)[:, None]
+    tris = np.concatenate([base + (0, 2, 1), base + (0, 3, 2)])
+    shade = np.where((i + j) % 2 == 0, 0.82, 0.68)
+    colours = np.repeat(np.stack([shade, shade, shade * 1.02], 1), 4, axis=0).clip(0, 1)
+    return v, tris, colours
