@@ -8,11 +8,12 @@ from .base import Term
 from .colliders import Colliders
 from .grab import Grab
 from .gravity_drag import GravityDrag
+from .pressure import Pressure
 from .self_contact import SelfContact
 from .springs import Springs
 from .wind import Wind
 
-TERMS = (GravityDrag, Springs, Wind, Attraction, Colliders, SelfContact, Grab)
+TERMS = (GravityDrag, Springs, Wind, Attraction, Pressure, Colliders, SelfContact, Grab)
 
 
 def build(model, select=None):
@@ -27,4 +28,4 @@ def find(terms, cls):
 
 
 __all__ = ["TERMS", "Term", "build", "find", "GravityDrag", "Springs", "Wind", "Attraction",
-           "Colliders", "SelfContact", "Grab"]
+           "Pressure", "Colliders", "SelfContact", "Grab"]
