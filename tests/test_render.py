@@ -10,7 +10,8 @@ import pytest
 
 import tcloth
 from tcloth import Camera
-from tcloth.render import COLLIDER_ID, LIGHT_DIR, ground_and_checker
+from tcloth.framing import ground_and_checker
+from tcloth.render import COLLIDER_ID, LIGHT_DIR
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RED, GREEN, BLUE = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)

@@ -15,7 +15,8 @@ from ..camera import Camera
 from ..drawables import cloth_palette, particle_spheres
 from ..errors import SceneError
 from ..integrators import INTEGRATORS
-from ..render import COLLIDER_COLOUR, PARTICLE_COLOUR, ground_and_checker
+from ..framing import ground_and_checker
+from ..render import COLLIDER_COLOUR, PARTICLE_COLOUR
 from .camera import OrbitCamera
 from .controls import Controls, contact_lines
 from .display import DisplayError, check_display
