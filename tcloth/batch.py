@@ -1,14 +1,14 @@
 """Batches of substeps: n steps of an explicit integrator in one kernel launch.
 
-Launching kernels from Python costs 20-70 us each on a CPU, and a substep of a small cloth
-is a few such launches; a batch runs the n substeps of ``Simulator.step(n)`` as one
-kernel whose outer loop walks the steps on one thread, each step being the integrator's
-``advance`` (the forces of every term, the update), the strain limit and the instability
-check, all the same ``ti.func``s that a step from Python launches one by one, so the results
-are the same numbers. The step works on the current State in place (one copy of the
-step's code, which keeps the compile time of the batch near that of the single step's
-kernels) with the other State as scratch, and a copy of the batch's start state to go
-back to if a step goes bad.
+On a CPU, launching a kernel from Python costs more than a small cloth's substep takes to
+compute, and a substep is a few launches (docs/benchmarks.md); a batch runs the n substeps
+of ``Simulator.step(n)`` as one kernel whose outer loop walks the steps on one thread,
+each step being the integrator's ``advance`` (the forces of every term, the update), the
+strain limit and the instability check, all the same ``ti.func``s that a step from Python
+launches one by one, so the results are the same numbers. The step works on the current
+State in place (one copy of the step's code, which keeps the compile time of the batch
+near that of the single step's kernels) with the other State as scratch, and a copy of the
+batch's start state to go back to if a step goes bad.
 
 A batch is used where every loop of a step would run on one thread anyway (on CPUs, below
 ``serial_below`` items: ``runtime.serial``) and no term needs Python between substeps
@@ -43,8 +43,8 @@ def kernel(integrator, limiter, contact, budget, a, b, start, x_bound, v_bound):
     """The batch kernel of one configuration: ``run(n, fresh, time_base, steps_before, dt)``.
 
     Its objects are the closure's (compile-time constants), so a launch passes five
-    scalars: Taichi's Python side costs about 20 us per template argument of a launch,
-    and a batch is one launch per frame.
+    scalars: every template argument adds to what Taichi's Python side spends on a
+    launch (docs/benchmarks.md), and a batch is one launch per frame.
 
     ``run`` advances State a by n steps in place; b is scratch, and start gets a copy of a
     first. The time of step k's start is time_base + (steps_before + k) dt, in float64 as

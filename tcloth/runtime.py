@@ -49,8 +49,8 @@ def init(arch="cpu", precision="f32", serial_below=None, **kwargs):
     arithmetic with no reassociation and no contraction into fused multiply-adds, so that
     the same operations give the same numbers wherever a ``ti.func`` is inlined (a batch of
     substeps against single steps, a checkpoint's continuation) and on CPUs with other
-    vector units (AVX2 against AVX-512). It costs about 2 % of an explicit substep
-    (docs/benchmarks.md, "Fast math and the scene snapshots").
+    vector units (AVX2 against AVX-512). What it costs: docs/benchmarks.md, "Fast math and
+    the scene snapshots".
 
     A request for a GPU that lands on the CPU (Taichi falls back without a word) or on a
     software Vulkan driver warns (``tcloth.DeviceWarning``); ``device()`` says what it
@@ -173,8 +173,9 @@ def _copy_out(src: ti.template(), out: ti.types.ndarray()):
 
 def to_numpy(field):
     """NumPy copy of a vector field of shape (N,), as an (N, components) array. On CPUs one
-    launch that writes into the new array: about 55 us at 1024 vec3 against 93 us for
-    ``Field.to_numpy`` (a frame's positions at a small cloth, docs/benchmarks.md)."""
+    launch that writes into the new array, which costs less than ``Field.to_numpy`` (it
+    also synchronises and handles every layout) for a frame's positions
+    (docs/benchmarks.md, "Per frame from Python")."""
     if not cpu():
         return field.to_numpy()
     out = np.empty((field.shape[0], field.n), dtype=np.float64 if field.dtype == ti.f64

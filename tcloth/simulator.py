@@ -44,7 +44,9 @@ class Simulator:
 
     Args:
         scene: a tcloth.Scene.
-        integrator: "forward_euler" | "symplectic_euler" | "verlet" | "rk4".
+        integrator: a name in ``tcloth.integrators.INTEGRATORS``: "forward_euler",
+            "symplectic_euler" (default), "verlet", "rk4" (explicit); "backward_euler",
+            "projective" (implicit); "vbd", "xpbd" (real-time solvers).
         dt: time step, s, > 0.
         grid_stencil: evaluate cloth springs with the per-particle grid stencil (default)
             rather than the spring list; both give the same forces.

@@ -157,9 +157,9 @@ def test_cloth_falling_at_10_m_per_s_stays_out_of_thin_colliders(integrator, dt,
     """A cloth thrown down at 10 m/s onto a box 1 cm thick or a sphere: no particle ends a
     step inside a collider, no path goes through the box (each step's, at dt = 1/60), no
     cloth crossing. At one step per frame the 24 x 24 cloth of the benchmark, 0.4 s: the
-    last round's projection used to leave held particles inside the box (1.9 mm), and a
-    particle resting on the sphere within rounding of its surface, whose ray cast found
-    no entry, ended 2.7 cm inside it."""
+    cases where the guard's last projection round could leave held particles inside the
+    box, and where a particle resting on the sphere within rounding of its surface has a
+    ray cast that finds no entry (docs/contact.md)."""
     tcloth.init()
     frame = dt > 1e-3
     # the real-time solvers on the 12 x 12 cloth (their own tests cover the solve)

@@ -104,8 +104,8 @@ def test_every_field_force_acts_under_every_integrator(references, integrator):
 
 
 def test_backward_euler_takes_a_callable_gust():
-    """The gust callable's wind reaches backward Euler (it once read only the constant
-    velocity): a gust-only wind lifts the cloth as it lifts it under symplectic Euler."""
+    """The gust callable's wind reaches backward Euler, not only the constant velocity: a
+    gust-only wind lifts the cloth as it lifts it under symplectic Euler."""
     tcloth.init(arch="cpu", precision="f64")
     lifts = {}
     for integrator in ("symplectic_euler", "backward_euler"):

@@ -29,7 +29,7 @@ def test_forces_match_numpy_reference_with_damping_gravity_and_drag(f64):
 
 @pytest.mark.parametrize("families, free_particle", [
     (dict(), False),
-    (dict(), True),              # the grid no longer holds every particle
+    (dict(), True),              # the grid does not hold every particle
     (dict(shear=None), False),
     (dict(flexion=None), False),
     (dict(structural=None, shear=(30.0, 0.3)), False),

@@ -41,8 +41,8 @@ def test_stiff_cloth_explodes_explicitly_but_is_stable_and_dissipative_implicitl
 
 
 def stiff_pinned_cloth(n, k):
-    """Issue 34's cloth: 0.2 kg, pinned at two corners, no damping, k_s = k structural,
-    k / 10 shear, k / 100 flexion."""
+    """A stiff cloth that strains Newton's line search (docs/implicit.md): 0.2 kg, pinned
+    at two corners, no damping, k_s = k structural, k / 10 shear, k / 100 flexion."""
     scene = tcloth.Scene(gravity=(0, -9.81, 0))
     scene.add_cloth(resolution=(n, n), size=(1, 1), center=(0, 1, 0), plane="xz", mass=0.2,
                     structural=(k, 0.0), shear=(k / 10, 0.0), flexion=(k / 100, 0.0),
@@ -57,12 +57,12 @@ def potential_never_rises(stats, slack):
 
 @pytest.mark.parametrize("precision", ["f32", "f64"])
 def test_newton_never_raises_the_incremental_potential_and_reports_non_convergence(precision):
-    """The undamped, pinned 32 x 32 cloth of k_s = 1e5 at dt = 1/60 (issue 34: in float64 a
-    step's spring energy went from 0.003 J to 27 kJ): the line search accepted an
-    increase of E when 14 halvings did not find a decrease along a huge truncated-CG
-    direction. Now no accepted iterate raises E beyond rounding, no converged step gains
-    energy, and across stiffnesses 1e2 to 1e6 (16 x 16, changed live) a step that stops at
-    its iteration cap says so: stats, the ``unconverged`` count, one ConvergenceWarning."""
+    """The undamped, pinned 32 x 32 cloth of k_s = 1e5 at dt = 1/60, where truncated CG
+    returns huge directions along which 14 halvings may find no decrease of E
+    (docs/implicit.md): no accepted iterate raises E beyond rounding, no converged step
+    gains energy, and across stiffnesses 1e2 to 1e6 (16 x 16, changed live) a step that
+    stops at its iteration cap says so: stats, the ``unconverged`` count, one
+    ConvergenceWarning."""
     tcloth.init(arch="cpu", precision=precision)
     slack = 1e-5 if precision == "f32" else 1e-12
     sim = tcloth.Simulator(stiff_pinned_cloth(32, 1e5), "backward_euler", dt=1 / 60)
@@ -96,9 +96,9 @@ def test_newton_never_raises_the_incremental_potential_and_reports_non_convergen
 
 def test_a_newton_direction_too_long_to_search_is_replaced_not_taken(f64, monkeypatch):
     """CG stopped at negative curvature can return a descent direction of any length
-    (issue 34 measured 4,070 m). Scaled by 1e7, no step the line search tries lowers E: it
-    used to take its smallest step anyway (E rose by kJ); now it takes the preconditioned
-    gradient instead, and E still falls."""
+    (docs/implicit.md). Scaled by 1e7, no step the line search tries lowers E: Newton then
+    takes the preconditioned gradient, not the smallest step (which would raise E), and E
+    still falls."""
     sim = tcloth.Simulator(stiff_pinned_cloth(8, 1e3), "backward_euler", dt=1 / 60)
     sim.step(3)
     be = sim.integrator
@@ -169,11 +169,10 @@ def test_newton_on_the_exact_hessian_converges_quadratically_on_folded_cloth(f64
     indefinite. CG on the exact Hessian (stopped at negative curvature, preconditioned by
     the projected one) takes Newton to the backward Euler step in a few iterations: the
     NumPy residual M (x0 + h v0 - x) / h^2 + f(x) of the free particles drops below 1e-9
-    of its start (measured: 8e-12 N in 5 iterations). CG on the projected Hessian (the
-    definiteness fix alone) converges linearly: more than three times the iterations for
-    the same step-size tolerance, and a residual 10 times larger or more, since a linear
-    rate leaves more behind its last step than a quadratic one (measured: 22 iterations,
-    2.5e-10 N)."""
+    of its start. CG on the projected Hessian (the definiteness fix alone) converges
+    linearly: more than three times the iterations for the same step-size tolerance, and
+    a residual 10 times larger or more, since a linear rate leaves more behind its last
+    step than a quadratic one (docs/implicit.md has the counts and residuals)."""
     n, h = 16, 1 / 60
     scene = tcloth.Scene()
     scene.add_cloth(resolution=(n, n), size=(0.1 * (n - 1),) * 2, mass=0.1 * n * n,

@@ -230,7 +230,7 @@ def test_multigrid_preconditioned_cg_solves_in_a_few_iterations(f64):
     exact = np.zeros(ny * nx * 3)
     dofs = np.repeat(free, 3)
     exact[dofs] = np.linalg.solve(dense[np.ix_(dofs, dofs)], rhs.ravel()[dofs])
-    assert residual < 1e-10 and iterations <= 20, iterations     # 16 measured
+    assert residual < 1e-10 and iterations <= 20, iterations     # 16 here: 20 leaves room
     assert np.abs(x - exact).max() < 1e-8 * np.abs(exact).max()
     assert np.all(x[~dofs] == 0.0)
 

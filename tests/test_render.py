@@ -10,7 +10,8 @@ import pytest
 
 import tcloth
 from tcloth import Camera
-from tcloth.render import COLLIDER_ID, LIGHT_DIR, ground_and_checker
+from tcloth.framing import ground_and_checker
+from tcloth.render import COLLIDER_ID, LIGHT_DIR
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RED, GREEN, BLUE = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)
@@ -165,7 +166,7 @@ def test_cli_errors_are_clear_with_exit_code_2(tmp_path):
     assert res.returncode == 2 and "output folder" in res.stderr
 
 
-# -- the ground, scripts without CONFIG, --set, --arch (issue 34) -------------------------
+# -- the ground, scripts without CONFIG, --set, --arch ------------------------------------
 def readme_example():
     """The Python block under "A scene in a few lines" in README.md."""
     with open(os.path.join(ROOT, "README.md")) as f:
@@ -176,8 +177,8 @@ def readme_example():
 
 def test_the_readme_example_shows_what_it_says(f32, monkeypatch):
     """Its cloth swings onto its sphere (contact energy), and the ground is drawn below
-    everything the cloth reaches, not through it (it was at y = 0.293, from the cloth's
-    start, hiding the cloth's lower 30 cm and half the sphere)."""
+    everything the cloth reaches, not through it (a ground at the cloth's start would
+    hide the cloth's lower part and half the sphere)."""
     seen = {"contact": 0.0, "lowest": np.inf, "frames": 0}
 
     def record(sim, path, frames, steps_per_frame, **options):
@@ -226,8 +227,8 @@ CONFIGLESS = ("import tcloth\n"
 
 
 def test_a_script_without_config_gets_a_stable_real_time_step(f32, tmp_path):
-    """The README's cloth as a script with no CONFIG: the old default dt = 1e-3 blew it up
-    at step 20. The step from its springs is below symplectic Euler's limit, a frame is
+    """The README's cloth as a script with no CONFIG (a fixed dt = 1e-3 is too large for
+    it): the step from its springs is below symplectic Euler's limit, a frame is
     1/30 s of simulated time, and a second of it runs without blowing up; --dt alone
     keeps real time too."""
     script = tmp_path / "bare.py"
@@ -281,7 +282,7 @@ def test_a_gpu_asked_for_and_not_given_is_said():
 
 def test_cloth_resting_on_a_collider_hides_its_rim(f32):
     """A coarse cloth lying a thickness over a sphere: between its particles the flat
-    triangles cut into the sphere, whose cap used to show through them. Seen from above,
+    triangles cut into the sphere, whose cap must not show through them. Seen from above,
     no pixel inside the cloth shows the collider."""
     scene = tcloth.Scene(gravity=(0, 0, 0))
     n, half, radius, thickness = 7, 0.2, 0.12, 0.005

@@ -179,8 +179,8 @@ def test_interrupted_sweep_resumes_computing_each_case_once(tmp_path):
 
 def test_ctrl_c_on_a_pool_sweep_prints_its_line_and_exits_4(tmp_path):
     """Ctrl-C in a terminal signals the whole process group: the Dask pool's processes
-    used to die of it, and the sweep then printed Dask's tracebacks or waited 60 s for
-    Client.__del__. They ignore it now; only the line and exit code 4 remain."""
+    ignore it (dying of it, they would make the sweep print Dask's tracebacks or wait for
+    Client.__del__), so only the line and exit code 4 remain."""
     import glob
     import time
     spec = tmp_path / "spec.toml"

@@ -38,7 +38,7 @@ from .proximity import contact_weights
 
 POINT_TRIANGLE, EDGE_EDGE = 0, 1
 # one query of the search costs about as much as this many items of the loops that
-# runtime.SERIAL_BELOW was measured on, so its loop goes parallel from that many / this
+# runtime.SERIAL_BELOW is set for, so its loop goes parallel from that many / this
 SEARCH_COST = 16
 QUERY_BLOCK = 64
 # particles per block of the displacement test's reduction
@@ -203,8 +203,9 @@ def _spread(broad: ti.template(), x: ti.template(), y: ti.template(),
     ``both``) from the middle of all the displacements' bounding box: no two particles
     have moved relative to each other by more, from x_ref to x or y or anywhere on the
     straight path between them. Blocks of DISPLACEMENT_BLOCK particles reduce in parallel,
-    then one thread over the blocks (a reduction of every particle into one vector made
-    the threads take turns on its atomic compare-and-swaps)."""
+    then one thread over the blocks: Taichi keeps no thread-local copy of a vector reduced
+    with atomics, so one vector for every particle would have the threads take turns on
+    its compare-and-swaps."""
     P = ti.static(broad.table.point_count)
     B = ti.static(blocks_for(P, DISPLACEMENT_BLOCK))
     ti.loop_config(serialize=ti.static(serial_count(P)))

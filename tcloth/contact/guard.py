@@ -23,9 +23,9 @@ x1. Kernels here change x1 (and v1 by the same change over dt) until that motion
     collider ends at the entry point, BACK_OFF before it (a ray cast, so a thin box cannot
     be stepped over), its normal velocity into the collider removed; one that started
     inside (by rounding, or a scene that started so) and would end deeper stays where it
-    was relative to the collider: pushed out along the surface's normal at its end, it
-    went round the collider's edges, off its path, through cloth the pairs' guard had
-    cleared.
+    was relative to the collider (pushed out along the surface's normal at its end, it
+    would go round the collider's edges, off its path, through cloth the pairs' guard
+    has cleared).
   - ``truncate`` (the fail-safe, where the sweeps left violations): every vertex of every
     candidate pair is kept on its side of a plane normal to n between the pair's two
     sides at x0, placed by how fast each side approaches (planar Divide and Truncate,

@@ -71,10 +71,10 @@ class VBD(ForceCache, Integrator):
     bounds (False): with self-collision, keep every move inside Offset Geometric Contact's
         conservative displacement bounds (module docstring). The solve then never takes
         cloth through cloth and the contact guard has almost nothing to do, but the
-        bounds, set by the proximity list's reach, cap how far a particle moves a step:
-        the fold's cloth dropped from upright falls 0.13 m in its first second instead
-        of 0.5 m (docs/realtime.md). Off, the guard keeps the step free of crossings as
-        for every other integrator.
+        bounds, set by the proximity list's reach, cap how far a particle moves a step,
+        which holds falling cloth back (docs/realtime.md, "Why the bounds are off by
+        default"). Off, the guard keeps the step free of crossings as for every other
+        integrator.
 
     A step leaves its net force m (v - v0) / h in the state's force accumulator, for the
     adaptive guess of the next (like Verlet's cached forces, dropped when the state is

@@ -79,9 +79,9 @@ class Store:
 def _sigint_ignored():
     """SIGINT ignored while the local pool's processes start: they inherit it (an ignored
     signal stays ignored across exec), so Ctrl-C in a terminal, which signals the whole
-    process group, interrupts only this process, which then shuts the pool down; the
-    workers themselves dying of it made the shutdown wait 60 s and print Dask's
-    tracebacks."""
+    process group, interrupts only this process, which then shuts the pool down (workers
+    dying of it would make the shutdown wait for Dask's timeout and print its
+    tracebacks)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return

@@ -28,7 +28,7 @@ from .base import Term
 def spring_force(xi, xj, vi, vj, ks, kd, rest):
     """Force on particle i from spring (i, j). Coincident ends give no force (direction
     undefined). Written as one scalar times x_ij (not times the unit vector): three
-    multiplications fewer, 9 % of a substep (docs/benchmarks.md)."""
+    multiplications fewer per spring (docs/benchmarks.md)."""
     d = xi - xj
     length = d.norm()
     inv = 1.0 / ti.max(length, 1e-30)
