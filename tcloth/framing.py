@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from .shapes import SHAPE_NAMES, SHAPES
+from .shapes import shape_of
 
 HANG_STRETCH = 1.25     # the most a hanging spring is taken to stretch (``lowest_reach``)
 
@@ -79,26 +79,11 @@ def ground_and_checker(scene, ground, extent):
     (planes: drawn instead) or where something can fall without end, and otherwise puts
     it just below everything that can move (``lowest_reach``) and every collider."""
     if ground is None:
-        has_planes = any(SHAPES[SHAPE_NAMES.index(c["kind"])].checkered
-                         for c in scene.colliders)
+        has_planes = any(shape_of(c).checkered for c in scene.colliders)
         lowest = None if has_planes else lowest_reach(scene)
         if lowest is None:
             ground = False
         else:
-            bottoms = [collider_bottom(c) for c in scene.colliders]
+            bottoms = [shape_of(c).bottom(c) for c in scene.colliders]
             ground = min([lowest] + bottoms) - 0.02 * extent
     return ground, 10.0 ** math.floor(math.log10(extent)) / 4
-
-
-def collider_bottom(collider):
-    """The lowest height (y, m) of a (non-plane) collider at t = 0."""
-    c = np.asarray(collider["center"], dtype=float)
-    if collider["kind"] == "sphere":
-        return float(c[1] - collider["radius"])
-    rotation = np.asarray(collider.get("rotation", np.eye(3)), dtype=float)
-    if collider["kind"] == "box":
-        return float(c[1] - np.abs(rotation[1]) @ np.asarray(collider["half_extents"]))
-    # cylinder along local y: its caps' rims reach radius * sqrt(1 - a_y^2) sideways
-    axis = rotation[:, 1]
-    return float(c[1] - abs(axis[1]) * collider["half_height"]
-                 - collider["radius"] * math.sqrt(max(1.0 - axis[1] ** 2, 0.0)))

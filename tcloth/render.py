@@ -2,7 +2,8 @@
 
 Everything visible is ray-cast exactly. Cloth triangles and particle spheres are splatted:
 each primitive tests the camera rays of the pixels its projected bounding box covers.
-The ground and the colliders (spheres, boxes, planes) are tested at every pixel.
+The ground and the colliders (every shape of ``shapes.SHAPES``, through its ray hit) are
+tested at every pixel.
 
 Visibility is race-free and deterministic: every hit is one int64 key (``raycast.py``)
 combined with ``atomic_min``: the nearest hit wins, ties go to the smaller id, whatever

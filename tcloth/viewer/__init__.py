@@ -16,9 +16,9 @@ the ground).
 from .camera import PICK_ANGLE, OrbitCamera, pick
 from .controls import Controls, contact_lines
 from .display import DisplayError, check_display, check_vulkan
-from .meshes import COLLIDER_MESHES, collider_mesh, tiles, vertex_normals
+from .meshes import collider_mesh, tiles, vertex_normals
 from .window import BACKGROUND, PANEL_WIDTH, SIDE_OFFSET, Viewer, view
 
 __all__ = ["Controls", "contact_lines", "OrbitCamera", "pick", "PICK_ANGLE", "DisplayError",
            "check_display", "check_vulkan", "vertex_normals", "tiles", "collider_mesh",
-           "COLLIDER_MESHES", "Viewer", "view", "BACKGROUND", "PANEL_WIDTH", "SIDE_OFFSET"]
+           "Viewer", "view", "BACKGROUND", "PANEL_WIDTH", "SIDE_OFFSET"]

@@ -129,12 +129,10 @@ class Viewer:
         if ground is not False:
             self.ground = self._mesh_fields(*tiles((self.centre[0], ground, self.centre[2]),
                                                    (0, 1, 0), half, size))
+        self.tile = size
         self.colliders = []
         for c in scene.colliders:
-            if c["kind"] == "plane":
-                fields = self._mesh_fields(*tiles(c["center"], c["normal"], half, size))
-            else:
-                fields = self._mesh_fields(*collider_mesh(c, 0.0, half))
+            fields = self._mesh_fields(*collider_mesh(c, 0.0, half, size))
             self.colliders.append((c, fields, bool(np.any(c["velocity"] != 0))))
 
     # -- per frame ---------------------------------------------------------------------------
@@ -175,8 +173,8 @@ class Viewer:
             if not enabled[k]:
                 continue
             if moving:
-                fields[0].from_numpy(
-                    collider_mesh(col, sim.time, 3 * self.extent)[0].astype(np.float32))
+                fields[0].from_numpy(collider_mesh(col, sim.time, 3 * self.extent,
+                                                   self.tile)[0].astype(np.float32))
             self._draw_mesh(fields)
         held = sim.grabbed
         if held is not None:
