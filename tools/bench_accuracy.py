@@ -28,14 +28,18 @@ from tcloth.sweep.plots import order, scene_size, work_precision
 HERE = os.path.dirname(os.path.abspath(__file__))
 # label -> (integrator, options); backward Euler also with its Newton and CG tolerances
 # tightened, so that its own time-discretisation error shows (the defaults stop Newton at
-# a velocity change of 1e-4 m/s, an error floor)
+# a velocity change of 1e-4 m/s, an error floor); VBD at its default 10 iterations and at
+# 40; XPBD at its default 10 iterations, one substep
 METHODS = {"forward_euler": ("forward_euler", {}),
            "symplectic_euler": ("symplectic_euler", {}),
            "verlet": ("verlet", {}),
            "rk4": ("rk4", {}),
            "backward_euler": ("backward_euler", {}),
            "backward_euler_tight": ("backward_euler", {"newton_tol": 1e-9, "cg_tol": 1e-8}),
-           "projective": ("projective", {})}
+           "projective": ("projective", {}),
+           "vbd": ("vbd", {}),
+           "vbd_40": ("vbd", {"iterations": 40}),
+           "xpbd": ("xpbd", {})}
 STEPS = [25, 50, 100, 200, 400, 800, 1600, 3200]
 REFERENCE_STEPS = 25600
 # name -> (scene script in tools/sweeps, build parameters)

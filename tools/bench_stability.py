@@ -38,7 +38,7 @@ from tcloth.sweep.plots import stability_map
 HERE = os.path.dirname(os.path.abspath(__file__))
 SCENE = os.path.join(HERE, "sweeps", "stability_cloth.py")
 INTEGRATORS = ["forward_euler", "symplectic_euler", "verlet", "rk4", "backward_euler",
-               "projective"]
+               "projective", "vbd", "xpbd"]
 SIZE, MASS = 0.5, 0.2
 MGL = MASS * 9.81 * SIZE
 
