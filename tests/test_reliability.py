@@ -35,10 +35,11 @@ def rich_scene():
     return scene
 
 
-@pytest.mark.parametrize("integrator", ["symplectic_euler", "verlet"])   # verlet: cached forces
-def test_save_load_continue_is_bit_identical(f64, tmp_path, integrator):
+def test_save_load_continue_is_bit_identical(f64, tmp_path):
+    """Velocity Verlet, whose cached end-of-step forces the checkpoint keeps too (the
+    symplectic Euler continuation of a saved run is the format-1 test's)."""
     path = str(tmp_path / "ck.npz")
-    sim = tcloth.Simulator(rich_scene(), integrator, dt=2e-4)
+    sim = tcloth.Simulator(rich_scene(), "verlet", dt=2e-4)
     sim.step(40)
     sim.save(path)
     assert not os.path.exists(path + ".partial")
