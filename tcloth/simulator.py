@@ -182,7 +182,8 @@ class Simulator:
         n = self.model.particle_count
         if not serial_count(n):
             return f"the {n} particles' loops run on several threads"
-        why = self.integrator.forces.batch_obstacle()
+        own = getattr(self.integrator, "batch_obstacle", None)
+        why = own() if own is not None else self.integrator.forces.batch_obstacle()
         if why is None and self._limiter is not None and self.settings["strain_limiting"]:
             why = self._limiter.batch_obstacle()
         return why

@@ -16,7 +16,7 @@ def f32():
     yield
 
 
-def every_term_scene():
+def every_term_scene(colliders=True):
     scene = tcloth.Scene(gravity=(0.0, -9.81, 0.0), air_drag=0.01)
     cloth = scene.add_cloth(resolution=(8, 8), size=(1.0, 1.0), center=(0.0, 1.0, 0.0),
                             pinned=[(0, 0), (7, 0)])
@@ -24,15 +24,17 @@ def every_term_scene():
     scene.set_wind((1.0, 0.0, 0.5), gust={"amplitude": (2.0, 0.0, 0.0), "frequency": 3.0,
                                           "phase": 0.1})
     scene.add_attraction(1e-3)
-    scene.add_sphere((0.1, 0.705, 0.0), 0.3, friction=0.3)
-    scene.add_plane((0.0, 0.2, 0.0), (0.0, 1.0, 0.0), friction=0.5)
+    if colliders:
+        scene.add_sphere((0.1, 0.705, 0.0), 0.3, friction=0.3)
+        scene.add_plane((0.0, 0.2, 0.0), (0.0, 1.0, 0.0), friction=0.5)
     scene.limit_strain(0.02)
     return scene
 
 
-def run(integrator, batch, before, after, dt):
+def run(integrator, batch, before, after, dt, colliders=True, **options):
     """Steps of dt in chunks ``before``, then of dt / 2 in chunks ``after``."""
-    sim = tcloth.Simulator(every_term_scene(), integrator, dt=dt, batch=batch)
+    sim = tcloth.Simulator(every_term_scene(colliders), integrator, dt=dt, batch=batch,
+                           **options)
     assert (sim.fusion() is None) == batch
     for n in before:
         sim.step(n)
@@ -55,6 +57,23 @@ def test_a_batch_equals_single_steps_bit_for_bit(f32, integrator):
     # the sphere's contact and the strain limit were at work
     assert single.energy()["contact"] > 0.0 and single.max_strain() < 0.03
     assert np.array_equal(batched.forces(), single.forces())
+
+
+def test_xpbd_batches_where_it_projects_nothing(f32):
+    """XPBD's step runs in a batch where it has no projections to run from Python (no
+    colliders, no self-contact): bit for bit the single steps, substeps too; with
+    colliders it says why not."""
+    for substeps in (1, 3):
+        single = run("xpbd", False, [1] * 8, [1] * 32, 1e-3, colliders=False,
+                     substeps=substeps)
+        batched = run("xpbd", True, [7, 1], [20, 12], 1e-3, colliders=False,
+                      substeps=substeps)
+        assert batched.time == single.time
+        assert np.array_equal(batched.positions(), single.positions())
+        assert np.array_equal(batched.velocities(), single.velocities())
+        assert single.max_strain() < 0.03
+    sim = tcloth.Simulator(every_term_scene(), "xpbd", dt=1e-3)
+    assert "projects" in sim.fusion()
 
 
 def test_a_bad_step_inside_a_batch_is_named_and_the_state_before_it_kept(f64):

@@ -107,6 +107,35 @@ class XPBD(Integrator):
                 term.project(x, v, t)
         state_out.t = state_in.t + dt
 
+    def batch_obstacle(self):
+        """None where a step can run inside a batch of substeps (``batch.py``): not with
+        projections, which run from Python."""
+        if self.projections:
+            return ("xpbd projects " + " and ".join(t.name or type(t).__name__
+                                                    for t in self.projections)
+                    + " between its launches")
+        return self.external.batch_obstacle()
+
+    @ti.func
+    def advance(self, a, b, t, dt, fresh):
+        """``simulate`` of State a in place, as a ``ti.func`` for the batches (where
+        ``batch_obstacle`` is None: no projections); the same functions, in the same
+        order. Its iteration and substep counts are compiled in: ``set_integrator``
+        changes them."""
+        # h and 1 / h in float64 first, then rounded, as simulate's Python floats are
+        h64 = dt / self.options["substeps"]
+        h = ti.cast(h64, float)
+        for sub in range(self.options["substeps"]):
+            self.external.accumulate(a.x, a.v, ti.cast(t + sub * h64, float), self.f)
+            self.predict(a.x, a.v, h)
+            if ti.static(self.has_springs):
+                ti.loop_config(serialize=True)
+                for s in range(self.lam.shape[0]):
+                    self.lam[s] = 0
+                for _ in range(self.options["iterations"]):
+                    self.spring_pass(a.x, h)
+            self.velocities(a.x, a.v, ti.cast(1.0 / h64, float))
+
     @ti.kernel
     def _copy(self, x_in: ti.template(), v_in: ti.template(), x: ti.template(),
               v: ti.template()):
@@ -116,6 +145,10 @@ class XPBD(Integrator):
 
     @ti.kernel
     def _predict(self, x: ti.template(), v: ti.template(), h: float):
+        self.predict(x, v, h)
+
+    @ti.func
+    def predict(self, x, v, h):
         ti.loop_config(serialize=ti.static(serial(x)))
         for p in range(x.shape[0]):
             if self.inv_mass[p] > 0.0:
@@ -125,6 +158,10 @@ class XPBD(Integrator):
 
     @ti.kernel
     def _springs(self, x: ti.template(), h: float):
+        self.spring_pass(x, h)
+
+    @ti.func
+    def spring_pass(self, x, h):
         """One Gauss-Seidel pass over the springs, colour after colour, the springs of a
         colour in parallel (module docstring; one launch: the colours' loops are unrolled,
         each a top-level loop)."""
@@ -151,6 +188,10 @@ class XPBD(Integrator):
 
     @ti.kernel
     def _velocities(self, x: ti.template(), v: ti.template(), inv_h: float):
+        self.velocities(x, v, inv_h)
+
+    @ti.func
+    def velocities(self, x, v, inv_h):
         ti.loop_config(serialize=ti.static(serial(x)))
         for p in range(x.shape[0]):
             v[p] = (x[p] - self.x_prev[p]) * inv_h
