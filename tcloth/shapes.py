@@ -154,21 +154,36 @@ def _cylinder_local(q, radius, half):
     return phi, n
 
 
+# The cylinder and the capsule lie along their local y axis: each gives (phi, local normal)
+# of a local point (``_cylinder_local``, ``_capsule_local``), and these turn it into the
+# shape's distance and shading normal, and its ray into the local frame.
 @ti.func
-def _cylinder_distance(col, x, t):
+def _axial_distance(local: ti.template(), col, x, t):
     rot = col.rotation
-    phi, nl = _cylinder_local(rot.transpose() @ (x - _centre(col, t)), col.extent[0],
-                              col.extent[1])
+    phi, nl = local(rot.transpose() @ (x - _centre(col, t)), col.extent[0], col.extent[1])
     return phi, rot @ nl
 
 
 @ti.func
-def _cylinder_hit(col, o, d, t):
-    """Entry of a ray into the capped cylinder (side or caps), or -1."""
+def _axial_normal(local: ti.template(), col, p, t):
+    rot = ti.cast(col.rotation, ti.f32)
+    q = rot.transpose() @ (p - ti.cast(_centre(col, t), ti.f32))
+    _, nl = local(q, ti.cast(col.extent[0], ti.f32), ti.cast(col.extent[1], ti.f32))
+    return rot @ nl
+
+
+@ti.func
+def _axial_ray(col, o, d, t):
+    """(origin, direction) of a ray in the collider's frame; (radius, half height)."""
     rot = col.rotation
-    radius, half = col.extent[0], col.extent[1]
-    ol = rot.transpose() @ (o - _centre(col, t))
-    dl = rot.transpose() @ d
+    return (rot.transpose() @ (o - _centre(col, t)), rot.transpose() @ d, col.extent[0],
+            col.extent[1])
+
+
+@ti.func
+def _side_entry(ol, dl, radius, half):
+    """Entry of a local ray into the side of the cylinder of ``radius`` between y = -half
+    and y = half, or 1e30."""
     best = 1e30
     a = dl[0] * dl[0] + dl[2] * dl[2]
     b = ol[0] * dl[0] + ol[2] * dl[2]
@@ -178,6 +193,19 @@ def _cylinder_hit(col, o, d, t):
         side = (-b - ti.sqrt(disc)) / a
         if side > 0.0 and ti.abs(ol[1] + side * dl[1]) <= half:
             best = side
+    return best
+
+
+@ti.func
+def _cylinder_distance(col, x, t):
+    return _axial_distance(_cylinder_local, col, x, t)
+
+
+@ti.func
+def _cylinder_hit(col, o, d, t):
+    """Entry of a ray into the capped cylinder (side or caps), or -1."""
+    ol, dl, radius, half = _axial_ray(col, o, d, t)
+    best = _side_entry(ol, dl, radius, half)
     if ti.abs(dl[1]) > 1e-12:
         for sign in ti.static((-1.0, 1.0)):
             cap = (sign * half - ol[1]) / dl[1]
@@ -189,10 +217,7 @@ def _cylinder_hit(col, o, d, t):
 
 @ti.func
 def _cylinder_normal(col, p, t):
-    rot = ti.cast(col.rotation, ti.f32)
-    q = rot.transpose() @ (p - ti.cast(_centre(col, t), ti.f32))
-    _, nl = _cylinder_local(q, ti.cast(col.extent[0], ti.f32), ti.cast(col.extent[1], ti.f32))
-    return rot @ nl
+    return _axial_normal(_cylinder_local, col, p, t)
 
 
 @ti.func
@@ -209,29 +234,15 @@ def _capsule_local(q, radius, half):
 
 @ti.func
 def _capsule_distance(col, x, t):
-    rot = col.rotation
-    phi, nl = _capsule_local(rot.transpose() @ (x - _centre(col, t)), col.extent[0],
-                             col.extent[1])
-    return phi, rot @ nl
+    return _axial_distance(_capsule_local, col, x, t)
 
 
 @ti.func
 def _capsule_hit(col, o, d, t):
     """Entry of a ray into the capsule: the first of its entries into the side of the
     cylinder between the caps' centres and into the two spheres (a convex union), or -1."""
-    rot = col.rotation
-    radius, half = col.extent[0], col.extent[1]
-    ol = rot.transpose() @ (o - _centre(col, t))
-    dl = rot.transpose() @ d
-    best = 1e30
-    a = dl[0] * dl[0] + dl[2] * dl[2]
-    b = ol[0] * dl[0] + ol[2] * dl[2]
-    c = ol[0] * ol[0] + ol[2] * ol[2] - radius * radius
-    disc = b * b - a * c
-    if a > 1e-12 and disc >= 0.0:
-        side = (-b - ti.sqrt(disc)) / a
-        if side > 0.0 and ti.abs(ol[1] + side * dl[1]) <= half:
-            best = side
+    ol, dl, radius, half = _axial_ray(col, o, d, t)
+    best = _side_entry(ol, dl, radius, half)
     for sign in ti.static((-1.0, 1.0)):
         oc = ol - ti.Vector([0.0, sign * half, 0.0])
         bs = oc.dot(dl)
@@ -245,10 +256,7 @@ def _capsule_hit(col, o, d, t):
 
 @ti.func
 def _capsule_normal(col, p, t):
-    rot = ti.cast(col.rotation, ti.f32)
-    q = rot.transpose() @ (p - ti.cast(_centre(col, t), ti.f32))
-    _, nl = _capsule_local(q, ti.cast(col.extent[0], ti.f32), ti.cast(col.extent[1], ti.f32))
-    return rot @ nl
+    return _axial_normal(_capsule_local, col, p, t)
 
 
 REQUIRED = inspect.Parameter.empty
