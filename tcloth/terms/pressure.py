@@ -30,6 +30,19 @@ def enclosed_volume(x, triangles):
     return float(np.einsum("ij,ij->", a, np.cross(b, c)) / 6.0)
 
 
+def gas_table(settings):
+    """(chambers, 3) f64: each chamber's P0 V0 (J), P_a (Pa) and V0 (m^3)."""
+    v0 = np.abs(settings["rest_volume"])
+    return np.stack([(settings["pressure"] + settings["ambient"]) * v0,
+                     np.full(len(v0), settings["ambient"]), v0], 1)
+
+
+def potential(gas, volume):
+    """-P0 V0 ln(V / V0) + P_a (V - V0) summed over chambers at volumes V (J)."""
+    return float(np.sum(-gas[:, 0] * np.log(volume / gas[:, 2])
+                        + gas[:, 1] * (volume - gas[:, 2])))
+
+
 def closed_surface(triangles, name):
     """Check that triangles (T,3) close a surface: every edge in exactly two triangles,
     once in each direction (consistently wound)."""
@@ -75,10 +88,10 @@ class PressureFeature(Feature):
         if not ids or len(set(ids)) != len(ids) or min(ids) < 0 or max(ids) >= count:
             raise SceneError(f"cloths must be distinct indices into the scene's {count} cloths "
                              f"(got {cloths!r})")
-        volumes = []
+        x, volumes = scene.positions, []
         for k in ids:
             closed_surface(scene.cloths[k].triangles, f"cloth {k}")
-            volumes.append(enclosed_volume(scene.positions, scene.cloths[k].triangles))
+            volumes.append(enclosed_volume(x, scene.cloths[k].triangles))
         if rest_volume is not None:
             given = np.ravel(np.asarray(rest_volume, dtype=np.float64))
             if given.shape != (len(ids),) or not np.all(given > 0):
@@ -94,11 +107,11 @@ class PressureFeature(Feature):
     def build(self, model, settings):
         """Triangles wound outward (a chamber wound inward is turned over), their chamber
         ids and each chamber's (P0 V0, P_a, V0) as fields (f64)."""
-        scene = model.scene
+        scene, x = model.scene, model.scene.positions
         tris, chamber = [], []
-        for c, (k, v0) in enumerate(zip(settings["cloths"], settings["rest_volume"])):
+        for c, k in enumerate(settings["cloths"]):
             t = scene.cloths[k].triangles
-            if enclosed_volume(scene.positions, t) < 0:
+            if enclosed_volume(x, t) < 0:
                 t = t[:, ::-1]
             tris.append(t)
             chamber.append(np.full(len(t), c))
@@ -107,9 +120,7 @@ class PressureFeature(Feature):
         model.pressure_triangles.from_numpy(tris.astype(np.int32))
         model.pressure_chamber = ti.field(ti.i32, shape=len(tris))
         model.pressure_chamber.from_numpy(chamber.astype(np.int32))
-        v0 = np.abs(settings["rest_volume"])
-        gas = np.stack([(settings["pressure"] + settings["ambient"]) * v0,
-                        np.full(len(v0), settings["ambient"]), v0], 1)
+        gas = gas_table(settings)
         model.pressure_gas = ti.Vector.field(3, ti.f64, shape=len(gas))
         model.pressure_gas.from_numpy(gas)
         return settings
@@ -119,10 +130,8 @@ class PressureFeature(Feature):
         floor) without ambient pressure."""
         if settings["ambient"] == 0.0:
             return None
-        p_a = settings["ambient"]
-        gas = (settings["pressure"] + p_a) * np.abs(settings["rest_volume"])
-        v0 = np.abs(settings["rest_volume"])
-        return float(np.sum(-gas * np.log(gas / p_a / v0) + gas - p_a * v0))
+        gas = gas_table(settings)
+        return potential(gas, gas[:, 0] / gas[:, 1])
 
 
 @ti.kernel
@@ -179,5 +188,4 @@ class Pressure(Term):
     def energy(self, x, t, out):
         """-P0 V0 ln(V / V0) + P_a (V - V0) summed over the chambers, in f64."""
         _volumes(self, x)
-        v, gas = self.volume.to_numpy(), self.gas.to_numpy()
-        return float(np.sum(-gas[:, 0] * np.log(v / gas[:, 2]) + gas[:, 1] * (v - gas[:, 2])))
+        return potential(self.gas.to_numpy(), self.volume.to_numpy())
