@@ -5,8 +5,9 @@ validating ``Scene`` methods a script uses, so a damaged or hand-edited file is 
 with a ``SceneError`` naming what is wrong. Each scene feature (``features.FEATURES``) is
 stored as the arguments of its Scene method that rebuild it (its ``saved``): NumPy
 arrays as arrays named ``feature_<name>_<argument>``, the rest as JSON. Files of format
-version 1 (features under keys of their own) are read too. Files are written to a temporary name, flushed
-and renamed: a crash mid-write never leaves a corrupt checkpoint under the real name.
+version 1 (features under keys of their own) are read too. Files are written to a
+temporary name, flushed and renamed: a crash mid-write never leaves a corrupt checkpoint
+under the real name.
 """
 import json
 import os
@@ -26,13 +27,10 @@ READS = (1, 2)
 
 
 def _plain(value):
+    """JSON-able: arrays as lists, dicts entry by entry (None stays None)."""
     if isinstance(value, dict):
         return {k: _plain(v) for k, v in value.items()}
     return value.tolist() if isinstance(value, np.ndarray) else value
-
-
-def _plain_dict(d):
-    return None if d is None else _plain(d)
 
 
 def _save_features(scene, desc, arrays):
@@ -120,7 +118,7 @@ def scene_to_arrays(scene):
         arrays[f"rope{k}_springs"] = r.springs
     desc["ropes"] = len(scene.ropes)
     for c in scene.colliders:
-        desc["colliders"].append(_plain_dict(c))
+        desc["colliders"].append(_plain(c))
     _save_features(scene, desc, arrays)
     return desc, arrays
 
@@ -189,7 +187,7 @@ def save(sim, path):
             "integrator": sim.integrator_name, "dt": sim.dt, "options": sim.integrator.options,
             "settings": sim.settings, "precision": sim.precision,
             "num_steps": sim.num_steps, "time_base": sim._time_base,
-            "step_base": sim._step_base, "grabbed": _plain_dict(sim.grabbed),
+            "step_base": sim._step_base, "grabbed": _plain(sim.grabbed),
             "forces_valid": sim.integrator.holds_forces(sim.state)}
     state = sim.state
     payload = {f"scene_{k}": v for k, v in arrays.items()}
