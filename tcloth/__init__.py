@@ -13,6 +13,7 @@ from .camera import Camera
 from .render import Renderer, render
 from .runtime import device, init
 from .builders import Cloth, MeshCloth, Rope
+from .fabric import Fabric
 from .objfile import load_obj
 from .scene import Scene
 from .simulator import Simulator
@@ -21,7 +22,7 @@ from .version import __version__
 from .viewer import view
 
 
-__all__ = ["cli", "init", "device", "Scene", "Cloth", "MeshCloth", "Rope", "load_obj", "Simulator", "SceneError", "InstabilityError", "ConvergenceWarning", "DeviceWarning",
+__all__ = ["cli", "init", "device", "Scene", "Cloth", "MeshCloth", "Rope", "Fabric", "load_obj", "Simulator", "SceneError", "InstabilityError", "ConvergenceWarning", "DeviceWarning",
            "StaleSimulatorError", "Camera", "Renderer", "render", "record", "write_png",
            "export_mesh", "write_obj", "write_ply", "view",
            "__version__"]

@@ -4,10 +4,39 @@ import os
 
 import numpy as np
 
+from . import fabric as fabrics
+from . import hinges
 from .errors import SceneError
 from .objfile import load_obj
 from .validate import (as_int, as_per_item, as_points, as_rotation, as_scalar,
                        as_spring_params, as_vec3, fmt)
+
+
+class _Unset:
+    """The default of a Provot cloth's mass and spring families, told apart from a value
+    given beside a fabric."""
+
+    def __init__(self, value):
+        self.value = value
+
+    def __repr__(self):
+        return repr(self.value)
+
+
+def unset(value):
+    """A default that ``classic`` resolves, shown as ``value`` in signatures."""
+    return _Unset(value)
+
+
+def classic(fabric, **given):
+    """The given mass and spring families, defaults filled in; SceneError when any of
+    them is given beside a fabric."""
+    if fabric is not None:
+        named = [k for k, v in given.items() if not isinstance(v, _Unset)]
+        if named:
+            raise SceneError(f"give either fabric or {', '.join(named)} (got both): the "
+                             "fabric sets the masses and springs")
+    return {k: v.value if isinstance(v, _Unset) else v for k, v in given.items()}
 
 
 class Cloth:
@@ -18,12 +47,15 @@ class Cloth:
         triangles: (T, 3) int array of particle ids, counter-clockwise seen from the front.
         springs: dict family -> (M_family,) int array of spring ids.
         resolution: (nx, ny); spacing: (dx, dy) in metres; offset: id of particle (0, 0).
-        params: dict family -> (k_s, k_d) or None.
+        params: dict family -> (k_s, k_d) or None (a fabric cloth: its interior springs').
+        stencil: its springs are one (k_s, k_d) per family, evaluated by the grid stencil;
+            False for a fabric cloth (border springs differ), whose springs are a list.
     """
 
     is_grid = True
 
-    def __init__(self, offset, resolution, spacing, params, plane):
+    def __init__(self, offset, resolution, spacing, params, plane, stencil=True):
+        self.stencil = stencil
         self.offset = offset
         self.resolution = resolution
         self.spacing = spacing
@@ -116,8 +148,12 @@ def mesh_springs(faces, triangles):
     return {"structural": structural, "shear": shear, "flexion": flexion}
 
 
-def add_mesh_cloth(scene, vertices, faces, mass, structural, shear, flexion, pinned):
-    """``Scene.add_mesh_cloth``: particles at the vertices, springs from the faces."""
+def add_mesh_cloth(scene, vertices, faces, mass, structural, shear, flexion, pinned,
+                   fabric=None):
+    """``Scene.add_mesh_cloth``: particles at the vertices, springs from the faces (a
+    fabric's: Van Gelder's edge springs and hinge bending, ``fabric.py``)."""
+    fabric = None if fabric is None else fabrics.preset(fabric)
+    given = classic(fabric, mass=mass, structural=structural, shear=shear, flexion=flexion)
     if isinstance(vertices, (str, os.PathLike)):
         if faces is not None:
             raise SceneError("give either a path or vertices and faces (got a path and faces)")
@@ -152,21 +188,38 @@ def add_mesh_cloth(scene, vertices, faces, mass, structural, shear, flexion, pin
     if len(lonely):
         raise SceneError(f"vertex {lonely[0]} is in no face (every vertex must be)")
     springs = mesh_springs(checked, triangles)
-    if np.ndim(mass) == 0:
-        masses = as_scalar("mass", mass, minimum=0.0, strict=True) * vertex_area \
+    if fabric is not None:
+        masses = fabric.density * vertex_area
+        params = {"structural": None, "shear": None, "flexion": None}
+    elif np.ndim(given["mass"]) == 0:
+        masses = as_scalar("mass", given["mass"], minimum=0.0, strict=True) * vertex_area \
             / vertex_area.sum()
     else:
-        masses = as_per_item("mass", mass, n, minimum=0.0, strict=True)
-    params = {"structural": as_spring_params("structural", structural),
-              "shear": as_spring_params("shear", shear),
-              "flexion": as_spring_params("flexion", flexion)}
+        masses = as_per_item("mass", given["mass"], n, minimum=0.0, strict=True)
+    if fabric is None:
+        params = {family: as_spring_params(family, given[family])
+                  for family in ("structural", "shear", "flexion")}
     pin = np.zeros(n, dtype=bool)
     ids = np.asarray(list(pinned) if pinned is not None else [], dtype=np.int64)
     if ids.ndim != 1 or (len(ids) and (ids.min() < 0 or ids.max() >= n)):
         raise SceneError(f"pinned must be vertex ids in [0, {n}) (got {fmt(pinned)})")
     pin[ids] = True
+    if fabric is not None:       # checked before anything is added
+        pairs = _pairs(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]],
+                                       triangles[:, [2, 0]]]))
+        ks = fabrics.mesh_stiffness(fabric, x, triangles, pairs)
+        damp = fabrics.damping(fabric, ks, masses, pairs)
+        hinge_ids, _, _, fold = hinges.hinge_table(triangles, x)
+        hinges.check_flat(hinge_ids + scene.num_particles, fold)
     cloth = MeshCloth(scene.num_particles, n, triangles, params)
     scene.add_particles(x, mass=masses, pinned=pin)
+    if fabric is not None:
+        cloth.springs["structural"] = scene.add_springs(pairs + cloth.offset, ks, damp,
+                                                        kind="structural")
+        cloth.params["structural"] = (float(np.max(ks)), float(np.max(damp)))
+        cloth.springs.update(shear=np.zeros(0, dtype=np.int64),
+                             flexion=np.zeros(0, dtype=np.int64))
+        return _finish_fabric(scene, cloth, fabric)
     for family, pairs in springs.items():
         kskd = params[family]
         if kskd is None or len(pairs) == 0:
@@ -190,8 +243,11 @@ class Rope:
 
 
 def add_cloth(scene, resolution, size, center, plane, mass, structural, shear, flexion,
-              pinned, rotation=None):
-    """``Scene.add_cloth``: the particles and springs of a Provot cloth grid."""
+              pinned, rotation=None, fabric=None):
+    """``Scene.add_cloth``: the particles and springs of a Provot cloth grid, or of a
+    fabric's grid (``fabric.py``)."""
+    fabric = None if fabric is None else fabrics.preset(fabric)
+    given = classic(fabric, mass=mass, structural=structural, shear=shear, flexion=flexion)
     if np.ndim(resolution) != 1 or len(resolution) != 2:
         raise SceneError(f"resolution must be a pair (nx, ny) (got {fmt(resolution)})")
     nx = as_int("resolution[0] (nx)", resolution[0], 2)
@@ -203,10 +259,10 @@ def add_cloth(scene, resolution, size, center, plane, mass, structural, shear, f
     c = as_vec3("center", center)
     if plane not in ("xz", "xy"):
         raise SceneError(f"plane must be 'xz' or 'xy' (got {plane!r})")
-    total = as_scalar("mass", mass, minimum=0.0, strict=True)
-    params = {"structural": as_spring_params("structural", structural),
-              "shear": as_spring_params("shear", shear),
-              "flexion": as_spring_params("flexion", flexion)}
+    if fabric is None:
+        total = as_scalar("mass", given["mass"], minimum=0.0, strict=True)
+        params = {family: as_spring_params(family, given[family])
+                  for family in ("structural", "shear", "flexion")}
     pins = [(0, 0), (nx - 1, 0)] if pinned is None else list(pinned)
     pin = np.zeros((ny, nx), dtype=bool)
     for k, ij in enumerate(pins):
@@ -223,10 +279,12 @@ def add_cloth(scene, resolution, size, center, plane, mass, structural, shear, f
         pos = np.stack([ii, np.zeros_like(ii), jj], -1)
     else:
         pos = np.stack([ii, -jj, np.zeros_like(ii)], -1)
-    cloth = Cloth(scene.num_particles, (nx, ny), (dx, dy), params, plane)
     pos = pos.reshape(-1, 3)
     if rotation is not None:
         pos = pos @ as_rotation("rotation", rotation).T
+    if fabric is not None:
+        return _fabric_grid(scene, fabric, (nx, ny), (dx, dy), plane, pos + c, pin.ravel())
+    cloth = Cloth(scene.num_particles, (nx, ny), (dx, dy), params, plane)
     scene.add_particles(pos + c, mass=total / (nx * ny), pinned=pin.ravel())
     for family, kskd in params.items():
         pairs = cloth.grid_pairs(family)
@@ -235,6 +293,38 @@ def add_cloth(scene, resolution, size, center, plane, mass, structural, shear, f
             continue
         cloth.springs[family] = scene.add_springs(pairs, kskd[0], kskd[1], kind=family)
     scene.cloths.append(cloth)
+    return cloth
+
+
+def _fabric_grid(scene, fabric, resolution, spacing, plane, positions, pinned):
+    """A grid cloth of a fabric: area-weighted masses, border-halved structural and shear
+    springs with damping as a ratio of critical, hinge bending (``fabric.py``)."""
+    k1, k2, kd = fabric.grid_stiffness(*spacing)
+    cloth = Cloth(scene.num_particles, resolution, spacing, {}, plane, stencil=False)
+    masses = fabrics.grid_masses(fabric, *resolution, *spacing).ravel()
+    scene.add_particles(positions, mass=masses, pinned=pinned)
+    m = scene.masses
+    for family, (pairs, ks) in fabrics.grid_springs(fabric, cloth).items():
+        damp = fabrics.damping(fabric, ks, m, pairs)
+        cloth.springs[family] = scene.add_springs(pairs, ks, damp, kind=family)
+        cloth.params[family] = (float(np.max(ks)), float(np.max(damp)))
+    cloth.params["flexion"] = None
+    cloth.springs["flexion"] = np.zeros(0, dtype=np.int64)
+    return _finish_fabric(scene, cloth, fabric)
+
+
+def _finish_fabric(scene, cloth, fabric):
+    """Append a fabric's cloth and add it, flat at its positions now, to the scene's
+    hinge bending (``Scene.set_bending``)."""
+    cloth.fabric = fabric
+    scene.cloths.append(cloth)
+    if max(fabric.bending) > 0:
+        old, rest = scene.bending, scene.positions
+        rigidity, cloths = [fabric.bending], [len(scene.cloths) - 1]
+        if old is not None:
+            rest[:len(old["rest_positions"])] = old["rest_positions"]
+            rigidity, cloths = list(old["rigidity"]) + rigidity, old["cloths"] + cloths
+        scene.set_bending(rigidity, cloths=cloths, rest_positions=rest)
     return cloth
 
 

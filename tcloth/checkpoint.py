@@ -106,7 +106,7 @@ def scene_to_arrays(scene):
         if c.is_grid:
             desc["cloths"].append({"offset": int(c.offset), "resolution": list(c.resolution),
                                    "spacing": list(c.spacing), "params": c.params,
-                                   "plane": c.plane})
+                                   "plane": c.plane, "stencil": c.stencil})
         else:
             desc["cloths"].append({"mesh": True, "offset": int(c.offset),
                                    "count": len(c.particles), "params": c.params})
@@ -152,7 +152,7 @@ def scene_from_arrays(desc, arrays):
             cloth = MeshCloth(c["offset"], c["count"], arrays[f"cloth{k}_triangles"], params)
         else:
             cloth = Cloth(c["offset"], tuple(c["resolution"]), tuple(c["spacing"]), params,
-                          c["plane"])
+                          c["plane"], c.get("stencil", True))
         if cloth.particles.max() >= scene.num_particles:
             raise SceneError(f"checkpoint cloth {k} refers to particles beyond the "
                              f"{scene.num_particles} stored")

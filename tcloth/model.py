@@ -97,7 +97,7 @@ class Model:
         in_grid = np.zeros(scene.num_springs, dtype=bool)
         self.grids = []
         if grid_stencil:
-            for cloth in (c for c in scene.cloths if c.is_grid):
+            for cloth in (c for c in scene.cloths if c.is_grid and c.stencil):
                 for sids in cloth.springs.values():
                     in_grid[sids] = True
                 self.grids.append(self._grid_block(cloth))
@@ -142,7 +142,7 @@ class Model:
             self.spring_ks.from_numpy(springs["stiffness"][self.spring_order].astype(npr))
             self.spring_kd.from_numpy(springs["damping"][self.spring_order].astype(npr))
         if self.grids:
-            grid_cloths = [c for c in scene.cloths if c.is_grid]
+            grid_cloths = [c for c in scene.cloths if c.is_grid and c.stencil]
             self.grids = [self._grid_block(c) for c in grid_cloths]
             self.grid_table.upload(self.grids)
         for feature in FEATURES:
@@ -152,8 +152,8 @@ class Model:
 
     def single_grid(self):
         """The GridBlock when the scene is one cloth grid and nothing else (no other
-        particles or springs), else None."""
-        if len(self.grids) == 1 and self.list_spring_count == 0 \
+        particles or springs, no bending), else None."""
+        if len(self.grids) == 1 and self.list_spring_count == 0 and self.bending is None \
                 and self.grids[0].covers(self.particle_count):
             return self.grids[0]
         return None

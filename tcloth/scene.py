@@ -7,6 +7,7 @@ input when it is added, so that a ``Simulator`` built from it never sees bad dat
 import numpy as np
 
 from . import builders
+from .builders import unset
 from .errors import SceneError
 from .shapes import SHAPE_NAMES, SHAPES, collider_builder
 from .validate import as_per_item, as_points, as_scalar, as_vec3, fmt
@@ -164,27 +165,35 @@ class Scene:
 
     # -- builders --------------------------------------------------------------------------
     def add_cloth(self, resolution=(32, 32), size=(1.0, 1.0), center=(0.0, 1.0, 0.0),
-                  plane="xz", mass=0.2, structural=(1000.0, 0.05), shear=(200.0, 0.02),
-                  flexion=(50.0, 0.01), pinned=None, rotation=None):
+                  plane="xz", mass=unset(0.2), structural=unset((1000.0, 0.05)),
+                  shear=unset((200.0, 0.02)), flexion=unset((50.0, 0.01)), pinned=None,
+                  rotation=None, fabric=None):
         """Add a Provot cloth: particles on a regular nx x ny grid.
 
         Args:
             resolution: (nx, ny) particles, each >= 2. size: (w, h) metres.
             center: grid centre. plane: "xz" (i along +x, j along +z, horizontal) or
                 "xy" (i along +x, j along -y: row 0 is the top edge; hangs vertically).
-            mass: total cloth mass (kg), spread evenly over the particles.
+            mass: total cloth mass (kg), spread evenly over the particles (default 0.2).
             structural, shear, flexion: (k_s, k_d) per family or None (absent).
-                structural = 4-neighbours, shear = diagonals, flexion = 2 apart.
+                structural = 4-neighbours, shear = diagonals, flexion = 2 apart
+                (defaults (1000, 0.05), (200, 0.02), (50, 0.01)).
             pinned: list of (i, j) grid coordinates; None pins (0, 0) and (nx-1, 0).
             rotation: None, or a 3x3 rotation matrix turning the grid about its centre.
+            fabric: a ``tcloth.Fabric`` or a preset's name (``tcloth.fabric.PRESETS``)
+                instead of mass and springs: masses from its density, structural and shear
+                springs from its stretch and shear stiffness (warp along i, weft along j),
+                hinge bending (``set_bending``) from its rigidity, docs/fabric.md. Giving
+                it with mass, structural, shear or flexion is a SceneError.
         Returns:
             Cloth.
         """
         return builders.add_cloth(self, resolution, size, center, plane, mass, structural,
-                                  shear, flexion, pinned, rotation)
+                                  shear, flexion, pinned, rotation, fabric)
 
-    def add_mesh_cloth(self, vertices, faces=None, mass=0.2, structural=(1000.0, 0.05),
-                       shear=None, flexion=(50.0, 0.01), pinned=()):
+    def add_mesh_cloth(self, vertices, faces=None, mass=unset(0.2),
+                       structural=unset((1000.0, 0.05)), shear=unset(None),
+                       flexion=unset((50.0, 0.01)), pinned=(), fabric=None):
         """Add a cloth made from a mesh: a particle at each vertex, springs from the faces.
 
         Springs: structural on every face edge; shear across both diagonals of each quad
@@ -201,6 +210,12 @@ class Scene:
             mass: total kg, spread by vertex area; or (V,) kg per vertex.
             structural, shear, flexion: (k_s, k_d) or None (absent).
             pinned: vertex ids to pin.
+            fabric: a ``tcloth.Fabric`` or a preset's name instead of mass and springs:
+                masses from its density, a spring on every triangle edge with Van Gelder's
+                stiffness for its stretch (one number: a mesh has no warp and weft; the
+                edges fix the shear stiffness at 3/8 of it, so the fabric's is not used),
+                hinge bending from its rigidity (docs/fabric.md). Giving it with mass,
+                structural, shear or flexion is a SceneError.
         A face repeating a vertex or of zero area, an edge shared by more than two faces
         (not manifold), or a vertex in no face raises SceneError; duplicate vertices are
         separate particles (a seam); a face joining two coincident ones has zero area.
@@ -208,7 +223,7 @@ class Scene:
             MeshCloth (particles (V,) in vertex order, triangles (T,3)).
         """
         return builders.add_mesh_cloth(self, vertices, faces, mass, structural, shear,
-                                       flexion, pinned)
+                                       flexion, pinned, fabric)
 
     def add_rope(self, start, end, segments, mass, stiffness, damping=0.0, pinned=("start",)):
         """Add a straight rope of ``segments`` springs from ``start`` to ``end``.

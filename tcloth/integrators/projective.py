@@ -16,7 +16,9 @@ with the constant matrix A in place of the Hessian. That is how it runs here: f 
 ordinary force evaluation at each iterate (gravity, air drag, springs with their axial
 damping k_d (v_ij . d) d), wind and attraction enter y at the start of the step as in
 the paper, and A carries the constant parts, M/h^2 + c/h + sum_s (k_s + k_d/h)
-A_s A_s^T (k_d/h A_s A_s^T bounds the axial damping's Jacobian: d d^T <= I). The fixed
+A_s A_s^T (k_d/h A_s A_s^T bounds the axial damping's Jacobian: d d^T <= I) and the
+Hessian of hinge bending (constant: ``terms/bending.py``), whose energy is already
+quadratic, as Liu's constraints with projection p = 0 are. The fixed
 point is the backward Euler step with axial spring damping, so damped motion is as
 accurate as backward Euler's (Liu's paper damps only through the medium).
 
@@ -89,8 +91,12 @@ class Projective(Integrator):
             self.adj_start, self.adj = springs.adjacency()
             self.weight = ti.field(real, shape=self.adj.shape[0])
             self.diag, self.precond = (ti.field(real, shape=n) for _ in range(2))
+            # terms whose Hessian is constant (bending) enter A whole: their diagonal
+            # here, their couplings in CG's products
+            self.constant = tuple(t for t in self.residual_forces.terms
+                                  if getattr(t, "constant_hessian", False))
             self.solver = linalg.PCG(n, self.diag, self.weight, self.adj_start, self.adj,
-                                     self.precond, model.inv_mass)
+                                     self.precond, model.inv_mass, self.constant)
         self.stats = {}
         self._h = None
 
@@ -168,6 +174,8 @@ class Projective(Integrator):
         ti.loop_config(serialize=ti.static(serial(self.diag)))
         for p in range(self.diag.shape[0]):
             self.diag[p] = self.mass[p] / (h * h) + self.params[3] / h
+            for term in ti.static(self.constant):
+                self.diag[p] += term.diagonal[p]
             total = self.diag[p]
             for k in range(self.adj_start[p], self.adj_start[p + 1]):
                 s = self.adj[k][0]

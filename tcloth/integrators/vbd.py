@@ -106,7 +106,12 @@ class VBD(ForceCache, Integrator):
         if self.has_springs:
             self.pairs, self.rest = self.springs.pairs, self.springs.rest
             self.ks, self.kd = self.springs.ks, self.springs.kd
-        self.pair_terms = self.potential.pair_terms
+        # pair terms with a per-vertex gradient (bending) are Gauss-Seidel like the
+        # springs; the others (self-contact) Jacobi, held through an iteration
+        self.local_terms = tuple(t for t in self.potential.pair_terms
+                                 if hasattr(t, "local_gradient"))
+        self.pair_terms = tuple(t for t in self.potential.pair_terms
+                                if t not in self.local_terms)
         self.mass, self.params = model.mass, model.params
         self.order, self.colour_start = self._colouring(n)
         self.colours = len(self.colour_start) - 1
@@ -123,10 +128,18 @@ class VBD(ForceCache, Integrator):
 
     def _colouring(self, n):
         """(order, colour_start): the particles sorted by colour as an i32 field, and the
-        Python list of each colour's first entry in it (and the end)."""
+        Python list of each colour's first entry in it (and the end). Particles joined by
+        a spring or sharing a hinge get different colours."""
         start = self.adj_start.to_numpy().astype(np.int64)
         others = self.adj.to_numpy()[:, 1].astype(np.int64) if start[-1] else np.zeros(0, int)
-        colours = colour_graph(start, others, n)
+        ends = np.repeat(np.arange(n), np.diff(start))
+        pairs = [np.stack([ends, others], 1)] + [t.coupled_pairs() for t in self.local_terms]
+        pairs = np.unique(np.concatenate(pairs), axis=0)
+        pairs = np.concatenate([pairs, pairs[:, ::-1]])
+        pairs = pairs[np.argsort(pairs[:, 0], kind="stable")]
+        start = np.zeros(n + 1, dtype=np.int64)
+        np.cumsum(np.bincount(pairs[:, 0], minlength=n), out=start[1:])
+        colours = colour_graph(start, pairs[:, 1], n)
         order = np.argsort(colours, kind="stable").astype(np.int32)
         counts = np.bincount(colours, minlength=colours.max() + 1 if n else 0)
         colour_start = [0] + np.cumsum(counts).tolist()
@@ -202,7 +215,7 @@ class VBD(ForceCache, Integrator):
     @ti.func
     def _local(self, p, x, h, t):
         """(g_i, H_i): vertex p's gradient of E and its 3 x 3 Hessian block, the springs'
-        projected (the self-contacts' from the iteration's start)."""
+        projected (the self-contacts' from the iteration's start; the bending's at x)."""
         g = self.mass[p] / (h * h) * (x[p] - self.potential.x_hat[p])
         for term in ti.static(self.potential.particle_terms):
             _, _, g_t = term.incremental(p, x, self.potential.x0, h, t)
@@ -211,6 +224,8 @@ class VBD(ForceCache, Integrator):
             g -= self.potential.f_lag[p]
         if ti.static(bool(self.pair_terms)):
             g += self.contact_grad[p]
+        for term in ti.static(self.local_terms):
+            g += term.local_gradient(p, x)
         block = self.potential.particle_block(p, x, h, t)
         if ti.static(self.has_springs):
             d0 = ti.static(self.springs.d0)

@@ -2,7 +2,9 @@
 substeps, Macklin et al. 2019, "Small Steps in Physics Simulation").
 
 The springs are compliant distance constraints C_s = |x_i - x_j| - l0 with compliance
-1/k_s and damping k_d: the same springs, not new physics. A step of h (dt / substeps):
+1/k_s and damping k_d: the same springs, not new physics. Hinge bending
+(``terms/bending.py``, energy |s|^2 / 2 with s = sum_i c_i x_i linear) is the vector
+constraint s = 0 with compliance 1, its hinges coloured like the springs. A step of h (dt / substeps):
 
   1. the other forces (gravity, drag, wind, attraction, the grab spring) at the start
      move every velocity, v += h f / m, and x_prev = x, x += h v (pinned particles move
@@ -29,24 +31,35 @@ from .. import terms as term_modules
 from ..errors import SceneError
 from ..forces import Forces
 from ..runtime import serial
+from ..terms.bending import Bending
 from ..terms.springs import Springs
 from .base import Integrator
 
 
 def colour_springs(pairs, n):
-    """Greedy edge colouring: each spring in order takes the smallest colour that no
-    spring at either of its ends has yet. Returns (S,) int colours."""
+    """Greedy colouring of constraints (springs (S,2), or hinges (S,4)): each in order takes
+    the smallest colour that no constraint at any of its particles has yet. Returns (S,)
+    int colours."""
     used = [set() for _ in range(n)]
     colours = np.empty(len(pairs), dtype=np.int64)
-    for s, (i, j) in enumerate(pairs):
-        taken = used[i] | used[j]
+    for s, ids in enumerate(pairs):
+        taken = set().union(*(used[i] for i in ids))
         c = 0
         while c in taken:
             c += 1
         colours[s] = c
-        used[i].add(c)
-        used[j].add(c)
+        for i in ids:
+            used[i].add(c)
     return colours
+
+
+def colour_order(constraints, n):
+    """(order field, colour starts) of constraints sorted by colour (``colour_springs``)."""
+    colours = colour_springs(constraints, n)
+    order = ti.field(ti.i32, shape=max(len(colours), 1))
+    if len(colours):
+        order.from_numpy(np.argsort(colours, kind="stable").astype(np.int32))
+    return order, [0] + np.cumsum(np.bincount(colours)).tolist()
 
 
 @ti.data_oriented
@@ -73,7 +86,7 @@ class XPBD(Integrator):
         springs = Springs(model) if Springs.present(model) else None
         self.has_springs = springs is not None
         self.external = Forces(model, lambda cls: cls.projective in ("force", "lagged")
-                               and cls is not Springs)
+                               and cls is not Springs and cls is not Bending)
         self.projections = term_modules.build(model, lambda cls: cls.projective == "projection")
         self.x_prev, self.f = (ti.Vector.field(3, real, shape=n) for _ in range(2))
         self.colour_start = [0]
@@ -82,11 +95,17 @@ class XPBD(Integrator):
             self.pairs, self.rest = springs.pairs, springs.rest
             self.ks, self.kd = springs.ks, springs.kd
             self.lam = ti.field(real, shape=count)
-            colours = colour_springs(self.pairs.to_numpy()[:count], n)
-            self.order = ti.field(ti.i32, shape=count)
-            self.order.from_numpy(np.argsort(colours, kind="stable").astype(np.int32))
-            self.colour_start += np.cumsum(np.bincount(colours)).tolist()
+            self.order, self.colour_start = colour_order(self.pairs.to_numpy()[:count], n)
         self.colours = len(self.colour_start) - 1
+        self.bending = Bending(model) if Bending.present(model) else None
+        self.hinge_start = [0]
+        if self.bending is not None:
+            self.hinge_lam = ti.Vector.field(3, real, shape=self.bending.hinges.shape[0])
+            self.hinge_order, self.hinge_start = colour_order(
+                self.bending.hinges.to_numpy(), n)
+        self.hinge_colours = len(self.hinge_start) - 1
+        self.has_hinges = self.bending is not None
+        self.constrained = self.has_springs or self.has_hinges
 
     def simulate(self, model, state_in, state_out, dt):
         opt = self.options
@@ -97,8 +116,8 @@ class XPBD(Integrator):
         for _ in range(opt["substeps"]):
             self.external.compute(x, v, t, self.f)
             self._predict(x, v, h)
-            if self.has_springs:
-                self.lam.fill(0)
+            if self.constrained:
+                self._zero_multipliers()
                 for _ in range(opt["iterations"]):
                     self._springs(x, h)
             self._velocities(x, v, 1.0 / h)
@@ -128,10 +147,8 @@ class XPBD(Integrator):
         for sub in range(self.options["substeps"]):
             self.external.accumulate(a.x, a.v, ti.cast(t + sub * h64, float), self.f)
             self.predict(a.x, a.v, h)
-            if ti.static(self.has_springs):
-                ti.loop_config(serialize=True)
-                for s in range(self.lam.shape[0]):
-                    self.lam[s] = 0
+            if ti.static(self.constrained):
+                self.zero_multipliers()
                 for _ in range(self.options["iterations"]):
                     self.spring_pass(a.x, h)
             self.velocities(a.x, a.v, ti.cast(1.0 / h64, float))
@@ -160,14 +177,48 @@ class XPBD(Integrator):
     def _springs(self, x: ti.template(), h: float):
         self.spring_pass(x, h)
 
+    @ti.kernel
+    def _zero_multipliers(self):
+        self.zero_multipliers()
+
+    @ti.func
+    def zero_multipliers(self):
+        """lambda = 0 for every spring and hinge: a step starts without them."""
+        if ti.static(self.has_springs):
+            ti.loop_config(serialize=True)
+            for s in range(self.lam.shape[0]):
+                self.lam[s] = 0
+        if ti.static(self.has_hinges):
+            ti.loop_config(serialize=True)
+            for k in range(self.hinge_lam.shape[0]):
+                self.hinge_lam[k] = ti.Vector.zero(float, 3)
+
     @ti.func
     def spring_pass(self, x, h):
-        """One Gauss-Seidel pass over the springs, colour after colour, the springs of a
-        colour in parallel (module docstring; one launch: the colours' loops are unrolled,
-        each a top-level loop)."""
+        """One Gauss-Seidel pass over the springs, then over the hinges, colour after
+        colour, the constraints of a colour in parallel (module docstring; one launch: the
+        colours' loops are unrolled, each a top-level loop)."""
         for c in ti.static(range(self.colours)):
             for k in range(ti.static(self.colour_start[c]), ti.static(self.colour_start[c + 1])):
                 self._spring(x, h, self.order[k])
+        for c in ti.static(range(self.hinge_colours)):
+            for k in range(ti.static(self.hinge_start[c]), ti.static(self.hinge_start[c + 1])):
+                self._hinge(x, h, self.hinge_order[k])
+
+    @ti.func
+    def _hinge(self, x, h, k):
+        """Hinge k as the vector constraint s = sum_i c_i x_i = 0 with compliance 1
+        (its energy is |s|^2 / 2): alpha = 1 / h^2, grad_i s = c_i I."""
+        ids, c = self.bending.hinges[k], self.bending.weights[k]
+        s = self.bending.hinge_vector(k, x)
+        alpha = 1.0 / (h * h)
+        denominator = alpha
+        for i in ti.static(range(4)):
+            denominator += self.inv_mass[ids[i]] * c[i] * c[i]
+        dlam = (-s - alpha * self.hinge_lam[k]) / denominator
+        for i in ti.static(range(4)):
+            x[ids[i]] += self.inv_mass[ids[i]] * c[i] * dlam
+        self.hinge_lam[k] += dlam
 
     @ti.func
     def _spring(self, x, h, s):

@@ -5,6 +5,7 @@ scene has, for one consumer (an integrator's workspace, the diagnostics).
 """
 from .attraction import Attraction
 from .base import Term
+from .bending import Bending
 from .colliders import Colliders
 from .grab import Grab
 from .gravity_drag import GravityDrag
@@ -13,7 +14,7 @@ from .self_contact import SelfContact
 from .springs import Springs
 from .wind import Wind
 
-TERMS = (GravityDrag, Springs, Wind, Attraction, Pressure, Colliders, SelfContact, Grab)
+TERMS = (GravityDrag, Springs, Bending, Wind, Attraction, Pressure, Colliders, SelfContact, Grab)
 
 
 def build(model, select=None):
@@ -27,5 +28,5 @@ def find(terms, cls):
     return next((t for t in terms if isinstance(t, cls)), None)
 
 
-__all__ = ["TERMS", "Term", "build", "find", "GravityDrag", "Springs", "Wind", "Attraction",
+__all__ = ["TERMS", "Term", "build", "find", "GravityDrag", "Springs", "Bending", "Wind", "Attraction",
            "Pressure", "Colliders", "SelfContact", "Grab"]

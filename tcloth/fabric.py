@@ -1,0 +1,179 @@
+"""Physical fabric: areal density, membrane stiffnesses and bending rigidity, turned into a
+cloth's particle masses, springs and hinge bending (docs/fabric.md derives the mapping).
+
+A grid cloth's springs form a membrane. With cells dx x dy, structural springs k1 (along i,
+the warp) and k2 (along j, the weft) and both diagonals k_d in every cell, the energy per
+area at a uniform strain e is W = C11/2 e_xx^2 + C12 e_xx e_yy + C22/2 e_yy^2 + 2 C66 e_xy^2,
+
+    C11 = k1 dx/dy + 2 k_d dx^3 / (L^2 dy),   C22 = k2 dy/dx + 2 k_d dy^3 / (L^2 dx),
+    C12 = C66 = 2 k_d dx dy / L^2,            L^2 = dx^2 + dy^2,
+
+so the shear stiffness G fixes k_d (C66 = G) and with it C12 = G (the lattice's Poisson
+coupling), and the stretch stiffnesses (uniaxial, the sides free to contract: E1 = C11 -
+C12^2 / C22, E2 = C22 - C12^2 / C11) fix k1, k2. Structural springs on the cloth's border
+carry half a cell and get half the stiffness; each particle carries the fabric's density
+times its share of the area (a quarter of each cell around it).
+
+A mesh cloth's springs are its triangles' edges. Van Gelder's (1998) stiffness
+k_e = E sum over the edge's triangles of A_t / |e|^2 gives an equilateral mesh the
+uniaxial stiffness E exactly, with Poisson's ratio 1/3 and so shear stiffness 3E/8: the
+edges cannot hold a separate shear stiffness, and the fabric's shear is not used there.
+
+Damping is a ratio of critical per spring: k_d = zeta 2 sqrt(k_s m_i m_j / (m_i + m_j)).
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import SceneError
+from .validate import fmt
+
+
+def _positive_pair(name, value, minimum=0.0):
+    """(warp, weft) from a number or a pair, each finite and > minimum."""
+    pair = np.ravel(np.asarray(value, dtype=np.float64)) if np.ndim(value) else \
+        np.array([float(value)] * 2)
+    if pair.shape != (2,) or not np.all(np.isfinite(pair)) or np.any(pair <= minimum):
+        raise SceneError(f"{name} must be a number > {minimum:g} or a (warp, weft) pair of "
+                         f"them (got {fmt(value)})")
+    return float(pair[0]), float(pair[1])
+
+
+@dataclass(frozen=True)
+class Fabric:
+    """A fabric's physical parameters (SI units).
+
+    Args:
+        density: areal density, kg/m^2 > 0.
+        stretch: uniaxial stretch stiffness per width, N/m > 0: a number or (warp, weft).
+        shear: in-plane shear stiffness per width, N/m > 0 (grid cloths).
+        bending: bending rigidity per width, N m >= 0: a number or (warp, weft) (grid
+            cloths; a mesh cloth takes one number).
+        damping: the springs' damping as a ratio of critical, >= 0.
+        name, source: what it is and where its numbers were measured (presets).
+    """
+    density: float
+    stretch: object
+    shear: float
+    bending: object
+    damping: float = 0.1
+    name: str = "custom"
+    source: str = ""
+
+    def __post_init__(self):
+        if not (np.isfinite(self.density) and self.density > 0):
+            raise SceneError(f"density must be kg/m^2 > 0 (got {fmt(self.density)})")
+        object.__setattr__(self, "stretch", _positive_pair("stretch", self.stretch))
+        if not (np.isfinite(self.shear) and self.shear > 0):
+            raise SceneError(f"shear must be N/m > 0 (got {fmt(self.shear)})")
+        pair = _positive_pair("bending", self.bending, minimum=-1.0)
+        if min(pair) < 0:
+            raise SceneError(f"bending must be N m >= 0 (got {fmt(self.bending)})")
+        object.__setattr__(self, "bending", pair)
+        if not (np.isfinite(self.damping) and self.damping >= 0):
+            raise SceneError(f"damping must be a ratio of critical >= 0 "
+                             f"(got {fmt(self.damping)})")
+
+    def isotropic(self):
+        """This fabric with the geometric means of its warp and weft stretch and bending
+        (for a mesh cloth, which has no warp and weft)."""
+        return Fabric(self.density, float(np.sqrt(np.prod(self.stretch))), self.shear,
+                      float(np.sqrt(np.prod(self.bending))), self.damping,
+                      name=f"{self.name} (warp-weft mean)", source=self.source)
+
+    def moduli(self, dx, dy):
+        """(C11, C22, C12) N/m of the grid membrane with this fabric's stretch and shear
+        (module docstring)."""
+        e1, e2 = self.stretch
+        root = np.sqrt(1.0 + 4.0 * self.shear ** 2 / (e1 * e2))
+        return 0.5 * e1 * (1.0 + root), 0.5 * e2 * (1.0 + root), self.shear
+
+    def grid_stiffness(self, dx, dy):
+        """(k1, k2, k_diagonal) N/m of an interior grid cell's springs."""
+        c11, c22, g = self.moduli(dx, dy)
+        diagonal = g * (dx * dx + dy * dy) / (2.0 * dx * dy)
+        k1 = (c11 - g * dx * dx / (dy * dy)) * dy / dx
+        k2 = (c22 - g * dy * dy / (dx * dx)) * dx / dy
+        if k1 <= 0 or k2 <= 0:
+            raise SceneError(f"a {dx:g} x {dy:g} m grid cannot hold shear {self.shear:g} N/m "
+                             f"with stretch {self.stretch}: its diagonals alone would be "
+                             "stiffer than that along the grid (lower the shear)")
+        return k1, k2, diagonal
+
+
+def damping(fabric, ks, masses, pairs):
+    """Each spring's k_d: the fabric's ratio of critical damping of its two masses."""
+    mi, mj = masses[pairs[:, 0]], masses[pairs[:, 1]]
+    return fabric.damping * 2.0 * np.sqrt(ks * mi * mj / (mi + mj))
+
+
+def grid_masses(fabric, nx, ny, dx, dy):
+    """(ny, nx) particle masses: density times a quarter of each cell around a particle."""
+    wx = np.full(nx, dx)
+    wx[[0, -1]] *= 0.5
+    wy = np.full(ny, dy)
+    wy[[0, -1]] *= 0.5
+    return fabric.density * np.outer(wy, wx)
+
+
+def grid_springs(fabric, cloth):
+    """dict family -> (pairs (M,2), k_s (M,)) of a grid cloth: structural and shear (no
+    flexion: the fabric bends through hinges)."""
+    (nx, ny), (dx, dy) = cloth.resolution, cloth.spacing
+    k1, k2, kd = fabric.grid_stiffness(dx, dy)
+    p = cloth.particles
+    along_i = np.stack([p[:, :-1].ravel(), p[:, 1:].ravel()], 1)
+    along_j = np.stack([p[:-1, :].ravel(), p[1:, :].ravel()], 1)
+    row = np.repeat(np.arange(ny), nx - 1)
+    column = np.tile(np.arange(nx), ny - 1)
+    ks_i = np.where((row == 0) | (row == ny - 1), 0.5 * k1, k1)
+    ks_j = np.where((column == 0) | (column == nx - 1), 0.5 * k2, k2)
+    shear = cloth.grid_pairs("shear")
+    return {"structural": (np.concatenate([along_i, along_j]), np.concatenate([ks_i, ks_j])),
+            "shear": (shear, np.full(len(shear), kd))}
+
+
+def mesh_stiffness(fabric, x, triangles, pairs):
+    """Van Gelder's k_e = E sum_t A_t / |e|^2 for each edge pair (M,2) of triangles (T,3)
+    at positions x; one stretch stiffness E (a mesh has no warp and weft)."""
+    e1, e2 = fabric.stretch
+    if e1 != e2:
+        raise SceneError(f"a (warp, weft) stretch needs a grid cloth: a mesh cloth has no "
+                         f"warp and weft (got {fabric.stretch})")
+    tris = np.asarray(triangles, dtype=np.int64)
+    area = 0.5 * np.linalg.norm(np.cross(x[tris[:, 1]] - x[tris[:, 0]],
+                                         x[tris[:, 2]] - x[tris[:, 0]]), axis=1)
+    edges = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), 1)
+    total = {}
+    for (a, b), A in zip(edges.tolist(), np.tile(area, 3)):
+        total[(a, b)] = total.get((a, b), 0.0) + A
+    lengths2 = np.sum((x[pairs[:, 0]] - x[pairs[:, 1]]) ** 2, axis=1)
+    shared = np.array([total.get((min(a, b), max(a, b)), 0.0) for a, b in pairs.tolist()])
+    return e1 * shared / lengths2
+
+
+# Measured fabrics: Wang, O'Brien & Ramamoorthi 2011, "Data-driven elastic models for
+# cloth: modeling and measurement", ACM TOG 30(4) 71, as published with ARCSim's material
+# files: density; stretch the zero-strain tangent stiffness along u (warp here) and v;
+# shear; bending ke/4 at the smallest curvature, for folds along u and v (docs/fabric.md).
+PRESETS = {
+    "denim": Fabric(0.324, (411.0, 2028.0), 26.7, (1.60e-5, 2.42e-5), name="denim",
+                    source="Wang et al. 2011, 11oz-black-denim"),
+    "interlock": Fabric(0.187, (33.0, 69.0), 18.4, (5.8e-6, 3.6e-6), name="interlock",
+                        source="Wang et al. 2011, gray-interlock (cotton/polyester knit)"),
+    "ponte": Fabric(0.284, (62.0, 88.0), 15.9, (9.1e-6, 9.3e-6), name="ponte",
+                    source="Wang et al. 2011, camel-ponte-roma (polyester/rayon knit)"),
+    "polyester": Fabric(0.113, (86.0, 343.0), 7.2, (3.6e-6, 5.1e-6), name="polyester",
+                        source="Wang et al. 2011, tango-red-jet-set (polyester)"),
+    "fleece": Fabric(0.228, (303.0, 490.0), 15.1, (2.93e-5, 1.49e-5), name="fleece",
+                     source="Wang et al. 2011, pink-ribbon-brown (polyester blanket)"),
+}
+
+
+def preset(name):
+    """The preset fabric ``name`` (``PRESETS``); SceneError naming the known ones."""
+    if isinstance(name, Fabric):
+        return name
+    if name not in PRESETS:
+        raise SceneError(f"fabric must be a Fabric or one of {sorted(PRESETS)} (got {name!r})")
+    return PRESETS[name]

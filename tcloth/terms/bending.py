@@ -1,0 +1,252 @@
+"""Bending with linear stiffness: Bergou, Wardetzky, Harmon, Zorin & Grinspun 2006, "A
+quadratic bending model for inextensible surfaces".
+
+The lecture's flexion springs (Provot) span two grid spacings; a fold by phi shortens one
+only to second order, 2h cos(phi/2) = 2h (1 - phi^2/8), so its energy is quartic in the
+angle and a flat cloth has no bending stiffness at small curvature. This term gives the
+cloth a bending rigidity B (N m), energy B/2 kappa^2 per area for a curvature kappa.
+
+Each interior edge (x0, x1) of a cloth's triangles with the opposite vertices x2, x3 of its
+two triangles is a hinge. With the cotangents c_jk of the rest angles between the hinge's
+edges e0 = x1 - x0, e1 = x2 - x0, e2 = x3 - x0, e3 = x2 - x1, e4 = x3 - x1, the weights
+
+    K = (c03 + c04, c01 + c02, -c01 - c03, -c02 - c04)
+
+make s = sum_i K_i x_i vanish on the flat rest hinge (and on every rigid motion of it),
+and |s| = 2 |e0| sin(theta / 2) when the hinge folds by theta keeping its edge lengths.
+The hinge's energy is
+
+    U = B_e / (2 A_e) |s|^2,   A_e the rest area of its two triangles,
+
+quadratic in the positions: its Hessian (B_e / A_e) K K^T (x) I is constant, which is what
+makes it cheap in the implicit solvers (Bergou's point). The scale B_e / A_e is measured,
+not assumed: summed over a grid or an equilateral mesh bent into a cylinder of curvature
+kappa it gives B/2 kappa^2 per area as the resolution grows (tests/test_bending.py;
+Bergou's Q_e = 3/A_e K K^T is for the integral of the squared mean curvature).
+
+A grid's triangles have their diagonals all one way, and on them a hinge across a cell
+side sees kappa_xx - kappa_xy: bending could trade against twist, and a narrow strip would
+bend 30-90 % too easily. A grid cloth's hinges are therefore the cell sides of both
+diagonal triangulations, each with half the rigidity (no diagonal hinges): the two see
+kappa_xx -+ kappa_xy, so the energy is B/2 (kappa_xx^2 + kappa_yy^2 + 2 kappa_xy^2) per area,
+an isotropic plate with Poisson's ratio 0, for every deformation. Hinges across a side
+along j (constant i) take the warp rigidity (they bend the cloth along i), those along i
+the weft. A mesh cloth's hinges are its interior edges, with one rigidity (on an
+equilateral mesh a plate with Poisson's ratio 1/3).
+
+The model needs a flat rest shape (a hinge folded at rest would be pulled flat):
+``Scene.set_bending`` refuses a cloth whose rest hinges are folded. Each hinge stores
+c = sqrt(B_e / A_e) K, so U = |sum c_i x_i|^2 / 2 and the force on its vertex i is -c_i s.
+Backward Euler, VBD and projective dynamics take the exact constant Hessian; XPBD takes a
+hinge as the compliant vector constraint s = 0.
+"""
+import numpy as np
+import taichi as ti
+
+from .. import runtime
+from ..errors import SceneError
+from ..hinges import cloth_hinges, rigidity_pair
+from ..runtime import serial
+from ..validate import fmt
+from .base import Feature, Term
+
+class BendingFeature(Feature):
+    """``Scene.set_bending``: the cloths with hinge bending, their rigidities and rest
+    positions; the model's hinges, their weights and each particle's hinges."""
+    name, method = "bending", "set_bending"
+
+    def set(self, scene, rigidity, cloths=None, rest_positions=None):
+        """Give cloths a bending rigidity B (N m): a hinge energy on every interior edge
+        of their triangles, B/2 kappa^2 per area at curvature kappa
+        (``tcloth.terms.bending``; Bergou et al. 2006's quadratic bending). Replaces any
+        earlier call; ``add_cloth(fabric=...)`` adds its cloth to the ones set (``builders``).
+
+        Args:
+            rigidity: N m >= 0: one number, a (warp, weft) pair (grid cloths: warp bends
+                along the grid's i, weft along j) or one of those per cloth in ``cloths``.
+            cloths: indices into ``scene.cloths`` (default: every cloth).
+            rest_positions: None (the scene's positions now), or (N,3) positions of all
+                the scene's particles at which the cloths are flat and unbent.
+        Returns:
+            dict of the settings.
+        """
+        count = len(scene.cloths)
+        ids = list(range(count)) if cloths is None else [int(c) for c in np.ravel(cloths)]
+        if not ids or len(set(ids)) != len(ids) or min(ids) < 0 or max(ids) >= count:
+            raise SceneError(f"cloths must be distinct indices into the scene's {count} cloths "
+                             f"(got {cloths!r})")
+        r = np.asarray(rigidity, dtype=np.float64) if np.ndim(rigidity) else rigidity
+        per_cloth = np.ndim(r) == 2
+        if per_cloth and np.shape(r)[0] != len(ids):
+            raise SceneError(f"rigidity must be one value or pair per cloth ({len(ids)}) "
+                             f"(got {fmt(rigidity)})")
+        rigidities = np.array([rigidity_pair(r[k] if per_cloth else r, "rigidity")
+                               for k in range(len(ids))])
+        rest = scene.positions if rest_positions is None else \
+            np.asarray(rest_positions, dtype=np.float64)
+        if rest.shape != (scene.num_particles, 3) or not np.all(np.isfinite(rest)):
+            raise SceneError(f"rest_positions must be finite ({scene.num_particles}, 3) "
+                             f"positions (got shape {np.shape(rest_positions)})")
+        for k, b in zip(ids, rigidities):
+            cloth_hinges(scene.cloths[k], rest, b)
+        return {"rigidity": rigidities, "cloths": ids, "rest_positions": rest.copy()}
+
+    def saved(self, value):
+        return {"rigidity": value["rigidity"], "cloths": value["cloths"],
+                "rest_positions": value["rest_positions"]}
+
+    def build(self, model, settings):
+        """The hinges (H,) vec4 ids and weights, each particle's (hinge, slot) entries in
+        CSR form and its diagonal weight sum(c^2), as fields."""
+        scene, n = model.scene, model.particle_count
+        parts = [cloth_hinges(scene.cloths[k], settings["rest_positions"], b)
+                 for k, b in zip(settings["cloths"], settings["rigidity"])]
+        ids = np.concatenate([p[0] for p in parts]).astype(np.int64)
+        weights = np.concatenate([p[1] for p in parts])
+        real, npr = runtime.real(), runtime.numpy_real()
+        count = max(len(ids), 1)
+        model.bending_hinges = ti.Vector.field(4, ti.i32, shape=count)
+        model.bending_weights = ti.Vector.field(4, real, shape=count)
+        if len(ids):
+            model.bending_hinges.from_numpy(ids.astype(np.int32))
+            model.bending_weights.from_numpy(weights.astype(npr))
+        vertex = ids.ravel()
+        order = np.argsort(vertex, kind="stable")
+        start = np.zeros(n + 1, dtype=np.int32)
+        np.cumsum(np.bincount(vertex, minlength=n), out=start[1:])
+        entries = np.stack([order // 4, order % 4], 1).astype(np.int32)
+        model.bending_start = ti.field(ti.i32, shape=n + 1)
+        model.bending_start.from_numpy(start)
+        model.bending_entries = ti.Vector.field(2, ti.i32, shape=max(len(entries), 1))
+        if len(entries):
+            model.bending_entries.from_numpy(entries)
+        model.bending_diagonal = ti.field(real, shape=n)
+        model.bending_diagonal.from_numpy(
+            np.bincount(vertex, weights=(weights ** 2).ravel(), minlength=n).astype(npr))
+        model.bending_count = len(ids)
+        return settings
+
+
+@ti.data_oriented
+class Bending(Term):
+    """The hinges of the scene's bending cloths (``Scene.set_bending``)."""
+    name = "bending"
+    feature = BendingFeature()
+    implicit = "potential"
+    projective = "force"
+    constant_hessian = True       # sum over hinges of c c^T (x) I: ``diagonal``, ``add_product``
+
+    @staticmethod
+    def present(model):
+        return model.bending is not None and model.bending_count > 0
+
+    def __init__(self, model):
+        self.hinges, self.weights = model.bending_hinges, model.bending_weights
+        self.start, self.entries = model.bending_start, model.bending_entries
+        self.diagonal = model.bending_diagonal
+        self.s = ti.Vector.field(3, runtime.real(), shape=self.hinges.shape[0])
+
+    def batch_obstacle(self):
+        if not serial(self.hinges):
+            return f"the bending's {self.hinges.shape[0]} hinges run on several threads"
+        return None
+
+    def coupled_pairs(self):
+        """(M,2) particle pairs that share a hinge (for graph colourings), NumPy."""
+        ids = self.hinges.to_numpy().astype(np.int64)
+        return np.concatenate([ids[:, [i, j]] for i in range(4) for j in range(i + 1, 4)])
+
+    @ti.func
+    def hinge_vector(self, k, x):
+        """s = sum_i c_i x_i of hinge k."""
+        ids, c = self.hinges[k], self.weights[k]
+        return (c[0] * x[ids[0]] + c[1] * x[ids[1]]) + (c[2] * x[ids[2]] + c[3] * x[ids[3]])
+
+    @ti.func
+    def hinge_vectors(self, x):
+        """Every hinge's s at x into ``s``."""
+        ti.loop_config(serialize=ti.static(serial(self.hinges)))
+        for k in range(self.hinges.shape[0]):
+            self.s[k] = self.hinge_vector(k, x)
+
+    @ti.func
+    def gather(self, p):
+        """sum over particle p's hinges of c_p s (after ``hinge_vectors``): its gradient."""
+        g = ti.Vector.zero(float, 3)
+        for e in range(self.start[p], self.start[p + 1]):
+            k, slot = self.entries[e][0], self.entries[e][1]
+            g += self.weights[k][slot] * self.s[k]
+        return g
+
+    @ti.func
+    def accumulate(self, x, v, t, f_out):
+        """f_out -= the energy's gradient, gathered per particle (no atomics)."""
+        self.hinge_vectors(x)
+        ti.loop_config(serialize=ti.static(serial(f_out)))
+        for p in range(f_out.shape[0]):
+            f_out[p] -= self.gather(p)
+
+    @ti.func
+    def local_gradient(self, p, x):
+        """Particle p's gradient at x, each of its hinges evaluated afresh (VBD's
+        Gauss-Seidel sweeps move its neighbours between calls)."""
+        g = ti.Vector.zero(float, 3)
+        for e in range(self.start[p], self.start[p + 1]):
+            k, slot = self.entries[e][0], self.entries[e][1]
+            g += self.weights[k][slot] * self.hinge_vector(k, x)
+        return g
+
+    @ti.kernel
+    def _energy(self, x: ti.template(), out: ti.template()) -> ti.f64:
+        out[0] = 0
+        ti.loop_config(serialize=ti.static(serial(self.hinges)))
+        for k in range(self.hinges.shape[0]):
+            s = self.hinge_vector(k, x)
+            out[0] += ti.cast(0.5 * s.dot(s), out.dtype)
+        return ti.cast(out[0], ti.f64)
+
+    def energy(self, x, t, out):
+        """sum over hinges of |s|^2 / 2, in the accumulator's type."""
+        return self._energy(x, out)
+
+    # -- backward Euler, VBD, projective ------------------------------------------------------
+    @ti.kernel
+    def _incremental(self, x: ti.template(), with_grad: ti.template(), acc: ti.template(),
+                     grad: ti.template()):
+        self.hinge_vectors(x)
+        ti.loop_config(serialize=ti.static(serial(self.hinges)))
+        for k in range(self.hinges.shape[0]):
+            e = 0.5 * self.s[k].dot(self.s[k])
+            acc[0] += ti.cast(e, acc.dtype)
+            acc[1] += ti.cast(e, acc.dtype)
+        if ti.static(with_grad):
+            ti.loop_config(serialize=ti.static(serial(grad)))
+            for p in range(grad.shape[0]):
+                grad[p] += self.gather(p)
+
+    def add_incremental(self, x, x0, h, with_grad, acc, grad):
+        """acc[0] += the energy at x (acc[1] its magnitude); with_grad: grad += its
+        gradient. It is conservative: nothing of it depends on x0 or h."""
+        self._incremental(x, with_grad, acc, grad)
+
+    def prepare_blocks(self, x, x0, h):
+        """Nothing: the Hessian is constant."""
+
+    @ti.func
+    def diagonal_block(self, p):
+        return self.diagonal[p] * ti.Matrix.identity(float, 3)
+
+    @ti.kernel
+    def _couplings(self, v: ti.template(), out: ti.template(), first: ti.template()):
+        self.hinge_vectors(v)
+        ti.loop_config(serialize=ti.static(serial(out)))
+        for p in range(out.shape[0]):
+            coupled = self.gather(p) - self.diagonal[p] * v[p]
+            if ti.static(first):
+                out[p] = coupled
+            else:
+                out[p] += coupled
+
+    def add_product(self, v, out, first):
+        """out += (= when ``first``) the Hessian without its diagonal blocks times v."""
+        self._couplings(v, out, first)
