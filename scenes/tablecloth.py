@@ -3,9 +3,8 @@
 The mesh, scenes/assets/round_tablecloth.obj, has rings of vertices, finer towards the rim."""
 import os
 
-import numpy as np
-
 import tcloth
+from tcloth.primitives import disc
 
 CONFIG = {
     "integrator": "symplectic_euler",
@@ -18,44 +17,9 @@ ASSET = os.path.join(os.path.dirname(os.path.abspath(__file__)), "assets",
                      "round_tablecloth.obj")
 
 
-def disc_mesh(rings=16, radius=0.6, grading=0.8):
-    """(vertices (V,3), triangles) of a horizontal disc: a centre vertex and rings of 6 k
-    vertices at radius R (k / rings)^grading, each ring turned against the last and
-    joined to it by triangles in angular order, counter-clockwise seen from above."""
-    pts, faces = [np.zeros(3)], []
-    inner, inner_angle = [0], np.zeros(1)
-    for k in range(1, rings + 1):
-        count = 6 * k
-        angle = 0.37 * k + 2 * np.pi * np.arange(count) / count
-        r = radius * (k / rings) ** grading
-        ring = list(range(len(pts), len(pts) + count))
-        pts += list(np.stack([r * np.cos(angle), np.zeros(count), r * np.sin(angle)], 1))
-        # the inner ring's angles lifted into [angle[0], angle[0] + 2 pi), in order
-        lifted = angle[0] + np.mod(inner_angle - angle[0], 2 * np.pi)
-        order = np.argsort(lifted)
-        inn, ia = [inner[i] for i in order], lifted[order]
-        m = len(inn)
-        i = j = 0
-        while i < count or j < m:
-            next_outer = angle[0] + 2 * np.pi * (i + 1) / count
-            next_inner = ia[j + 1] if j + 1 < m else ia[0] + 2 * np.pi
-            if j == m or (i < count and next_outer <= next_inner):
-                faces.append((ring[i % count], ring[(i + 1) % count], inn[j % m]))
-                i += 1
-            else:
-                faces.append((ring[i % count], inn[(j + 1) % m], inn[j % m]))
-                j += 1
-        inner, inner_angle = ring, angle
-    x = np.array(pts)
-    tri = np.array([f for f in faces if len(set(f)) == 3])
-    up = np.cross(x[tri[:, 1]] - x[tri[:, 0]], x[tri[:, 2]] - x[tri[:, 0]])[:, 1]
-    tri[up < 0] = tri[up < 0][:, ::-1]
-    return x, tri
-
-
 def write_asset(path=ASSET):
     """Write the disc mesh as the OBJ this scene reads."""
-    x, tri = disc_mesh()
+    x, tri = disc(rings=16, radius=0.6, grading=0.8)
     os.makedirs(os.path.dirname(path), exist_ok=True)
     tcloth.write_obj(path, x, tri)
 

@@ -1,0 +1,40 @@
+"""Cusick's drape test: a 30 cm disc of fabric, clamped at its centre between two 18 cm
+discs, hangs into folds; its drape coefficient is the shadow's share of the ring outside
+the support (``tools/drape.py`` measures it for the fabric presets).
+
+    tcloth render scenes/drape.py --set fabric=denim --out out/drape.mp4
+    tcloth view scenes/drape.py --set fabric=fleece
+"""
+import numpy as np
+
+import tcloth
+from tcloth.fabric import preset
+from tcloth.primitives import disc
+
+CONFIG = {
+    "integrator": "backward_euler",
+    "dt": 1 / 60,
+    "steps_per_frame": 1,
+    "frames": 150,
+    "camera": {"eye": (0.38, 0.5, 0.45), "target": (0.0, 0.2, 0.0), "fov": 40.0},
+}
+
+
+def build(fabric="denim", rings=24, radius=0.15, support=0.09, height=0.3):
+    """The specimen (a disc mesh of ``rings`` rings of a preset's name or a Fabric, its
+    warp-weft mean: a mesh has no warp and weft) on its support, a cylinder of radius
+    ``support``; the particles within the support's radius are clamped (pinned)."""
+    vertices, triangles = disc(rings, radius)
+    vertices[:, 1] += height
+    clamped = np.flatnonzero(np.hypot(vertices[:, 0], vertices[:, 2]) <= support + 1e-9)
+    scene = tcloth.Scene(gravity=(0.0, -9.81, 0.0), air_drag=1e-4)
+    scene.add_mesh_cloth(vertices, [tuple(t) for t in triangles.tolist()], pinned=clamped,
+                         fabric=preset(fabric).isotropic())
+    scene.add_cylinder(center=(0.0, 0.5 * (height - 0.004), 0.0), radius=support,
+                       half_height=0.5 * (height - 0.004), thickness=0.002)
+    scene.add_plane(point=(0.0, 0.0, 0.0), normal=(0.0, 1.0, 0.0))
+    return scene
+
+
+if __name__ == "__main__":
+    tcloth.cli.run_script(__file__)
