@@ -154,18 +154,19 @@ def mesh_stiffness(fabric, x, triangles, pairs):
 
 # Measured fabrics: Wang, O'Brien & Ramamoorthi 2011, "Data-driven elastic models for
 # cloth: modeling and measurement", ACM TOG 30(4) 71, as published with ARCSim's material
-# files: density; stretch the zero-strain tangent stiffness along u (warp here) and v;
-# shear; bending ke/4 at the smallest curvature, for folds along u and v (docs/fabric.md).
+# files (the data's u axis taken as the warp): density; stretch along u and v and shear at
+# zero strain; bending at the smallest curvature, bending along u (a fold along v) and
+# along v, converted to rigidities as docs/fabric.md says.
 PRESETS = {
-    "denim": Fabric(0.324, (411.0, 2028.0), 26.7, (1.60e-5, 2.42e-5), name="denim",
+    "denim": Fabric(0.324, (411.0, 2028.0), 26.7, (2.42e-5, 1.60e-5), name="denim",
                     source="Wang et al. 2011, 11oz-black-denim"),
-    "interlock": Fabric(0.187, (33.0, 69.0), 18.4, (5.8e-6, 3.6e-6), name="interlock",
+    "interlock": Fabric(0.187, (33.0, 69.0), 18.4, (3.6e-6, 5.8e-6), name="interlock",
                         source="Wang et al. 2011, gray-interlock (cotton/polyester knit)"),
-    "ponte": Fabric(0.284, (62.0, 88.0), 15.9, (9.1e-6, 9.3e-6), name="ponte",
+    "ponte": Fabric(0.284, (62.0, 88.0), 15.9, (9.3e-6, 9.1e-6), name="ponte",
                     source="Wang et al. 2011, camel-ponte-roma (polyester/rayon knit)"),
-    "polyester": Fabric(0.113, (86.0, 343.0), 7.2, (3.6e-6, 5.1e-6), name="polyester",
+    "polyester": Fabric(0.113, (86.0, 343.0), 7.2, (5.1e-6, 3.6e-6), name="polyester",
                         source="Wang et al. 2011, tango-red-jet-set (polyester)"),
-    "fleece": Fabric(0.228, (303.0, 490.0), 15.1, (2.93e-5, 1.49e-5), name="fleece",
+    "fleece": Fabric(0.228, (303.0, 490.0), 15.1, (1.49e-5, 2.93e-5), name="fleece",
                      source="Wang et al. 2011, pink-ribbon-brown (polyester blanket)"),
 }
 
