@@ -13,6 +13,7 @@ from tcloth.primitives import disc
 
 CONFIG = {
     "integrator": "backward_euler",
+    "options": {"newton_iterations": 50},
     "dt": 1 / 60,
     "steps_per_frame": 1,
     "frames": 150,
