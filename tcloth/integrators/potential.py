@@ -27,9 +27,10 @@ class IncrementalPotential:
         grad: the gradient of the last evaluation with ``with_grad``, (n,) vec3.
         particle_terms: the per-particle potential terms (gravity and drag, colliders).
         springs: the Springs term or None.
-        pair_terms: the other potential terms (self-contact): each gives
-            ``add_incremental`` like the springs, and its Hessian's diagonal blocks
-            (``prepare_blocks``, then the ti.func ``diagonal_block(p)``).
+        pair_terms: the other potential terms (bending, self-contact): each gives
+            ``add_incremental`` like the springs, its Hessian's diagonal blocks
+            (``prepare_blocks``, then the ti.func ``diagonal_block(p)``) and its couplings'
+            product (``add_product``, for CG).
     """
 
     def __init__(self, model):

@@ -16,9 +16,11 @@ Since E is backward Euler's own potential, VBD's iterates converge to backward E
 step (tested), and damping, friction, colliders and the grab spring enter as they do
 there.
 
-Self-contact couples vertices through the contact list, which changes every step: its
-gradient and diagonal blocks are evaluated once per iteration, before the colour passes,
-and held through them (a Jacobi update for contacts, Gauss-Seidel for springs); the
+Hinge bending (``terms/bending.py``) is Gauss-Seidel like the springs: a vertex's
+gradient is summed over its hinges at the current positions, its constant block added,
+and vertices sharing a hinge get different colours. Self-contact couples vertices through
+the contact list, which changes every step: its gradient and diagonal blocks are evaluated
+once per iteration, before the colour passes, and held through them (a Jacobi update); the
 contact stage's guard (``contact/guard.py``) keeps the step free of crossings as for
 every integrator. With ``bounds=True`` every move is kept inside its vertex's
 conservative displacement bound (``contact/bounds.py``, as Offset Geometric Contact

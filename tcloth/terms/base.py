@@ -35,7 +35,11 @@ a pass share one launch):
     ``hessian_block(p, x, x0, h, t)`` -> its 3x3 block of that potential's Hessian.
 
 Springs are a pair term: their per-spring functions live in ``springs.py`` and the
-solvers call them for each spring or grid offset.
+solvers call them for each spring or grid offset. The other potential terms that couple
+particles (bending, self-contact) give backward Euler ``add_incremental``,
+``prepare_blocks``, ``diagonal_block(p)`` and ``add_product`` (their Hessian's couplings
+times a vector, for CG); bending also ``local_gradient(p, x)`` for VBD's Gauss-Seidel
+sweeps and ``constant_hessian`` for projective dynamics' matrix.
 
 A term whose scene data is optional (wind, attraction, self-collision, pressure) names its
 ``Feature`` (below) as ``feature``: the one description of that data from the scene's
