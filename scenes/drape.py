@@ -31,8 +31,8 @@ def build(fabric="denim", rings=24, radius=0.15, support=0.09, height=0.3):
     scene = tcloth.Scene(gravity=(0.0, -9.81, 0.0), air_drag=1e-4)
     scene.add_mesh_cloth(vertices, [tuple(t) for t in triangles.tolist()], pinned=clamped,
                          fabric=preset(fabric).isotropic())
-    scene.add_cylinder(center=(0.0, 0.5 * (height - 0.004), 0.0), radius=support,
-                       half_height=0.5 * (height - 0.004), thickness=0.002)
+    scene.add_cylinder(center=(0.0, 0.5 * (height - 0.01), 0.0), radius=support,
+                       half_height=0.5 * (height - 0.01), thickness=0.002)
     scene.add_plane(point=(0.0, 0.0, 0.0), normal=(0.0, 1.0, 0.0))
     return scene
 

@@ -172,3 +172,26 @@ def test_cantilever_converges_with_resolution():
         coarse, _ = cantilever.simulate("grid", 16.0, 10)
         fine, _ = cantilever.simulate("grid", 16.0, 20)
     assert abs(fine - coarse) < 1.0
+
+
+def test_render_takes_a_fabric_preset_by_name(tmp_path):
+    """``tcloth render scenes/drape.py --set fabric=NAME`` builds the preset's drape; an
+    unknown name is one clear line naming the presets."""
+    import subprocess
+    import sys
+    root = Path(__file__).resolve().parents[1]
+
+    def render(*settings):
+        return subprocess.run(
+            [sys.executable, "-m", "tcloth", "render", str(root / "scenes" / "drape.py"),
+             "--out", str(tmp_path / "frames"), "--frames", "2", "--width", "32",
+             "--height", "24", "--supersample", "1", "--quiet", "--set", "rings=6",
+             *[arg for s in settings for arg in ("--set", s)]],
+            capture_output=True, text=True, timeout=600)
+
+    done = render("fabric=fleece")
+    assert done.returncode == 0, done.stderr
+    assert len(list((tmp_path / "frames").glob("*.png"))) == 2
+    refused = render("fabric=velvet")
+    assert refused.returncode == 2 and "denim" in refused.stderr
+    assert "Traceback" not in refused.stderr
