@@ -76,6 +76,34 @@ def test_xpbd_batches_where_it_projects_nothing(f32):
     assert "projects" in sim.fusion()
 
 
+def test_vbd_batches_without_colliders_or_self_contact(f32):
+    """VBD's step runs in a batch where nothing in it needs Python (no colliders, no
+    self-contact): bit for bit the single steps, with hinge bending, the adaptive initial
+    guess (the gravity guess after a change from outside) and Chebyshev acceleration; with
+    colliders it says why not."""
+    def run_vbd(batch, before, after):
+        scene = every_term_scene(colliders=False)
+        scene.set_bending(1e-4)
+        sim = tcloth.Simulator(scene, "vbd", dt=1e-3, batch=batch)
+        assert (sim.fusion() is None) == batch
+        for n in before:
+            sim.step(n)
+        sim.set_state(velocities=sim.velocities() * 0.5)
+        sim.set_dt(5e-4)
+        for n in after:
+            sim.step(n)
+        return sim
+
+    single = run_vbd(False, [1] * 8, [1] * 12)
+    batched = run_vbd(True, [5, 3], [7, 5])
+    assert batched.time == single.time
+    assert np.array_equal(batched.positions(), single.positions())
+    assert np.array_equal(batched.velocities(), single.velocities())
+    assert single.energy()["bending"] > 0.0
+    sim = tcloth.Simulator(every_term_scene(), "vbd", dt=1e-3)
+    assert "colliders" in sim.fusion()
+
+
 def test_a_bad_step_inside_a_batch_is_named_and_the_state_before_it_kept(f64):
     def exploding(batch):
         scene = tcloth.Scene()

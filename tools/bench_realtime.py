@@ -13,7 +13,8 @@ counts.
 Lines: ``realtime.<n>.<solver>[.<iterations>].{ms_per_step,error_m,max_strain}``.
 
 Usage: python tools/bench_realtime.py [--n 128] [--seconds 1] [--vbd 5,10,20,40]
-                                      [--xpbd 10,40] [--newton-python PATH] [--arch cpu]
+                                      [--xpbd 10,40] [--unbatched] [--newton-python PATH]
+                                      [--arch cpu]
 """
 import argparse
 import json
@@ -79,6 +80,9 @@ def main(argv=None):
     ap.add_argument("--seconds", type=float, default=1.0)
     ap.add_argument("--vbd", default="5,10,20,40")
     ap.add_argument("--xpbd", default="10,40")
+    ap.add_argument("--unbatched", action="store_true",
+                    help="also VBD and XPBD with batch=False (a launch per kernel), side by "
+                         "side with their batches (which run where the cloth is small)")
     ap.add_argument("--newton-python", default=None)
     ap.add_argument("--arch", default="cpu")
     args = ap.parse_args(argv)
@@ -96,10 +100,12 @@ def main(argv=None):
               flush=True)
     for integrator in ("backward_euler", "projective"):
         report(integrator, *run(n, steps, integrator))
-    for iterations in (int(k) for k in args.vbd.split(",") if k):
-        report(f"vbd.{iterations}", *run(n, steps, "vbd", iterations=iterations))
-    for iterations in (int(k) for k in args.xpbd.split(",") if k):
-        report(f"xpbd.{iterations}", *run(n, steps, "xpbd", iterations=iterations))
+    for solver in ("vbd", "xpbd"):
+        for iterations in (int(k) for k in getattr(args, solver).split(",") if k):
+            report(f"{solver}.{iterations}", *run(n, steps, solver, iterations=iterations))
+            if args.unbatched:
+                report(f"{solver}.{iterations}.unbatched",
+                       *run(n, steps, solver, batch=False, iterations=iterations))
     if args.newton_python:
         for solver, counts in (("vbd", args.vbd), ("xpbd", args.xpbd)):
             for iterations in (int(k) for k in counts.split(",") if k):

@@ -92,6 +92,11 @@ class IncrementalPotential:
     @ti.kernel
     def _begin_particles(self, x: ti.template(), v: ti.template(), h: float,
                          x_start: ti.template()):
+        self.begin_particles(x, v, h, x_start)
+
+    @ti.func
+    def begin_particles(self, x, v, h, x_start):
+        """x0 = x, x_hat = x + h v, x_start = x_hat."""
         ti.loop_config(serialize=ti.static(serial(x)))
         for p in range(x.shape[0]):
             self.x0[p] = x[p]

@@ -28,6 +28,10 @@ does), detected at the step's start and again after an iteration that clamped a 
 so the iterations never take cloth through cloth, at the price of capping how fast
 cloth near other cloth can move.
 
+Where a scene has neither colliders nor self-contact, ``step(n)`` runs its n steps in one
+kernel launch (``advance``, ``batch.py``), the same functions as the launches from Python
+and so the same numbers.
+
 Chebyshev acceleration (the paper's Section 3.7; Wang 2015) mixes each iterate with the
 one two iterations back, x^(n) = w_n (x^(n) - x^(n-2)) + x^(n-2), with w_1 = 1,
 w_2 = 2 / (2 - rho^2), w_n = 4 / (4 - rho^2 w_(n-1)), rho the estimated spectral radius of
@@ -40,11 +44,14 @@ from ..contact.bounds import DisplacementBounds
 from ..errors import SceneError
 from ..runtime import serial
 from ..terms import springs as spring_term
+from ..terms.colliders import Colliders
 from ..terms.springs import Springs
 from .base import ForceCache, Integrator
+from .linalg import copy
 from .potential import IncrementalPotential
 
 GUESSES = ("start", "inertia", "gravity", "adaptive")
+GRAVITY_GUESS = GUESSES.index("gravity")
 
 
 def colour_graph(start, neighbours, n):
@@ -58,6 +65,15 @@ def colour_graph(start, neighbours, n):
         free[taken[(taken >= 0) & (taken <= len(taken))]] = False
         colours[i] = int(np.argmax(free))
     return colours
+
+
+def chebyshev(rho, iterations):
+    """(iterations + 1,) f64: Chebyshev's weight w_n for iteration n = 1..iterations (w_1 = 1,
+    w_2 = 2 / (2 - rho^2), w_n = 4 / (4 - rho^2 w_(n-1))); entry 0 unused."""
+    omega = np.ones(iterations + 1)
+    for n in range(2, iterations + 1):
+        omega[n] = 2.0 / (2.0 - rho * rho) if n == 2 else 4.0 / (4.0 - rho * rho * omega[n - 1])
+    return omega
 
 
 @ti.data_oriented
@@ -127,6 +143,11 @@ class VBD(ForceCache, Integrator):
         self.bounded = self.bounds is not None
         self.track_potential = False
         self.stats = {}
+        self.guess_kind = GUESSES.index(opt["initial_guess"])
+        self.omegas = ti.field(ti.f64, shape=opt["iterations"] + 1)
+        self.omegas.from_numpy(chebyshev(float(opt["rho"]), opt["iterations"]))
+        if self.has_springs:
+            self.springs.implicit_fields()
 
     def _colouring(self, n):
         """(order, colour_start): the particles sorted by colour as an i32 field, and the
@@ -163,16 +184,14 @@ class VBD(ForceCache, Integrator):
             self._clamp(x)
         energies = [e.evaluate(x, h, t1, False)[0]] if self.track_potential else []
         rho = float(opt["rho"])
-        omega = 1.0
+        omegas = self.omegas.to_numpy()
         for it in range(1, opt["iterations"] + 1):
             if rho > 0.0:
-                omega = 1.0 if it == 1 else (2.0 / (2.0 - rho * rho) if it == 2
-                                             else 4.0 / (4.0 - rho * rho * omega))
                 self._remember(x)
             self._contacts(x, h)
             self._sweep(x, h, t1)
             if rho > 0.0 and it > 1:
-                self._accelerate(x, omega)
+                self._accelerate(x, omegas[it])
             if self.bounds is not None and self.bounds.any_clamped() and it < opt["iterations"]:
                 if self.bounds.detect(x):
                     for term in self.pair_terms:        # the list's rows changed
@@ -183,6 +202,47 @@ class VBD(ForceCache, Integrator):
         self._cached = state_out
         state_out.t = t1
         self.stats = {"iterations": opt["iterations"], "potential": energies}
+
+    def batch_obstacle(self):
+        """None where a step can run inside a batch of substeps (``batch.py``): not with
+        self-contact (gathered from Python every iteration) or colliders (their contacts
+        at the step's start are stored by a launch)."""
+        if self.pair_terms:
+            return "vbd gathers the self-contacts from Python every iteration"
+        if any(isinstance(t, Colliders) for t in self.potential.terms):
+            return "vbd stores the colliders' contacts at each step's start with a launch"
+        for term in self.potential.terms:
+            if term.batch_obstacle() is not None:
+                return term.batch_obstacle()
+        return self.potential.lagged.batch_obstacle()
+
+    @ti.func
+    def advance(self, a, b, t, dt, fresh):
+        """``simulate`` of State a in place (b.v holds v0, b.x the unused x_hat copy), as a
+        ``ti.func`` for the batches (where ``batch_obstacle`` is None): the same
+        functions in the same order. Its iteration count is compiled in:
+        ``set_integrator`` changes it."""
+        h = ti.cast(dt, float)
+        copy(b.v, a.v)
+        self.potential.begin_particles(a.x, a.v, h, b.x)
+        if ti.static(self.has_springs):
+            self.springs.begin_directions(self.potential.x0)
+        if ti.static(self.potential.has_lagged):
+            self.potential.lagged.accumulate(a.x, a.v, ti.cast(t, float), self.potential.f_lag)
+        kind = self.guess_kind
+        if ti.static(self.options["initial_guess"] == "adaptive"):
+            if fresh:
+                kind = GRAVITY_GUESS
+        self.guess(a.x, a.f, h, kind)
+        t1 = ti.cast(t + dt, float)
+        for it in range(1, self.options["iterations"] + 1):
+            if ti.static(self.options["rho"] > 0.0):
+                self.remember(a.x)
+            self.sweep(a.x, h, t1)
+            if ti.static(self.options["rho"] > 0.0):
+                if it > 1:
+                    self.accelerate(a.x, ti.cast(self.omegas[it], float))
+        self.finish(a.x, b.v, ti.cast(1.0 / dt, float), a.v, a.f)
 
     def _contacts(self, x, h):
         """The pair terms' (self-contact's) gradient and diagonal blocks at x, held through
@@ -196,6 +256,10 @@ class VBD(ForceCache, Integrator):
 
     @ti.kernel
     def _guess(self, x: ti.template(), f: ti.template(), h: float, kind: ti.i32):
+        self.guess(x, f, h, kind)
+
+    @ti.func
+    def guess(self, x, f, h, kind):
         """x at the initial guess (GUESSES[kind]; "adaptive" reads the last step's m a in
         f); pinned particles at x_hat = x0 + h v0 (they move with their velocity)."""
         g = ti.Vector([self.params[0], self.params[1], self.params[2]])
@@ -244,6 +308,10 @@ class VBD(ForceCache, Integrator):
 
     @ti.kernel
     def _sweep(self, x: ti.template(), h: float, t: float):
+        self.sweep(x, h, t)
+
+    @ti.func
+    def sweep(self, x, h, t):
         """One iteration: a Newton step on each free vertex, colour after colour, the
         vertices of a colour in parallel (one launch: the colours' loops are unrolled,
         each a top-level loop)."""
@@ -290,6 +358,10 @@ class VBD(ForceCache, Integrator):
 
     @ti.kernel
     def _remember(self, x: ti.template()):
+        self.remember(x)
+
+    @ti.func
+    def remember(self, x):
         """prev2 <- prev <- x: the iterates one and two iterations back."""
         ti.loop_config(serialize=ti.static(serial(x)))
         for p in range(x.shape[0]):
@@ -298,6 +370,10 @@ class VBD(ForceCache, Integrator):
 
     @ti.kernel
     def _accelerate(self, x: ti.template(), omega: float):
+        self.accelerate(x, omega)
+
+    @ti.func
+    def accelerate(self, x, omega):
         ti.loop_config(serialize=ti.static(serial(x)))
         for p in range(x.shape[0]):
             if self.potential.inv_mass[p] > 0.0:
@@ -306,6 +382,10 @@ class VBD(ForceCache, Integrator):
     @ti.kernel
     def _finish(self, x: ti.template(), v0: ti.template(), inv_h: float,
                 v_out: ti.template(), f_out: ti.template()):
+        self.finish(x, v0, inv_h, v_out, f_out)
+
+    @ti.func
+    def finish(self, x, v0, inv_h, v_out, f_out):
         """v = (x - x0) / h, and f = m (v - v0) / h: the step's net force, which the
         adaptive guess of the next step reads (``holds_forces``)."""
         ti.loop_config(serialize=ti.static(serial(x)))

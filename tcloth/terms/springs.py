@@ -204,6 +204,12 @@ def spring_sums(x: ti.template(), pairs: ti.template(), ks: ti.template(),
 # -- backward Euler over the spring list ------------------------------------------------------
 @ti.kernel
 def begin_springs(x0: ti.template(), pairs: ti.template(), count: ti.i32, d0_out: ti.template()):
+    directions(x0, pairs, count, d0_out)
+
+
+@ti.func
+def directions(x0, pairs, count, d0_out):
+    """Each spring's unit direction at positions x0 into d0_out."""
     ti.loop_config(serialize=ti.static(serial(pairs)))
     for s in range(count):
         d0_out[s] = direction(x0[pairs[s][0]], x0[pairs[s][1]])
@@ -333,12 +339,21 @@ class Springs(Term):
         return self._adjacency
 
     # -- backward Euler ----------------------------------------------------------------------
-    def begin_step(self, x0, t0):
-        """The spring directions d0 at the step's start (``direction_at``)."""
+    def implicit_fields(self):
+        """(d0, per-spring gradients): backward Euler's fields, made on first use."""
         if self._implicit is None:
             real = runtime.real()
             self._implicit = tuple(ti.Vector.field(3, real, shape=self.count) for _ in range(2))
-        begin_springs(x0, self.pairs, self.count, self._implicit[0])
+        return self._implicit
+
+    def begin_step(self, x0, t0):
+        """The spring directions d0 at the step's start (``direction_at``)."""
+        begin_springs(x0, self.pairs, self.count, self.implicit_fields()[0])
+
+    @ti.func
+    def begin_directions(self, x0):
+        """``begin_step`` as a ``ti.func`` (``implicit_fields`` made before it compiles)."""
+        directions(x0, self.pairs, self.count, self._implicit[0])
 
     @property
     def d0(self):
