@@ -4,10 +4,9 @@ import numpy as np
 import pytest
 
 import tcloth
-from tcloth import SceneError
+from tcloth import SceneError, primitives
 from tcloth.builders import fan, mesh_springs
 
-from conftest import scene_module
 
 FORMS = """# every accepted line form
 mtllib cloth.mtl
@@ -171,8 +170,8 @@ def test_wind_on_a_face_on_triangle_is_drag_area_u_abs_u_in_thirds(f64):
 
 
 def disc(rings=6, radius=0.4):
-    """scenes/tablecloth.py's irregular disc mesh: rings of 6 k vertices."""
-    return scene_module("tablecloth").disc_mesh(rings=rings, radius=radius)
+    """The tablecloth scene's irregular disc mesh: rings of 6 k vertices, finer outwards."""
+    return primitives.disc(rings, radius, grading=0.8)
 
 
 def test_hanging_mesh_cloth_reaches_equilibrium_where_springs_balance_gravity(f64):

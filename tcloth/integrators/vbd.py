@@ -184,7 +184,7 @@ class VBD(ForceCache, Integrator):
             self._clamp(x)
         energies = [e.evaluate(x, h, t1, False)[0]] if self.track_potential else []
         rho = float(opt["rho"])
-        omegas = self.omegas.to_numpy()
+        omegas = chebyshev(rho, opt["iterations"])
         for it in range(1, opt["iterations"] + 1):
             if rho > 0.0:
                 self._remember(x)
