@@ -63,7 +63,8 @@ class BendingFeature(Feature):
 
         Args:
             rigidity: N m >= 0: one number, a (warp, weft) pair (grid cloths: warp bends
-                along the grid's i, weft along j) or one of those per cloth in ``cloths``.
+                along the grid's i, weft along j), or a (len(cloths), 2) array of pairs,
+                one per cloth.
             cloths: indices into ``scene.cloths`` (default: every cloth).
             rest_positions: None (the scene's positions now), or (N,3) positions of all
                 the scene's particles at which the cloths are flat and unbent.
