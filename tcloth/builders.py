@@ -299,7 +299,7 @@ def add_cloth(scene, resolution, size, center, plane, mass, structural, shear, f
 def _fabric_grid(scene, fabric, resolution, spacing, plane, positions, pinned):
     """A grid cloth of a fabric: area-weighted masses, border-halved structural and shear
     springs with damping as a ratio of critical, hinge bending (``fabric.py``)."""
-    k1, k2, kd = fabric.grid_stiffness(*spacing)
+    fabric.grid_stiffness(*spacing)        # refuses an impossible shear before anything is added
     cloth = Cloth(scene.num_particles, resolution, spacing, {}, plane, stencil=False)
     masses = fabrics.grid_masses(fabric, *resolution, *spacing).ravel()
     scene.add_particles(positions, mass=masses, pinned=pinned)

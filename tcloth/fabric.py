@@ -81,16 +81,16 @@ class Fabric:
                       float(np.sqrt(np.prod(self.bending))), self.damping,
                       name=f"{self.name} (warp-weft mean)", source=self.source)
 
-    def moduli(self, dx, dy):
+    def moduli(self):
         """(C11, C22, C12) N/m of the grid membrane with this fabric's stretch and shear
-        (module docstring)."""
+        (module docstring; they do not depend on the cell's shape)."""
         e1, e2 = self.stretch
         root = np.sqrt(1.0 + 4.0 * self.shear ** 2 / (e1 * e2))
         return 0.5 * e1 * (1.0 + root), 0.5 * e2 * (1.0 + root), self.shear
 
     def grid_stiffness(self, dx, dy):
         """(k1, k2, k_diagonal) N/m of an interior grid cell's springs."""
-        c11, c22, g = self.moduli(dx, dy)
+        c11, c22, g = self.moduli()
         diagonal = g * (dx * dx + dy * dy) / (2.0 * dx * dy)
         k1 = (c11 - g * dx * dx / (dy * dy)) * dy / dx
         k2 = (c22 - g * dy * dy / (dx * dx)) * dx / dy
