@@ -205,9 +205,7 @@ def add_mesh_cloth(scene, vertices, faces, mass, structural, shear, flexion, pin
         raise SceneError(f"pinned must be vertex ids in [0, {n}) (got {fmt(pinned)})")
     pin[ids] = True
     if fabric is not None:       # checked before anything is added
-        pairs = _pairs(np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]],
-                                       triangles[:, [2, 0]]]))
-        ks = fabrics.mesh_stiffness(fabric, x, triangles, pairs)
+        pairs, ks = fabrics.mesh_springs(fabric, x, triangles)
         damp = fabrics.damping(fabric, ks, masses, pairs)
         hinge_ids, _, _, fold = hinges.hinge_table(triangles, x)
         hinges.check_flat(hinge_ids + scene.num_particles, fold)
@@ -299,12 +297,12 @@ def add_cloth(scene, resolution, size, center, plane, mass, structural, shear, f
 def _fabric_grid(scene, fabric, resolution, spacing, plane, positions, pinned):
     """A grid cloth of a fabric: area-weighted masses, border-halved structural and shear
     springs with damping as a ratio of critical, hinge bending (``fabric.py``)."""
-    fabric.grid_stiffness(*spacing)        # refuses an impossible shear before anything is added
     cloth = Cloth(scene.num_particles, resolution, spacing, {}, plane, stencil=False)
+    springs = fabrics.grid_springs(fabric, cloth)   # may refuse: before anything is added
     masses = fabrics.grid_masses(fabric, *resolution, *spacing).ravel()
     scene.add_particles(positions, mass=masses, pinned=pinned)
     m = scene.masses
-    for family, (pairs, ks) in fabrics.grid_springs(fabric, cloth).items():
+    for family, (pairs, ks) in springs.items():
         damp = fabrics.damping(fabric, ks, m, pairs)
         cloth.springs[family] = scene.add_springs(pairs, ks, damp, kind=family)
         cloth.params[family] = (float(np.max(ks)), float(np.max(damp)))

@@ -26,17 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import SceneError
-from .validate import fmt
-
-
-def _positive_pair(name, value, minimum=0.0):
-    """(warp, weft) from a number or a pair, each finite and > minimum."""
-    pair = np.ravel(np.asarray(value, dtype=np.float64)) if np.ndim(value) else \
-        np.array([float(value)] * 2)
-    if pair.shape != (2,) or not np.all(np.isfinite(pair)) or np.any(pair <= minimum):
-        raise SceneError(f"{name} must be a number > {minimum:g} or a (warp, weft) pair of "
-                         f"them (got {fmt(value)})")
-    return float(pair[0]), float(pair[1])
+from .validate import as_warp_weft, fmt
 
 
 @dataclass(frozen=True)
@@ -63,13 +53,10 @@ class Fabric:
     def __post_init__(self):
         if not (np.isfinite(self.density) and self.density > 0):
             raise SceneError(f"density must be kg/m^2 > 0 (got {fmt(self.density)})")
-        object.__setattr__(self, "stretch", _positive_pair("stretch", self.stretch))
+        object.__setattr__(self, "stretch", as_warp_weft("stretch", self.stretch, strict=True))
         if not (np.isfinite(self.shear) and self.shear > 0):
             raise SceneError(f"shear must be N/m > 0 (got {fmt(self.shear)})")
-        pair = _positive_pair("bending", self.bending, minimum=-1.0)
-        if min(pair) < 0:
-            raise SceneError(f"bending must be N m >= 0 (got {fmt(self.bending)})")
-        object.__setattr__(self, "bending", pair)
+        object.__setattr__(self, "bending", as_warp_weft("bending", self.bending))
         if not (np.isfinite(self.damping) and self.damping >= 0):
             raise SceneError(f"damping must be a ratio of critical >= 0 "
                              f"(got {fmt(self.damping)})")
@@ -121,21 +108,19 @@ def grid_springs(fabric, cloth):
     flexion: the fabric bends through hinges)."""
     (nx, ny), (dx, dy) = cloth.resolution, cloth.spacing
     k1, k2, kd = fabric.grid_stiffness(dx, dy)
-    p = cloth.particles
-    along_i = np.stack([p[:, :-1].ravel(), p[:, 1:].ravel()], 1)
-    along_j = np.stack([p[:-1, :].ravel(), p[1:, :].ravel()], 1)
-    row = np.repeat(np.arange(ny), nx - 1)
-    column = np.tile(np.arange(nx), ny - 1)
+    row = np.repeat(np.arange(ny), nx - 1)            # grid_pairs: the springs along i,
+    column = np.tile(np.arange(nx), ny - 1)           # then those along j, row by row
     ks_i = np.where((row == 0) | (row == ny - 1), 0.5 * k1, k1)
     ks_j = np.where((column == 0) | (column == nx - 1), 0.5 * k2, k2)
     shear = cloth.grid_pairs("shear")
-    return {"structural": (np.concatenate([along_i, along_j]), np.concatenate([ks_i, ks_j])),
+    return {"structural": (cloth.grid_pairs("structural"), np.concatenate([ks_i, ks_j])),
             "shear": (shear, np.full(len(shear), kd))}
 
 
-def mesh_stiffness(fabric, x, triangles, pairs):
-    """Van Gelder's k_e = E sum_t A_t / |e|^2 for each edge pair (M,2) of triangles (T,3)
-    at positions x; one stretch stiffness E (a mesh has no warp and weft)."""
+def mesh_springs(fabric, x, triangles):
+    """(pairs (M,2), k_s (M,)): a spring on every edge of triangles (T,3), each pair sorted
+    and the pairs unique, with Van Gelder's k_e = E sum_t A_t / |e|^2 at positions x; one
+    stretch stiffness E (a mesh has no warp and weft)."""
     e1, e2 = fabric.stretch
     if e1 != e2:
         raise SceneError(f"a (warp, weft) stretch needs a grid cloth: a mesh cloth has no "
@@ -144,12 +129,10 @@ def mesh_stiffness(fabric, x, triangles, pairs):
     area = 0.5 * np.linalg.norm(np.cross(x[tris[:, 1]] - x[tris[:, 0]],
                                          x[tris[:, 2]] - x[tris[:, 0]]), axis=1)
     edges = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), 1)
-    total = {}
-    for (a, b), A in zip(edges.tolist(), np.tile(area, 3)):
-        total[(a, b)] = total.get((a, b), 0.0) + A
+    pairs, inverse = np.unique(edges, axis=0, return_inverse=True)
+    shared = np.bincount(inverse.ravel(), weights=np.tile(area, 3), minlength=len(pairs))
     lengths2 = np.sum((x[pairs[:, 0]] - x[pairs[:, 1]]) ** 2, axis=1)
-    shared = np.array([total.get((min(a, b), max(a, b)), 0.0) for a, b in pairs.tolist()])
-    return e1 * shared / lengths2
+    return pairs, e1 * shared / lengths2
 
 
 # Measured fabrics: Wang, O'Brien & Ramamoorthi 2011, "Data-driven elastic models for

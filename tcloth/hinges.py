@@ -3,7 +3,6 @@ derives them and simulates the energy; the builders check a fabric's mesh with t
 import numpy as np
 
 from .errors import SceneError
-from .validate import fmt
 
 FOLD_TOLERANCE = 1e-3        # the largest rest fold (radians) a hinge may have
 
@@ -21,11 +20,9 @@ def hinge_table(triangles, x):
     _, inverse, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
     inverse = inverse.ravel()
     order = np.argsort(inverse, kind="stable")
-    pair_start = np.flatnonzero(counts[inverse[order]] == 2)
-    first = order[pair_start]
-    shared = pair_start[1:][np.diff(inverse[order][pair_start]) == 0] if len(pair_start) else []
-    first, second = order[np.asarray(shared, dtype=np.int64) - 1], \
-        order[np.asarray(shared, dtype=np.int64)]
+    edge = inverse[order]                   # a shared edge's two sides are neighbours here
+    same = np.flatnonzero((edge[1:] == edge[:-1]) & (counts[edge[1:]] == 2))
+    first, second = order[same], order[same + 1]
     ids = np.stack([a[first], b[first], c[first], c[second]], 1)
     x0, x1, x2, x3 = (x[ids[:, k]] for k in range(4))
     e0, e1, e2, e3, e4 = x1 - x0, x2 - x0, x3 - x0, x2 - x1, x3 - x1
@@ -40,16 +37,6 @@ def hinge_table(triangles, x):
     cosine = np.einsum("ij,ij->i", n1, n2) / (np.linalg.norm(n1, axis=1)
                                              * np.linalg.norm(n2, axis=1))
     return ids, K, area, np.arccos(np.clip(cosine, -1.0, 1.0))
-
-
-def rigidity_pair(value, name):
-    """(warp, weft) N m from a number or a pair, each >= 0."""
-    r = np.ravel(np.asarray(value, dtype=np.float64)) if np.ndim(value) else \
-        np.array([float(value)] * 2)
-    if r.shape != (2,) or not np.all(np.isfinite(r)) or np.any(r < 0):
-        raise SceneError(f"{name} must be a bending rigidity >= 0 in N m, or a (warp, weft) "
-                         f"pair of them (got {fmt(value)})")
-    return r
 
 
 def check_flat(ids, fold):
@@ -81,7 +68,7 @@ def cloth_hinges(cloth, rest, rigidity):
         B = 0.5 * np.where(di[leg] == 0, rigidity[0], rigidity[1])
     elif rigidity[0] != rigidity[1]:
         raise SceneError(f"a (warp, weft) bending rigidity needs a grid cloth: a mesh cloth "
-                         f"has no warp and weft (got {rigidity.tolist()})")
+                         f"has no warp and weft (got {list(rigidity)})")
     else:
         B = np.full(len(ids), rigidity[0])
     return ids, np.sqrt(B / area)[:, None] * K

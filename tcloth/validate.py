@@ -54,6 +54,18 @@ def as_scalar(name, value, minimum=None, strict=False):
     return x
 
 
+def as_warp_weft(name, value, minimum=0.0, strict=False):
+    """(warp, weft) floats from one number (both) or a pair, finite and bounded below
+    (``minimum`` inclusive unless ``strict``)."""
+    pair = np.ravel(np.asarray(value, dtype=np.float64)) if np.ndim(value) else \
+        np.array([float(value)] * 2)
+    low = pair <= minimum if strict else pair < minimum
+    if pair.shape != (2,) or not np.all(np.isfinite(pair)) or np.any(low):
+        raise SceneError(f"{name} must be a number {'>' if strict else '>='} {minimum:g} or a "
+                         f"(warp, weft) pair of them (got {fmt(value)})")
+    return float(pair[0]), float(pair[1])
+
+
 def as_per_item(name, value, n, minimum=None, strict=False):
     """A scalar broadcast to (n,), or an (n,) array; finite, bounded below."""
     try:

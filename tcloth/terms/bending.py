@@ -45,9 +45,9 @@ import taichi as ti
 
 from .. import runtime
 from ..errors import SceneError
-from ..hinges import cloth_hinges, rigidity_pair
+from ..hinges import cloth_hinges
 from ..runtime import serial
-from ..validate import fmt
+from ..validate import as_warp_weft, fmt
 from .base import Feature, Term
 
 class BendingFeature(Feature):
@@ -81,7 +81,7 @@ class BendingFeature(Feature):
         if per_cloth and np.shape(r)[0] != len(ids):
             raise SceneError(f"rigidity must be one value or pair per cloth ({len(ids)}) "
                              f"(got {fmt(rigidity)})")
-        rigidities = np.array([rigidity_pair(r[k] if per_cloth else r, "rigidity")
+        rigidities = np.array([as_warp_weft("rigidity", r[k] if per_cloth else r)
                                for k in range(len(ids))])
         rest = scene.positions if rest_positions is None else \
             np.asarray(rest_positions, dtype=np.float64)
