@@ -4,7 +4,8 @@ substeps, Macklin et al. 2019, "Small Steps in Physics Simulation").
 The springs are compliant distance constraints C_s = |x_i - x_j| - l0 with compliance
 1/k_s and damping k_d: the same springs, not new physics. Hinge bending
 (``terms/bending.py``, energy |s|^2 / 2 with s = sum_i c_i x_i linear) is the vector
-constraint s = 0 with compliance 1, its hinges coloured like the springs. A step of h (dt / substeps):
+constraint s = 0 with compliance 1, its hinges coloured like the springs (``spring_pass``
+takes both). A step of h (dt / substeps):
 
   1. the other forces (gravity, drag, wind, attraction, the grab spring) at the start
      move every velocity, v += h f / m, and x_prev = x, x += h v (pinned particles move
