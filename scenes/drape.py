@@ -22,15 +22,16 @@ CONFIG = {
 
 
 def build(fabric="denim", rings=24, radius=0.15, support=0.09, height=0.3):
-    """The specimen (a disc mesh of ``rings`` rings of a preset's name or a Fabric, its
-    warp-weft mean: a mesh has no warp and weft) on its support, a cylinder of radius
-    ``support``; the particles within the support's radius are clamped (pinned)."""
+    """The specimen (a disc mesh of ``rings`` rings of a preset's name or a Fabric, warp
+    along x, with the mean of its warp and weft bending: a mesh's hinges take one) on its
+    support, a cylinder of radius ``support``; the particles within the support's radius
+    are clamped (pinned)."""
     vertices, triangles = disc(rings, radius)
     vertices[:, 1] += height
     clamped = np.flatnonzero(np.hypot(vertices[:, 0], vertices[:, 2]) <= support + 1e-9)
     scene = tcloth.Scene(gravity=(0.0, -9.81, 0.0), air_drag=1e-4)
     scene.add_mesh_cloth(vertices, [tuple(t) for t in triangles.tolist()], pinned=clamped,
-                         fabric=preset(fabric).isotropic())
+                         fabric=preset(fabric).mean_bending())
     scene.add_cylinder(center=(0.0, 0.5 * (height - 0.01), 0.0), radius=support,
                        half_height=0.5 * (height - 0.01), thickness=0.002)
     scene.add_plane(point=(0.0, 0.0, 0.0), normal=(0.0, 1.0, 0.0))

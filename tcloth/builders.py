@@ -151,7 +151,7 @@ def mesh_springs(faces, triangles):
 def add_mesh_cloth(scene, vertices, faces, mass, structural, shear, flexion, pinned,
                    fabric=None):
     """``Scene.add_mesh_cloth``: particles at the vertices, springs from the faces (a
-    fabric's: Van Gelder's edge springs and hinge bending, ``fabric.py``)."""
+    fabric's: the triangle membrane and hinge bending, ``fabric.py``)."""
     fabric = None if fabric is None else fabrics.preset(fabric)
     given = classic(fabric, mass=mass, structural=structural, shear=shear, flexion=flexion)
     if isinstance(vertices, (str, os.PathLike)):
@@ -187,7 +187,7 @@ def add_mesh_cloth(scene, vertices, faces, mass, structural, shear, flexion, pin
     lonely = np.flatnonzero(vertex_area == 0.0)
     if len(lonely):
         raise SceneError(f"vertex {lonely[0]} is in no face (every vertex must be)")
-    springs = mesh_springs(checked, triangles)
+    springs = mesh_springs(checked, triangles)      # refuses a mesh that is not manifold
     if fabric is not None:
         masses = fabric.density * vertex_area
         params = {"structural": None, "shear": None, "flexion": None}
@@ -204,19 +204,13 @@ def add_mesh_cloth(scene, vertices, faces, mass, structural, shear, flexion, pin
     if ids.ndim != 1 or (len(ids) and (ids.min() < 0 or ids.max() >= n)):
         raise SceneError(f"pinned must be vertex ids in [0, {n}) (got {fmt(pinned)})")
     pin[ids] = True
-    if fabric is not None:       # checked before anything is added
-        pairs, ks = fabrics.mesh_springs(fabric, x, triangles)
-        damp = fabrics.damping(fabric, ks, masses, pairs)
-        hinge_ids, _, _, fold = hinges.hinge_table(triangles, x)
-        hinges.check_flat(hinge_ids + scene.num_particles, fold)
+    if fabric is not None and max(fabric.bending) > 0:     # checked before anything is added
+        hinges.cloth_hinges(MeshCloth(scene.num_particles, n, triangles, params),
+                            np.concatenate([scene.positions, x]), fabric.bending)
     cloth = MeshCloth(scene.num_particles, n, triangles, params)
     scene.add_particles(x, mass=masses, pinned=pin)
     if fabric is not None:
-        cloth.springs["structural"] = scene.add_springs(pairs + cloth.offset, ks, damp,
-                                                        kind="structural")
-        cloth.params["structural"] = (float(np.max(ks)), float(np.max(damp)))
-        cloth.springs.update(shear=np.zeros(0, dtype=np.int64),
-                             flexion=np.zeros(0, dtype=np.int64))
+        cloth.springs.update({family: np.zeros(0, dtype=np.int64) for family in params})
         return _finish_fabric(scene, cloth, fabric)
     for family, pairs in springs.items():
         kskd = params[family]
@@ -312,18 +306,30 @@ def _fabric_grid(scene, fabric, resolution, spacing, plane, positions, pinned):
 
 
 def _finish_fabric(scene, cloth, fabric):
-    """Append a fabric's cloth and add it, flat at its positions now, to the scene's
-    hinge bending (``Scene.set_bending``)."""
+    """Append a fabric's cloth and add it, at rest at its positions now, to the scene's
+    hinge bending (``Scene.set_bending``) and, a mesh cloth, to its triangle membrane
+    (``Scene.set_membrane``)."""
     cloth.fabric = fabric
     scene.cloths.append(cloth)
     if max(fabric.bending) > 0:
-        old, rest = scene.bending, scene.positions
-        rigidity, cloths = [fabric.bending], [len(scene.cloths) - 1]
-        if old is not None:
-            rest[:len(old["rest_positions"])] = old["rest_positions"]
-            rigidity, cloths = list(old["rigidity"]) + rigidity, old["cloths"] + cloths
-        scene.set_bending(rigidity, cloths=cloths, rest_positions=rest)
+        _join(scene, "bending", {"rigidity": fabric.bending})
+    if not cloth.is_grid:
+        _join(scene, "membrane", {"stretch": fabric.stretch, "shear": fabric.shear,
+                                  "damping": fabric.damping})
     return cloth
+
+
+def _join(scene, feature, values):
+    """Add the scene's last cloth, at rest at its positions now, to the per-cloth
+    feature ``feature`` (set_bending, set_membrane) with its values."""
+    old, rest = getattr(scene, feature), scene.positions
+    values = {key: [value] for key, value in values.items()}
+    cloths = [len(scene.cloths) - 1]
+    if old is not None:
+        rest[:len(old["rest_positions"])] = old["rest_positions"]
+        values = {key: list(old[key]) + value for key, value in values.items()}
+        cloths = old["cloths"] + cloths
+    getattr(scene, "set_" + feature)(**values, cloths=cloths, rest_positions=rest)
 
 
 def add_rope(scene, start, end, segments, mass, stiffness, damping, pinned):

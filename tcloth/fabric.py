@@ -14,12 +14,15 @@ C12^2 / C22, E2 = C22 - C12^2 / C11) fix k1, k2. Structural springs on the cloth
 carry half a cell and get half the stiffness; each particle carries the fabric's density
 times its share of the area (a quarter of each cell around it).
 
-A mesh cloth's springs are its triangles' edges. Van Gelder's (1998) stiffness
-k_e = E sum over the edge's triangles of A_t / |e|^2 gives an equilateral mesh the
-uniaxial stiffness E exactly, with Poisson's ratio 1/3 and so shear stiffness 3E/8: the
-edges cannot hold a separate shear stiffness, and the fabric's shear is not used there.
+A mesh cloth has no springs: edge springs cannot hold a separate shear stiffness (Van
+Gelder's 1998 stiffness k_e = E sum over the edge's triangles of A_t / |e|^2 gives an
+equilateral mesh the uniaxial stiffness E with Poisson's ratio 1/3 and so shear 3E/8,
+where fabric shears at a few percent of its stretch). Its triangles carry the fabric's
+stretch (warp along the world x axis) and shear as a membrane (``terms/membrane.py``,
+Poisson's ratio 0), and each particle an equal share of each face around it.
 
-Damping is a ratio of critical per spring: k_d = zeta 2 sqrt(k_s m_i m_j / (m_i + m_j)).
+Damping is a ratio of critical per spring: k_d = zeta 2 sqrt(k_s m_i m_j / (m_i + m_j)),
+and per membrane condition against the stiffer stretch (``terms/membrane.py``).
 """
 from dataclasses import dataclass
 
@@ -36,10 +39,10 @@ class Fabric:
     Args:
         density: areal density, kg/m^2 > 0.
         stretch: uniaxial stretch stiffness per width, N/m > 0: a number or (warp, weft).
-        shear: in-plane shear stiffness per width, N/m > 0 (grid cloths).
+        shear: in-plane shear stiffness per width, N/m > 0.
         bending: bending rigidity per width, N m >= 0: a number or (warp, weft) (grid
             cloths; a mesh cloth takes one number).
-        damping: the springs' damping as a ratio of critical, >= 0.
+        damping: the springs' and the membrane's damping as a ratio of critical, >= 0.
         name, source: what it is and where its numbers were measured (presets).
     """
     density: float
@@ -61,12 +64,12 @@ class Fabric:
             raise SceneError(f"damping must be a ratio of critical >= 0 "
                              f"(got {fmt(self.damping)})")
 
-    def isotropic(self):
-        """This fabric with the geometric means of its warp and weft stretch and bending
-        (for a mesh cloth, which has no warp and weft)."""
-        return Fabric(self.density, float(np.sqrt(np.prod(self.stretch))), self.shear,
+    def mean_bending(self):
+        """This fabric with the geometric mean of its warp and weft bending (for a mesh
+        cloth, whose hinges take one rigidity)."""
+        return Fabric(self.density, self.stretch, self.shear,
                       float(np.sqrt(np.prod(self.bending))), self.damping,
-                      name=f"{self.name} (warp-weft mean)", source=self.source)
+                      name=f"{self.name} (mean bending)", source=self.source)
 
     def moduli(self):
         """(C11, C22, C12) N/m of the grid membrane with this fabric's stretch and shear
@@ -115,24 +118,6 @@ def grid_springs(fabric, cloth):
     shear = cloth.grid_pairs("shear")
     return {"structural": (cloth.grid_pairs("structural"), np.concatenate([ks_i, ks_j])),
             "shear": (shear, np.full(len(shear), kd))}
-
-
-def mesh_springs(fabric, x, triangles):
-    """(pairs (M,2), k_s (M,)): a spring on every edge of triangles (T,3), each pair sorted
-    and the pairs unique, with Van Gelder's k_e = E sum_t A_t / |e|^2 at positions x; one
-    stretch stiffness E (a mesh has no warp and weft)."""
-    e1, e2 = fabric.stretch
-    if e1 != e2:
-        raise SceneError(f"a (warp, weft) stretch needs a grid cloth: a mesh cloth has no "
-                         f"warp and weft (got {fabric.stretch})")
-    tris = np.asarray(triangles, dtype=np.int64)
-    area = 0.5 * np.linalg.norm(np.cross(x[tris[:, 1]] - x[tris[:, 0]],
-                                         x[tris[:, 2]] - x[tris[:, 0]]), axis=1)
-    edges = np.sort(np.concatenate([tris[:, [0, 1]], tris[:, [1, 2]], tris[:, [2, 0]]]), 1)
-    pairs, inverse = np.unique(edges, axis=0, return_inverse=True)
-    shared = np.bincount(inverse.ravel(), weights=np.tile(area, 3), minlength=len(pairs))
-    lengths2 = np.sum((x[pairs[:, 0]] - x[pairs[:, 1]]) ** 2, axis=1)
-    return pairs, e1 * shared / lengths2
 
 
 # Measured fabrics: Wang, O'Brien & Ramamoorthi 2011, "Data-driven elastic models for

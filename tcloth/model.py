@@ -152,9 +152,9 @@ class Model:
 
     def single_grid(self):
         """The GridBlock when the scene is one cloth grid and nothing else (no other
-        particles or springs, no bending), else None."""
+        particles or springs, no bending or membrane), else None."""
         if len(self.grids) == 1 and self.list_spring_count == 0 and self.bending is None \
-                and self.grids[0].covers(self.particle_count):
+                and self.membrane is None and self.grids[0].covers(self.particle_count):
             return self.grids[0]
         return None
 

@@ -211,11 +211,11 @@ class Scene:
             structural, shear, flexion: (k_s, k_d) or None (absent).
             pinned: vertex ids to pin.
             fabric: a ``tcloth.Fabric`` or a preset's name instead of mass and springs:
-                masses from its density, a spring on every triangle edge with Van Gelder's
-                stiffness for its stretch (one number: a mesh has no warp and weft; the
-                edges fix the shear stiffness at 3/8 of it, so the fabric's is not used),
-                hinge bending from its rigidity (docs/fabric.md). Giving it with mass,
-                structural, shear or flexion is a SceneError.
+                masses from its density, no springs but a triangle membrane
+                (``set_membrane``) with its stretch (warp along the world x axis) and
+                shear, hinge bending from its rigidity (one number on a mesh),
+                docs/fabric.md. Giving it with mass, structural, shear or flexion is a
+                SceneError.
         A face repeating a vertex or of zero area, an edge shared by more than two faces
         (not manifold), or a vertex in no face raises SceneError; duplicate vertices are
         separate particles (a seam); a face joining two coincident ones has zero area.

@@ -66,6 +66,17 @@ def as_warp_weft(name, value, minimum=0.0, strict=False):
     return float(pair[0]), float(pair[1])
 
 
+def as_warp_weft_per(name, value, count, strict=False):
+    """(count, 2) array of (warp, weft) pairs from one number or pair (for all) or a
+    (count, 2) array (one each); ``as_warp_weft``'s bounds."""
+    v = np.asarray(value, dtype=np.float64) if np.ndim(value) else value
+    if np.ndim(v) == 2 and np.shape(v)[0] != count:
+        raise SceneError(f"{name} must be one value or pair, or one pair each of {count} "
+                         f"(got {fmt(value)})")
+    return np.array([as_warp_weft(name, v[k] if np.ndim(v) == 2 else v, strict=strict)
+                     for k in range(count)])
+
+
 def as_per_item(name, value, n, minimum=None, strict=False):
     """A scalar broadcast to (n,), or an (n,) array; finite, bounded below."""
     try:

@@ -10,9 +10,9 @@ support (smoothed over 10 degrees, each at least 5 mm above the minima beside it
 The specimen hangs under backward Euler at dt = 1/60 s until no particle moves faster than
 0.2 mm/s at two checks 0.25 s apart (or for 8 s), from a flat start given a small random
 sag (1 mm) so that its folds are not set by the mesh's symmetry. No self-contact: the
-folds of these fabrics do not reach each other. A mesh cloth's shear stiffness is 3/8 of
-its stretch (Van Gelder's edge springs), not the fabric's: docs/fabric.md shows what that
-does to soft fabrics' drape.
+folds of these fabrics do not reach each other. The disc's triangles carry the fabric's
+stretch (warp along x) and shear as a membrane (``tcloth/terms/membrane.py``); its hinges
+the mean of the warp and weft bending.
 
     python tools/drape.py --measured            # every preset, three resolutions
     python tools/drape.py --fabrics denim --rings 24 32 --images docs/img

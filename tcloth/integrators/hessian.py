@@ -9,8 +9,9 @@ Two layouts, one interface (``assemble``, ``solve``, ``dx``, ``product``):
     block stencil weights on the grid, with a geometric multigrid V-cycle (Galerkin coarse
     levels built at each step's first Newton iteration, block Gauss-Seidel smoothing;
     ``block_multigrid.py``) as the preconditioner.
-With ``exact`` the CG matrix carries the exact spring blocks (indefinite where springs are
-compressed) and the preconditioner the projected ones; else both the projected ones.
+With ``exact`` the CG matrix carries the exact spring and membrane blocks (indefinite where
+they are compressed) and the preconditioner the projected ones; else both the projected
+ones.
 Pinned particles' rows and columns are filtered out (Baraff & Witkin's filtered CG).
 """
 import taichi as ti
@@ -30,6 +31,9 @@ class BlockHessian:
     def __init__(self, model, potential, exact):
         n, real = model.particle_count, runtime.real()
         self.potential, self.exact = potential, exact
+        for term in potential.pair_terms:     # the membrane's products, as the springs'
+            if hasattr(term, "exact"):
+                term.exact = exact
         self.springs = potential.springs
         self.has_springs = self.springs is not None
         self.adj_start, self.adj = (self.springs or Springs(model)).adjacency()

@@ -27,7 +27,7 @@ class IncrementalPotential:
         grad: the gradient of the last evaluation with ``with_grad``, (n,) vec3.
         particle_terms: the per-particle potential terms (gravity and drag, colliders).
         springs: the Springs term or None.
-        pair_terms: the other potential terms (bending, self-contact): each gives
+        pair_terms: the other potential terms (bending, membrane, self-contact): each gives
             ``add_incremental`` like the springs, its Hessian's diagonal blocks
             (``prepare_blocks``, then the ti.func ``diagonal_block(p)``) and its couplings'
             product (``add_product``, for CG).
@@ -76,13 +76,19 @@ class IncrementalPotential:
 
     @ti.func
     def particle_block(self, p, x, h, t):
-        """Particle p's diagonal Hessian block without springs: inertia M/h^2, the
-        per-particle terms' blocks and the pair terms' diagonal blocks."""
+        """Particle p's diagonal Hessian block without springs: ``inertial_block`` and the
+        pair terms' diagonal blocks."""
+        block = self.inertial_block(p, x, h, t)
+        for term in ti.static(self.pair_terms):
+            block += term.diagonal_block(p)
+        return block
+
+    @ti.func
+    def inertial_block(self, p, x, h, t):
+        """Inertia M/h^2 and the per-particle terms' blocks of particle p."""
         block = self.mass[p] / (h * h) * ti.Matrix.identity(float, 3)
         for term in ti.static(self.particle_terms):
             block += term.hessian_block(p, x, self.x0, h, t)
-        for term in ti.static(self.pair_terms):
-            block += term.diagonal_block(p)
         return block
 
     @ti.kernel

@@ -18,7 +18,8 @@ damping k_d (v_ij . d) d), wind and attraction enter y at the start of the step 
 the paper, and A carries the constant parts, M/h^2 + c/h + sum_s (k_s + k_d/h)
 A_s A_s^T (k_d/h A_s A_s^T bounds the axial damping's Jacobian: d d^T <= I) and the
 Hessian of hinge bending (constant: ``terms/bending.py``), whose energy is already
-quadratic, as Liu's constraints with projection p = 0 are. The fixed
+quadratic, as Liu's constraints with projection p = 0 are, and the triangle membrane's
+rotation-invariant bound (``terms/membrane.py``), as Liu's springs' A_s A_s^T are. The fixed
 point is the backward Euler step with axial spring damping, so damped motion is as
 accurate as backward Euler's (Liu's paper damps only through the medium).
 
@@ -91,10 +92,10 @@ class Projective(Integrator):
             self.adj_start, self.adj = springs.adjacency()
             self.weight = ti.field(real, shape=self.adj.shape[0])
             self.diag, self.precond = (ti.field(real, shape=n) for _ in range(2))
-            # terms whose Hessian is constant (bending) enter A whole: their diagonal
-            # here, their couplings in CG's products
-            self.constant = tuple(t for t in self.residual_forces.terms
-                                  if getattr(t, "constant_hessian", False))
+            # terms with a constant matrix (bending's Hessian, the membrane's bound)
+            # enter A whole: their diagonal here, their couplings in CG's products
+            self.constant = tuple(t.constant_matrix() for t in self.residual_forces.terms
+                                  if hasattr(t, "constant_matrix"))
             self.solver = linalg.PCG(n, self.diag, self.weight, self.adj_start, self.adj,
                                      self.precond, model.inv_mass, self.constant)
         self.stats = {}
@@ -141,6 +142,8 @@ class Projective(Integrator):
         if self.grid is not None:
             self.mg.set_matrix(self._grid_weights(model, h))
         else:
+            for term in self.constant:
+                term.set_step(h)
             self._build_adjacency_matrix(h)
 
     def _grid_weights(self, model, h):

@@ -16,9 +16,10 @@ Since E is backward Euler's own potential, VBD's iterates converge to backward E
 step (tested), and damping, friction, colliders and the grab spring enter as they do
 there.
 
-Hinge bending (``terms/bending.py``) is Gauss-Seidel like the springs: a vertex's
-gradient is summed over its hinges at the current positions, its constant block added,
-and vertices sharing a hinge get different colours. Self-contact couples vertices through
+Hinge bending (``terms/bending.py``) and the triangle membrane (``terms/membrane.py``)
+are Gauss-Seidel like the springs: a vertex's gradient and block are summed over its
+hinges and triangles at the current positions, and vertices sharing a hinge or a
+triangle get different colours. Self-contact couples vertices through
 the contact list, which changes every step: its gradient and diagonal blocks are evaluated
 once per iteration, before the colour passes, and held through them (a Jacobi update); the
 contact stage's guard (``contact/guard.py``) keeps the step free of crossings as for
@@ -124,10 +125,10 @@ class VBD(ForceCache, Integrator):
         if self.has_springs:
             self.pairs, self.rest = self.springs.pairs, self.springs.rest
             self.ks, self.kd = self.springs.ks, self.springs.kd
-        # pair terms with a per-vertex gradient (bending) are Gauss-Seidel like the
-        # springs; the others (self-contact) Jacobi, held through an iteration
+        # pair terms with a per-vertex system (bending, membrane) are Gauss-Seidel like
+        # the springs; the others (self-contact) Jacobi, held through an iteration
         self.local_terms = tuple(t for t in self.potential.pair_terms
-                                 if hasattr(t, "local_gradient"))
+                                 if hasattr(t, "local_system"))
         self.pair_terms = tuple(t for t in self.potential.pair_terms
                                 if t not in self.local_terms)
         self.mass, self.params = model.mass, model.params
@@ -152,7 +153,7 @@ class VBD(ForceCache, Integrator):
     def _colouring(self, n):
         """(order, colour_start): the particles sorted by colour as an i32 field, and the
         Python list of each colour's first entry in it (and the end). Particles joined by
-        a spring or sharing a hinge get different colours."""
+        a spring or sharing a hinge or a triangle get different colours."""
         start = self.adj_start.to_numpy().astype(np.int64)
         others = self.adj.to_numpy()[:, 1].astype(np.int64) if start[-1] else np.zeros(0, int)
         ends = np.repeat(np.arange(n), np.diff(start))
@@ -252,7 +253,7 @@ class VBD(ForceCache, Integrator):
         self.contact_grad.fill(0)
         for term in self.pair_terms:
             term.add_incremental(x, self.potential.x0, h, True, self.acc, self.contact_grad)
-        self.potential.prepare_blocks(x, h)
+            term.prepare_blocks(x, self.potential.x0, h)
 
     @ti.kernel
     def _guess(self, x: ti.template(), f: ti.template(), h: float, kind: ti.i32):
@@ -281,7 +282,8 @@ class VBD(ForceCache, Integrator):
     @ti.func
     def _local(self, p, x, h, t):
         """(g_i, H_i): vertex p's gradient of E and its 3 x 3 Hessian block, the springs'
-        projected (the self-contacts' from the iteration's start; the bending's at x)."""
+        projected (the self-contacts' from the iteration's start; the bending's and the
+        membrane's at x)."""
         g = self.mass[p] / (h * h) * (x[p] - self.potential.x_hat[p])
         for term in ti.static(self.potential.particle_terms):
             _, _, g_t = term.incremental(p, x, self.potential.x0, h, t)
@@ -290,9 +292,13 @@ class VBD(ForceCache, Integrator):
             g -= self.potential.f_lag[p]
         if ti.static(bool(self.pair_terms)):
             g += self.contact_grad[p]
+        block = self.potential.inertial_block(p, x, h, t)
+        for term in ti.static(self.pair_terms):
+            block += term.diagonal_block(p)
         for term in ti.static(self.local_terms):
-            g += term.local_gradient(p, x)
-        block = self.potential.particle_block(p, x, h, t)
+            g_t, block_t = term.local_system(p, x, self.potential.x0, h)
+            g += g_t
+            block += block_t
         if ti.static(self.has_springs):
             d0 = ti.static(self.springs.d0)
             for a in range(self.adj_start[p], self.adj_start[p + 1]):

@@ -4,8 +4,10 @@ substeps, Macklin et al. 2019, "Small Steps in Physics Simulation").
 The springs are compliant distance constraints C_s = |x_i - x_j| - l0 with compliance
 1/k_s and damping k_d: the same springs, not new physics. Hinge bending
 (``terms/bending.py``, energy |s|^2 / 2 with s = sum_i c_i x_i linear) is the vector
-constraint s = 0 with compliance 1, its hinges coloured like the springs (``spring_pass``
-takes both). A step of h (dt / substeps):
+constraint s = 0 with compliance 1, and a membrane triangle (``terms/membrane.py``) the
+three constraints of its stretch and shear conditions, compliances 1 / (A k_c) and
+damping beta k_c; hinges and triangles are coloured like the springs (``spring_pass``
+takes all three). A step of h (dt / substeps):
 
   1. the other forces (gravity, drag, wind, attraction, the grab spring) at the start
      move every velocity, v += h f / m, and x_prev = x, x += h v (pinned particles move
@@ -33,6 +35,7 @@ from ..errors import SceneError
 from ..forces import Forces
 from ..runtime import serial
 from ..terms.bending import Bending
+from ..terms.membrane import Membrane
 from ..terms.springs import Springs
 from .base import Integrator
 
@@ -87,7 +90,7 @@ class XPBD(Integrator):
         springs = Springs(model) if Springs.present(model) else None
         self.has_springs = springs is not None
         self.external = Forces(model, lambda cls: cls.projective in ("force", "lagged")
-                               and cls is not Springs and cls is not Bending)
+                               and cls not in (Springs, Bending, Membrane))
         self.projections = term_modules.build(model, lambda cls: cls.projective == "projection")
         self.x_prev, self.f = (ti.Vector.field(3, real, shape=n) for _ in range(2))
         self.colour_start = [0]
@@ -106,7 +109,15 @@ class XPBD(Integrator):
                 self.bending.hinges.to_numpy(), n)
         self.hinge_colours = len(self.hinge_start) - 1
         self.has_hinges = self.bending is not None
-        self.constrained = self.has_springs or self.has_hinges
+        self.membrane = Membrane(model) if Membrane.present(model) else None
+        self.triangle_start = [0]
+        if self.membrane is not None:
+            self.triangle_lam = ti.Vector.field(3, real, shape=self.membrane.tris.shape[0])
+            self.triangle_order, self.triangle_start = colour_order(
+                self.membrane.tris.to_numpy(), n)
+        self.triangle_colours = len(self.triangle_start) - 1
+        self.has_triangles = self.membrane is not None
+        self.constrained = self.has_springs or self.has_hinges or self.has_triangles
 
     def simulate(self, model, state_in, state_out, dt):
         opt = self.options
@@ -184,7 +195,7 @@ class XPBD(Integrator):
 
     @ti.func
     def zero_multipliers(self):
-        """lambda = 0 for every spring and hinge: a step starts without them."""
+        """lambda = 0 for every spring, hinge and triangle: a step starts without them."""
         if ti.static(self.has_springs):
             ti.loop_config(serialize=True)
             for s in range(self.lam.shape[0]):
@@ -193,18 +204,52 @@ class XPBD(Integrator):
             ti.loop_config(serialize=True)
             for k in range(self.hinge_lam.shape[0]):
                 self.hinge_lam[k] = ti.Vector.zero(float, 3)
+        if ti.static(self.has_triangles):
+            ti.loop_config(serialize=True)
+            for e in range(self.triangle_lam.shape[0]):
+                self.triangle_lam[e] = ti.Vector.zero(float, 3)
 
     @ti.func
     def spring_pass(self, x, h):
-        """One Gauss-Seidel pass over the springs, then over the hinges, colour after
-        colour, the constraints of a colour in parallel (module docstring; one launch: the
-        colours' loops are unrolled, each a top-level loop)."""
+        """One Gauss-Seidel pass over the springs, then the hinges, then the membrane's
+        triangles, colour after colour, the constraints of a colour in parallel (module
+        docstring; one launch: the colours' loops are unrolled, each a top-level loop)."""
         for c in ti.static(range(self.colours)):
             for k in range(ti.static(self.colour_start[c]), ti.static(self.colour_start[c + 1])):
                 self._spring(x, h, self.order[k])
         for c in ti.static(range(self.hinge_colours)):
             for k in range(ti.static(self.hinge_start[c]), ti.static(self.hinge_start[c + 1])):
                 self._hinge(x, h, self.hinge_order[k])
+        for c in ti.static(range(self.triangle_colours)):
+            for k in range(ti.static(self.triangle_start[c]),
+                           ti.static(self.triangle_start[c + 1])):
+                self._triangle(x, h, self.triangle_order[k])
+
+    @ti.func
+    def _triangle(self, x, h, e):
+        """Triangle e's conditions in turn, c_0 = |f_u| - 1, c_1 = |f_v| - 1 and
+        c_2 = f_u . f_v, each with compliance 1 / (A k_c) and damping beta k_c (grad_i c =
+        b_iu n_u, b_iv n_v and b_iu f_v + b_iv f_u)."""
+        ids, b, coef = self.membrane.tris[e], self.membrane.b[e], self.membrane.c[e]
+        gamma = coef[3] / h
+        for c in ti.static(range(3)):
+            fu, fv = self.membrane.frame(e, x)
+            value, du, dv = fu.dot(fv), fv, fu
+            if ti.static(c == 0):
+                value, du, dv = fu.norm() - 1.0, fu / fu.norm(), ti.Vector.zero(float, 3)
+            elif ti.static(c == 1):
+                value, du, dv = fv.norm() - 1.0, ti.Vector.zero(float, 3), fv / fv.norm()
+            alpha = 1.0 / (coef[c] * h * h)
+            rate, weight = 0.0, 0.0
+            for i in ti.static(range(3)):
+                grad = b[i, 0] * du + b[i, 1] * dv
+                rate += grad.dot(x[ids[i]] - self.x_prev[ids[i]])
+                weight += self.inv_mass[ids[i]] * grad.dot(grad)
+            dlam = (-value - alpha * self.triangle_lam[e][c] - gamma * rate) \
+                / ((1.0 + gamma) * weight + alpha)
+            for i in ti.static(range(3)):
+                x[ids[i]] += self.inv_mass[ids[i]] * dlam * (b[i, 0] * du + b[i, 1] * dv)
+            self.triangle_lam[e][c] += dlam
 
     @ti.func
     def _hinge(self, x, h, k):

@@ -8,13 +8,15 @@ from .base import Term
 from .bending import Bending
 from .colliders import Colliders
 from .grab import Grab
+from .membrane import Membrane
 from .gravity_drag import GravityDrag
 from .pressure import Pressure
 from .self_contact import SelfContact
 from .springs import Springs
 from .wind import Wind
 
-TERMS = (GravityDrag, Springs, Bending, Wind, Attraction, Pressure, Colliders, SelfContact, Grab)
+TERMS = (GravityDrag, Springs, Bending, Membrane, Wind, Attraction, Pressure, Colliders,
+         SelfContact, Grab)
 
 
 def build(model, select=None):
@@ -28,5 +30,5 @@ def find(terms, cls):
     return next((t for t in terms if isinstance(t, cls)), None)
 
 
-__all__ = ["TERMS", "Term", "build", "find", "GravityDrag", "Springs", "Bending", "Wind", "Attraction",
-           "Pressure", "Colliders", "SelfContact", "Grab"]
+__all__ = ["TERMS", "Term", "build", "find", "GravityDrag", "Springs", "Bending", "Membrane",
+           "Wind", "Attraction", "Pressure", "Colliders", "SelfContact", "Grab"]

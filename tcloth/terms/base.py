@@ -36,17 +36,21 @@ a pass share one launch):
 
 Springs are a pair term: their per-spring functions live in ``springs.py`` and the
 solvers call them for each spring or grid offset. The other potential terms that couple
-particles (bending, self-contact) give backward Euler ``add_incremental``,
+particles (bending, the membrane, self-contact) give backward Euler ``add_incremental``,
 ``prepare_blocks``, ``diagonal_block(p)`` and ``add_product`` (their Hessian's couplings
-times a vector, for CG); bending also ``local_gradient(p, x)`` for VBD's Gauss-Seidel
-sweeps and ``constant_hessian`` for projective dynamics' matrix.
+times a vector, for CG); bending and the membrane also ``local_system(p, x, x0, h)`` (a
+particle's gradient and Hessian block at x) for VBD's Gauss-Seidel sweeps and
+``constant_matrix()`` for projective dynamics' matrix (an object with ``set_step(h)``,
+a per-particle scalar ``diagonal`` and ``add_product``).
 
 A term whose scene data is optional (wind, attraction, self-collision, pressure) names its
 ``Feature`` (below) as ``feature``: the one description of that data from the scene's
 method to the model's fields and the checkpoint.
 """
+import numpy as np
 import taichi as ti
 
+from ..errors import SceneError
 from ..runtime import serial
 
 
@@ -121,3 +125,36 @@ def particle_energy(term: ti.template(), x: ti.template(), t: float,
     for p in range(x.shape[0]):
         out[0] += ti.cast(term.potential(p, x, t), out.dtype)
     return ti.cast(out[0], ti.f64)
+
+
+def cloth_selection(scene, cloths, rest_positions):
+    """(ids, rest) for a per-cloth feature's ``set``: the indices ``cloths`` into
+    ``scene.cloths`` (None: every cloth) and the (N,3) rest positions of all particles
+    (None: the scene's positions now), checked."""
+    count = len(scene.cloths)
+    ids = list(range(count)) if cloths is None else [int(c) for c in np.ravel(cloths)]
+    if not ids or len(set(ids)) != len(ids) or min(ids) < 0 or max(ids) >= count:
+        raise SceneError(f"cloths must be distinct indices into the scene's {count} cloths "
+                         f"(got {cloths!r})")
+    rest = scene.positions if rest_positions is None else \
+        np.asarray(rest_positions, dtype=np.float64)
+    if rest.shape != (scene.num_particles, 3) or not np.all(np.isfinite(rest)):
+        raise SceneError(f"rest_positions must be finite ({scene.num_particles}, 3) "
+                         f"positions (got shape {np.shape(rest_positions)})")
+    return ids, rest.copy()
+
+
+def incidence(ids, n):
+    """Each particle's elements, for elements of k particles ids (E,k), as Taichi fields:
+    (start (n+1,), entries): particle p's (element, slot) pairs are entries[start[p]:
+    start[p+1]], in element order (a gather per particle needs no atomics)."""
+    vertex = np.asarray(ids, dtype=np.int64).ravel()
+    k = np.shape(ids)[1] if np.ndim(ids) == 2 else 1
+    start = ti.field(ti.i32, shape=n + 1)
+    start.from_numpy(np.concatenate([[0], np.cumsum(np.bincount(vertex, minlength=n))])
+                     .astype(np.int32))
+    order = np.argsort(vertex, kind="stable")
+    entries = ti.Vector.field(2, ti.i32, shape=max(len(order), 1))
+    if len(order):
+        entries.from_numpy(np.stack([order // k, order % k], 1).astype(np.int32))
+    return start, entries

@@ -44,11 +44,10 @@ import numpy as np
 import taichi as ti
 
 from .. import runtime
-from ..errors import SceneError
 from ..hinges import cloth_hinges
 from ..runtime import serial
-from ..validate import as_warp_weft, fmt
-from .base import Feature, Term
+from ..validate import as_warp_weft_per
+from .base import Feature, Term, cloth_selection, incidence
 
 class BendingFeature(Feature):
     """``Scene.set_bending``: the cloths with hinge bending, their rigidities and rest
@@ -71,26 +70,11 @@ class BendingFeature(Feature):
         Returns:
             dict of the settings.
         """
-        count = len(scene.cloths)
-        ids = list(range(count)) if cloths is None else [int(c) for c in np.ravel(cloths)]
-        if not ids or len(set(ids)) != len(ids) or min(ids) < 0 or max(ids) >= count:
-            raise SceneError(f"cloths must be distinct indices into the scene's {count} cloths "
-                             f"(got {cloths!r})")
-        r = np.asarray(rigidity, dtype=np.float64) if np.ndim(rigidity) else rigidity
-        per_cloth = np.ndim(r) == 2
-        if per_cloth and np.shape(r)[0] != len(ids):
-            raise SceneError(f"rigidity must be one value or pair per cloth ({len(ids)}) "
-                             f"(got {fmt(rigidity)})")
-        rigidities = np.array([as_warp_weft("rigidity", r[k] if per_cloth else r)
-                               for k in range(len(ids))])
-        rest = scene.positions if rest_positions is None else \
-            np.asarray(rest_positions, dtype=np.float64)
-        if rest.shape != (scene.num_particles, 3) or not np.all(np.isfinite(rest)):
-            raise SceneError(f"rest_positions must be finite ({scene.num_particles}, 3) "
-                             f"positions (got shape {np.shape(rest_positions)})")
+        ids, rest = cloth_selection(scene, cloths, rest_positions)
+        rigidities = as_warp_weft_per("rigidity", rigidity, len(ids))
         for k, b in zip(ids, rigidities):
             cloth_hinges(scene.cloths[k], rest, b)
-        return {"rigidity": rigidities, "cloths": ids, "rest_positions": rest.copy()}
+        return {"rigidity": rigidities, "cloths": ids, "rest_positions": rest}
 
     def saved(self, value):
         return {"rigidity": value["rigidity"], "cloths": value["cloths"],
@@ -111,16 +95,8 @@ class BendingFeature(Feature):
         if len(ids):
             model.bending_hinges.from_numpy(ids.astype(np.int32))
             model.bending_weights.from_numpy(weights.astype(npr))
+        model.bending_start, model.bending_entries = incidence(ids.reshape(-1, 4), n)
         vertex = ids.ravel()
-        order = np.argsort(vertex, kind="stable")
-        start = np.zeros(n + 1, dtype=np.int32)
-        np.cumsum(np.bincount(vertex, minlength=n), out=start[1:])
-        entries = np.stack([order // 4, order % 4], 1).astype(np.int32)
-        model.bending_start = ti.field(ti.i32, shape=n + 1)
-        model.bending_start.from_numpy(start)
-        model.bending_entries = ti.Vector.field(2, ti.i32, shape=max(len(entries), 1))
-        if len(entries):
-            model.bending_entries.from_numpy(entries)
         model.bending_diagonal = ti.field(real, shape=n)
         model.bending_diagonal.from_numpy(
             np.bincount(vertex, weights=(weights ** 2).ravel(), minlength=n).astype(npr))
@@ -135,7 +111,6 @@ class Bending(Term):
     feature = BendingFeature()
     implicit = "potential"
     projective = "force"
-    constant_hessian = True       # sum over hinges of c c^T (x) I: ``diagonal``, ``add_product``
 
     @staticmethod
     def present(model):
@@ -151,6 +126,14 @@ class Bending(Term):
         if not serial(self.hinges):
             return f"the bending's {self.hinges.shape[0]} hinges run on several threads"
         return None
+
+    def constant_matrix(self):
+        """Projective dynamics' constant part: the Hessian itself, sum over hinges of
+        c c^T (x) I (``diagonal``, ``add_product``)."""
+        return self
+
+    def set_step(self, h):
+        """Nothing: the Hessian does not depend on the step."""
 
     def coupled_pairs(self):
         """(M,2) particle pairs that share a hinge (for graph colourings), NumPy."""
@@ -188,14 +171,15 @@ class Bending(Term):
             f_out[p] -= self.gather(p)
 
     @ti.func
-    def local_gradient(self, p, x):
-        """Particle p's gradient at x, each of its hinges evaluated afresh (VBD's
-        Gauss-Seidel sweeps move its neighbours between calls)."""
+    def local_system(self, p, x, x0, h):
+        """(gradient, Hessian block) of particle p at x, each of its hinges evaluated
+        afresh (VBD's Gauss-Seidel sweeps move its neighbours between calls); x0 and h
+        are unused (the energy is conservative)."""
         g = ti.Vector.zero(float, 3)
         for e in range(self.start[p], self.start[p + 1]):
             k, slot = self.entries[e][0], self.entries[e][1]
             g += self.weights[k][slot] * self.hinge_vector(k, x)
-        return g
+        return g, self.diagonal_block(p)
 
     @ti.kernel
     def _energy(self, x: ti.template(), out: ti.template()) -> ti.f64:
