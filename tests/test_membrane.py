@@ -202,10 +202,12 @@ def test_vbd_xpbd_and_projective_converge_to_backward_euler():
         return be.positions()
 
     def gaps(scene, x, v, goal, integrator, counts, **options):
+        # one simulator, its steps from Python, which read the iteration count each step
+        sim = tcloth.Simulator(scene, integrator=integrator, dt=1 / 60, batch=False,
+                               **options)
         out = []
         for n in counts:
-            sim = tcloth.Simulator(scene, integrator=integrator, dt=1 / 60, iterations=n,
-                                   **options)
+            sim.integrator.options["iterations"] = n
             sim.set_state(positions=x, velocities=v)
             sim.step(1)
             out.append(np.abs(sim.positions() - goal).max())
@@ -246,6 +248,25 @@ def test_a_mesh_fabric_has_its_shear_and_the_checkpoint_keeps_it(tmp_path):
     loaded.step(5)
     assert np.array_equal(loaded.positions(), sim.positions())
     assert loaded.energy()["membrane"] == sim.energy()["membrane"] > 0
+
+
+@pytest.mark.parametrize("integrator", ["symplectic_euler", "vbd", "xpbd"])
+def test_a_batch_of_steps_equals_single_steps_bit_for_bit(integrator):
+    """The membrane is in-kernel: n steps in one launch (``batch.py``) are the single
+    steps' numbers exactly, damping and gravity included."""
+    def run(batch, chunks):
+        scene, _ = _scene(damping=0.3, gravity=9.81, pinned=[0, 7])
+        sim = tcloth.Simulator(scene, integrator=integrator, batch=batch,
+                               dt=1e-4 if integrator == "symplectic_euler" else 1 / 60)
+        assert (sim.fusion() is None) == batch
+        for n in chunks:
+            sim.step(n)
+        return sim
+
+    single, batched = run(False, [1] * 6), run(True, [4, 2])
+    assert np.array_equal(batched.positions(), single.positions())
+    assert np.array_equal(batched.velocities(), single.velocities())
+    assert single.energy()["membrane"] > 0.0
 
 
 def test_set_membrane_checks_its_arguments():
