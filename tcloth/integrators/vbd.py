@@ -239,7 +239,7 @@ class VBD(ForceCache, Integrator):
         for it in range(1, self.options["iterations"] + 1):
             if ti.static(self.options["rho"] > 0.0):
                 self.remember(a.x)
-            self.sweep(a.x, h, t1)
+            self.sweep_in_order(a.x, h, t1)
             if ti.static(self.options["rho"] > 0.0):
                 if it > 1:
                     self.accelerate(a.x, ti.cast(self.omegas[it], float))
@@ -323,10 +323,23 @@ class VBD(ForceCache, Integrator):
         each a top-level loop)."""
         for c in ti.static(range(self.colours)):
             for k in range(ti.static(self.colour_start[c]), ti.static(self.colour_start[c + 1])):
-                p = self.order[k]
-                if self.potential.inv_mass[p] > 0.0:
-                    g, block = self._local(p, x, h, t)
-                    x[p] = self._bounded(p, x[p] - block.inverse() @ g)
+                self._update(self.order[k], x, h, t)
+
+    @ti.func
+    def sweep_in_order(self, x, h, t):
+        """``sweep`` inside a batch, where it runs on one thread: the vertices one after
+        another in colour order (the order is sorted by colour), the same updates in the
+        same order as the colour passes, with the update's code inlined once instead of
+        once per colour (a scene's compilation is then as long for every colouring)."""
+        for k in range(ti.static(self.colour_start[-1])):
+            self._update(self.order[k], x, h, t)
+
+    @ti.func
+    def _update(self, p, x, h, t):
+        """Vertex p's Newton step, if it is free."""
+        if self.potential.inv_mass[p] > 0.0:
+            g, block = self._local(p, x, h, t)
+            x[p] = self._bounded(p, x[p] - block.inverse() @ g)
 
     @ti.func
     def _bounded(self, p, y):
