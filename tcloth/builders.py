@@ -204,10 +204,9 @@ def add_mesh_cloth(scene, vertices, faces, mass, structural, shear, flexion, pin
     if ids.ndim != 1 or (len(ids) and (ids.min() < 0 or ids.max() >= n)):
         raise SceneError(f"pinned must be vertex ids in [0, {n}) (got {fmt(pinned)})")
     pin[ids] = True
-    if fabric is not None and max(fabric.bending) > 0:     # checked before anything is added
-        hinges.cloth_hinges(MeshCloth(scene.num_particles, n, triangles, params),
-                            np.concatenate([scene.positions, x]), fabric.bending)
     cloth = MeshCloth(scene.num_particles, n, triangles, params)
+    if fabric is not None and max(fabric.bending) > 0:     # checked before anything is added
+        hinges.cloth_hinges(cloth, np.concatenate([scene.positions, x]), fabric.bending)
     scene.add_particles(x, mass=masses, pinned=pin)
     if fabric is not None:
         cloth.springs.update({family: np.zeros(0, dtype=np.int64) for family in params})

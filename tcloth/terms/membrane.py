@@ -42,7 +42,7 @@ import taichi as ti
 from .. import runtime
 from ..errors import SceneError
 from ..runtime import serial
-from ..validate import as_warp_weft_per, fmt
+from ..validate import as_per_item, as_warp_weft_per
 from .base import Feature, Term, cloth_selection, incidence
 
 
@@ -97,22 +97,12 @@ class MembraneFeature(Feature):
         """
         ids, rest = cloth_selection(scene, cloths, rest_positions)
         stretches = as_warp_weft_per("stretch", stretch, len(ids), strict=True)
-        per = {}
-        for key, value, low in (("shear", shear, "> 0"), ("damping", damping, ">= 0")):
-            a = np.broadcast_to(np.asarray(value, dtype=np.float64), (len(ids),)) \
-                if np.ndim(value) in (0, 1) and np.size(value) in (1, len(ids)) else None
-            if a is None or not np.all(np.isfinite(a)) or \
-                    not np.all(a > 0 if low == "> 0" else a >= 0):
-                raise SceneError(f"{key} must be {low}: one number or one per cloth "
-                                 f"({len(ids)}) (got {fmt(value)})")
-            per[key] = a.copy()
+        shears = as_per_item("shear", shear, len(ids), minimum=0.0, strict=True)
+        dampings = as_per_item("damping", damping, len(ids), minimum=0.0)
         for k in ids:
             triangle_frames(scene.cloths[k].triangles, rest)
-        return {"stretch": stretches, "shear": per["shear"], "damping": per["damping"],
-                "cloths": ids, "rest_positions": rest}
-
-    def saved(self, value):
-        return dict(value)
+        return {"stretch": stretches, "shear": shears, "damping": dampings, "cloths": ids,
+                "rest_positions": rest}
 
     def build(self, model, settings):
         """The triangles (T,) vec3 ids, their weights b (T,) 3x2, their coefficients
@@ -297,12 +287,10 @@ class Membrane(Term):
 
     # -- backward Euler, VBD, projective ------------------------------------------------------
     @ti.func
-    def incremental(self, e, x, x0, h):
-        """(energy, g_u, g_v) of triangle e's part of the incremental potential: W and the
-        damping's beta A sum_c k_c h/2 dc^2 with the rates at the step's start."""
-        c = self.c[e]
-        fu, fv = self.frame(e, x)
-        f0u, f0v = self.frame(e, x0)
+    def incremental(self, fu, fv, f0u, f0v, c, h):
+        """(energy, g_u, g_v) of a triangle's part of the incremental potential, at f_u, f_v
+        from f0_u, f0_v at the step's start, coefficients c: W and the damping's
+        beta A sum_c k_c h/2 dc^2 with the rates at the step's start."""
         w, gu, gv = self.elastic(fu, fv, c)
         rate = _rates(f0u, f0v, (fu - f0u) / h, (fv - f0v) / h)
         hu, hv = _weighted(f0u, f0v, c[3] * rate, c)
@@ -315,7 +303,9 @@ class Membrane(Term):
                      with_grad: ti.template(), acc: ti.template(), grad: ti.template()):
         ti.loop_config(serialize=ti.static(serial(self.tris)))
         for e in range(self.tris.shape[0]):
-            w, gu, gv = self.incremental(e, x, x0, h)
+            fu, fv = self.frame(e, x)
+            f0u, f0v = self.frame(e, x0)
+            w, gu, gv = self.incremental(fu, fv, f0u, f0v, self.c[e], h)
             acc[0] += ti.cast(w, acc.dtype)
             acc[1] += ti.cast(w, acc.dtype)
             self.gu[e], self.gv[e] = gu, gv
@@ -398,12 +388,12 @@ class Membrane(Term):
         block = ti.Matrix.zero(float, 3, 3)
         for k in range(self.start[p], self.start[p + 1]):
             e, slot = self.entries[k][0], self.entries[k][1]
-            b = self.b[e]
-            _, gu, gv = self.incremental(e, x, x0, h)
-            g += b[slot, 0] * gu + b[slot, 1] * gv
+            b, c = self.b[e], self.c[e]
             fu, fv = self.frame(e, x)
             f0u, f0v = self.frame(e, x0)
-            uu, uv, vv = self.blocks(fu, fv, f0u, f0v, self.c[e], h, False)
+            _, gu, gv = self.incremental(fu, fv, f0u, f0v, c, h)
+            g += b[slot, 0] * gu + b[slot, 1] * gv
+            uu, uv, vv = self.blocks(fu, fv, f0u, f0v, c, h, False)
             block += self.vertex_block(b, slot, uu, uv, vv)
         return g, block
 
