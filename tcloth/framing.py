@@ -1,6 +1,6 @@
 """What frames a scene in both renderers (the off-screen one and the window): the height
-and tile size of the drawn ground, placed below the lowest point anything can reach, and
-how far behind the cloth the colliders are drawn. Plain NumPy from the scene."""
+and tile size of the drawn ground, placed below the lowest point anything can reach.
+Plain NumPy from the scene."""
 import heapq
 import math
 
@@ -9,20 +9,6 @@ import numpy as np
 from .shapes import shape_of
 
 HANG_STRETCH = 1.25     # the most a hanging spring is taken to stretch (``lowest_reach``)
-
-
-def collider_push(x, tris):
-    """How much farther than they are colliders are drawn from the camera (m): half the
-    longest edge of the cloth triangles at x, the deepest a triangle resting on a collider
-    can cut into it (``Renderer._pull``). Moving the colliders, not the cloth, keeps the
-    cloth layers' depth order among themselves."""
-    tris = [t for t in tris if len(t)]
-    if not tris:
-        return 0.0
-    t = np.concatenate(tris)
-    edges = np.concatenate([x[t[:, 1]] - x[t[:, 0]], x[t[:, 2]] - x[t[:, 1]],
-                            x[t[:, 0]] - x[t[:, 2]]])
-    return float(0.5 * np.linalg.norm(edges, axis=1).max())
 
 
 def lowest_reach(scene):

@@ -21,10 +21,11 @@ def rings(theta, sectors):
                      np.sin(theta) * np.sin(phi)], -1).reshape(-1, 3)
 
 
-def sphere(radius, rings=16, sectors=32):
-    """(vertices, triangles) of a sphere about the origin."""
-    theta = np.linspace(0, np.pi, rings + 1)[:, None]
-    return radius * rings(theta, sectors), grid_triangles(rings, sectors)
+def sphere(radius, stacks=16, sectors=32):
+    """(vertices, triangles) of a sphere about the origin: ``stacks`` bands of
+    ``sectors``."""
+    theta = np.linspace(0, np.pi, stacks + 1)[:, None]
+    return radius * rings(theta, sectors), grid_triangles(stacks, sectors)
 
 
 def cylinder(radius, half, sectors=32):

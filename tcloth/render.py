@@ -19,9 +19,9 @@ import taichi as ti
 
 from . import raycast, runtime
 from .camera import Camera
-from .drawables import cloth_palette, particle_spheres
+from .drawables import DrawnCloth, cloth_palette, particle_spheres
 from .errors import SceneError
-from .framing import collider_push, ground_and_checker
+from .framing import ground_and_checker
 from .shapes import SHAPES
 
 SKY_ID = 2147483647
@@ -33,7 +33,6 @@ PARTICLE_COLOUR = (0.95, 0.78, 0.25)
 COLLIDER_COLOUR = (0.50, 0.58, 0.66)
 LIGHT_DIR = (0.35, 0.85, 0.4)
 SHADOW_MAP = 1024
-CONTACT_REACH = 3.0     # a particle within this many thicknesses of a collider rests on it
 
 
 @ti.data_oriented
@@ -71,7 +70,6 @@ class Renderer:
 
         tris = [c.triangles for c in scene.cloths]
         self.tri_count = sum(len(t) for t in tris)
-        self.push = collider_push(x0, tris) if self.colliders.count else 0.0
         palette = cloth_palette(cloth_colours, len(tris))
         spheres, self.radius = particle_spheres(scene, particle_radius, extent)
         self.sphere_count = len(spheres)
@@ -102,13 +100,13 @@ class Renderer:
         self.colour = ti.Vector.field(3, ti.f32, shape=(H, W))
         self.image = ti.Vector.field(3, ti.u8, shape=(self.height, self.width))
         self.normals = ti.Vector.field(3, ti.f32, shape=scene.num_particles)
-        # 1 where a particle is within CONTACT_REACH thicknesses of a collider this frame
-        self.near_collider = ti.field(ti.i32, shape=scene.num_particles)
-        self.tris = ti.Vector.field(3, ti.i32, shape=max(self.tri_count, 1))
+        # the cloth's triangles and where they are drawn (out of the colliders they rest on)
+        self.cloth = DrawnCloth(self.colliders, np.concatenate(tris) if self.tri_count
+                                else np.zeros((0, 3), np.int32), scene.num_particles)
+        self.tris = self.cloth.tris
         self.tri_cloth = ti.field(ti.i32, shape=max(self.tri_count, 1))
         self.palette = ti.Vector.field(3, ti.f32, shape=(max(len(tris), 1), 2))
         if self.tri_count:
-            self.tris.from_numpy(np.concatenate(tris).astype(np.int32))
             self.tri_cloth.from_numpy(np.concatenate(
                 [np.full(len(t), k, dtype=np.int32) for k, t in enumerate(tris)]))
             self.palette.from_numpy(palette.astype(np.float32))
@@ -124,10 +122,10 @@ class Renderer:
         self.sim._check()
         x = self.sim.state.x
         self.time[None] = self.sim.time
+        cloth = self.cloth.x
         if self.tri_count:
-            self._vertex_normals(x)
-            if self.colliders.count:
-                self._near_colliders(x)
+            self.cloth.update(x, self.sim.time)
+            self._vertex_normals(cloth)
         targets = [(self.depth, True)] + ([(self.shadow, False)] if self.shadows else [])
         for depth, camera in targets[::-1]:
             if camera or self.moving:
@@ -138,10 +136,10 @@ class Renderer:
                     self._static_ready = True
                 self.shadow.copy_from(self.shadow_static)
             if self.tri_count:
-                self._splat_triangles(x, depth, camera)
+                self._splat_triangles(cloth, depth, camera)
             if self.sphere_count:
                 self._splat_spheres(x, depth, camera)
-        self._shade(x)
+        self._shade(x, cloth)
         self._resolve()
         return self.image.to_numpy()
 
@@ -195,12 +193,10 @@ class Renderer:
     # -- passes ------------------------------------------------------------------------------
     @ti.kernel
     def _analytic(self, depth: ti.template(), camera: ti.template(), has_ground: ti.template()):
-        """Clear to sky, then the ground plane and the colliders, hit analytically; seen
-        from the camera, a collider's depth is ``push`` farther than it is (cloth resting
-        on it is drawn in front of it; ``_shade`` uses the true hit)."""
+        """Clear to sky, then the ground plane and the colliders, hit analytically where
+        they are (cloth resting on them is drawn out of them: ``DrawnCloth``)."""
         h, w = depth.shape
         time = self.time[None]
-        push = ti.static(self.push if camera else 0.0)
         for r, c in ti.ndrange(h, w):
             o, d = self._ray(camera, r, c, h, w)
             best, best_id = 1e30, SKY_ID
@@ -215,8 +211,8 @@ class Renderer:
                     for k in range(g.first, g.first + g.count):
                         t = ti.cast(SHAPES[g.shape].ray_hit(self.colliders.data[k], o, d,
                                                             time), ti.f32)
-                        if 0.0 < t and t + push < best:
-                            best, best_id = t + push, COLLIDER_ID + k
+                        if 0.0 < t < best:
+                            best, best_id = t, COLLIDER_ID + k
             key = ti.i64(SKY_KEY)
             if best_id != SKY_ID:
                 key = raycast.key(best, best_id)
@@ -233,20 +229,6 @@ class Renderer:
             self.normals[a] += n
             self.normals[b] += n
             self.normals[c] += n
-
-    @ti.kernel
-    def _near_colliders(self, x: ti.template()):
-        """Flag the particles within CONTACT_REACH thicknesses of a switched-on collider."""
-        time = self.time[None]
-        for p in self.near_collider:
-            near = 0
-            for g in ti.static(self.colliders.groups):
-                for k in range(g.first, g.first + g.count):
-                    col = self.colliders.data[k]
-                    phi, _ = SHAPES[g.shape].signed_distance(col, x[p], time)
-                    if col.stiffness > 0.0 and phi < CONTACT_REACH * col.thickness:
-                        near = 1
-            self.near_collider[p] = near
 
     @ti.func
     def _splat(self, depth: ti.template(), camera: ti.template(), sphere: ti.template(), h, w,
@@ -265,20 +247,6 @@ class Renderer:
                     hit = raycast.hit_triangle(o, d, a, b, c)[0]
                 if hit > 0.0:
                     ti.atomic_min(depth[r, col], raycast.key(hit, prim_id))
-
-    @ti.func
-    def _pull(self, i, a, b, c):
-        """How deep triangle i = (a, b, c) may cut into a collider (m): 0, or, where one of
-        its particles rests on a collider, half its longest edge. Flat between its
-        particles, which rest a thickness out, such a triangle cuts into a round or
-        edged collider by up to a fraction of its size: the collider does not shade it
-        from within that depth (``_lit``), and is drawn behind it (``collider_push``)."""
-        pull = 0.0
-        if ti.static(self.colliders.count > 0):
-            if self.near_collider[i[0]] + self.near_collider[i[1]] \
-                    + self.near_collider[i[2]] > 0:
-                pull = 0.5 * ti.max((b - a).norm(), (c - b).norm(), (a - c).norm())
-        return pull
 
     @ti.kernel
     def _splat_triangles(self, x: ti.template(), depth: ti.template(), camera: ti.template()):
@@ -320,13 +288,12 @@ class Renderer:
                             self.tri_count + k, centre, centre, centre, radius)
 
     @ti.func
-    def _lit(self, p, n, pull=0.0):
+    def _lit(self, p, n):
         """Direct light reaching point p with normal n: Lambert times the fraction of the
         shadow map's 2 x 2 texels around p that do not block it, weighted bilinearly by
         p's position between their centres (a percentage-closer filter whose shadow edges
         are smooth ramps rather than texel-sized steps), with a bias that grows at grazing
-        light (no self-shadowing acne). ``pull`` > 0: the point is on cloth resting on a
-        collider (``_pull``), which does not shade it from within that depth."""
+        light (no self-shadowing acne)."""
         light = -self._vec(19)
         cos_l = n.dot(light)
         lit = ti.max(cos_l, 0.0)
@@ -346,18 +313,16 @@ class Renderer:
                     blocker = self.shadow[r, c]
                     depth = raycast.key_t(blocker)
                     blocked = blocker != ti.i64(SKY_KEY) and depth < s[2] - bias
-                    if blocked and raycast.key_id(blocker) >= COLLIDER_ID \
-                            and depth > s[2] - pull - bias:
-                        blocked = False
                 if not blocked:
                     visible += (fy if dr else 1.0 - fy) * (fx if dc else 1.0 - fx)
             lit *= visible
         return lit
 
     @ti.kernel
-    def _shade(self, x: ti.template()):
-        """Lambert + hemisphere ambient + a little specular, with shadows; cloth front and
-        back in two colours, checkered ground and planes."""
+    def _shade(self, x: ti.template(), cloth: ti.template()):
+        """Lambert + hemisphere ambient + a little specular, with shadows; cloth (drawn at
+        ``cloth``) front and back in two colours, checkered ground and planes; particle
+        spheres at ``x``."""
         h, w = self.depth.shape
         time = self.time[None]
         checker = ti.static(self.view[15])
@@ -365,12 +330,9 @@ class Renderer:
             o, d = self._ray(True, r, c, h, w)
             k = raycast.key_id(self.depth[r, c])
             t = raycast.key_t(self.depth[r, c])
-            if k >= COLLIDER_ID:
-                t -= ti.static(self.push)       # the true hit (``_analytic``)
             p = o + t * d
             base = ti.math.vec3(0.0)
             n = ti.math.vec3(0.0, 1.0, 0.0)
-            pull = 0.0
             if k == SKY_ID:
                 s = 0.5 + 0.5 * d[1]
                 base = (1.0 - s) * ti.math.vec3(0.93, 0.95, 0.98) + s * ti.math.vec3(0.55, 0.70, 0.92)
@@ -393,11 +355,8 @@ class Renderer:
                 n = self._collider_normal(k - COLLIDER_ID, p, time)
             elif k < self.tri_count:
                 i = self.tris[k]
-                a = ti.cast(x[i[0]], ti.f32)
-                b = ti.cast(x[i[1]], ti.f32)
-                cv = ti.cast(x[i[2]], ti.f32)
+                a, b, cv = cloth[i[0]], cloth[i[1]], cloth[i[2]]
                 hit = raycast.hit_triangle(o, d, a, b, cv)
-                pull = self._pull(i, a, b, cv)
                 u, v = hit[1], hit[2]
                 ns = ((1.0 - u - v) * self.normals[i[0]] + u * self.normals[i[1]]
                       + v * self.normals[i[2]])
@@ -413,7 +372,7 @@ class Renderer:
             if k != SKY_ID:
                 if n.dot(d) > 0.0:
                     n = -n
-                lit = self._lit(p, n, pull)
+                lit = self._lit(p, n)
                 half = (-self._vec(19) - d).normalized()
                 spec = ti.max(half.dot(n), 0.0)
                 for _ in ti.static(range(5)):

@@ -333,6 +333,112 @@ def test_a_cloth_over_a_cloth_resting_on_a_collider_stays_in_front(f32):
     assert rim.size and (rim < lower_triangles).all()
 
 
+WRAPPED = {   # collider and camera of each wrapped_cloth case
+    "box": ((0.0, 0.02, 0.0), {"half_extents": (0.25, 0.02, 0.02)},
+            {"eye": (0.1, 0.2, 0.35), "target": (0.0, 0.02, 0.0), "fov": 35}),
+    "capsule": ((0.0, 0.06, 0.0), {"radius": 0.04, "half_height": 0.08,
+                                   "rotation": [[0, 1, 0], [-1, 0, 0], [0, 0, 1]]},
+                {"eye": (0.25, 0.25, 0.35), "target": (0.05, 0.06, 0.0), "fov": 35}),
+    "sphere": ((0.0, 0.08, 0.0), {"radius": 0.08},
+               {"eye": (0.2, 0.3, 0.35), "target": (0.0, 0.08, 0.0), "fov": 35})}
+
+
+def wrapped_cloth(kind, rest, thickness=0.005, rows=7, cols=8):
+    """A scene with one collider and a coarse closed mesh cloth wrapped all round it, its
+    particles ``rest`` out from it: a rod (a box along x, the cloth 5 cm longer at each
+    end), a capsule along x (over both caps, to their tips) or a sphere (pole to pole).
+    ``cols`` particles round the axis (the rod's edges half-way between two), ``rows``
+    along it. Its flat triangles cut into the collider between the particles (by 2 to 7
+    mm: the rod's edges, the capsule's and sphere's curves), and no ray from outside
+    reaches the collider without crossing the smooth surface at ``rest`` that the
+    particles lie on."""
+    centre, shape, _ = WRAPPED[kind]
+    v = (np.arange(cols) + 0.5) * 2 * np.pi / cols
+    if kind == "box":
+        d = np.stack([np.sin(v), np.cos(v)], 1)             # (y, z) directions
+        lo, hi = np.zeros(cols), np.full(cols, 0.1)
+        for _ in range(60):                                  # bisection: distance = rest
+            t = 0.5 * (lo + hi)
+            q = np.abs(t[:, None] * d) - 0.02
+            inside = (np.linalg.norm(np.maximum(q, 0), axis=1) + np.minimum(q.max(1), 0)
+                      < rest)
+            lo, hi = np.where(inside, t, lo), np.where(inside, hi, t)
+        along = np.linspace(-0.3, 0.3, rows)[:, None]
+        ring_y, ring_z = lo * d[:, 0], lo * d[:, 1]
+    else:
+        r = shape["radius"] + rest
+        if kind == "capsule":        # arc length along the axis, over the caps
+            h = shape["half_height"]
+            u = np.linspace(-h - 0.5 * np.pi * r, h + 0.5 * np.pi * r, rows)
+            alpha = np.clip((np.abs(u) - h) / r, 0.0, None)
+            along = (np.sign(u) * (np.minimum(np.abs(u), h) + r * np.sin(alpha)))[:, None]
+            ring = (r * np.cos(alpha))[:, None]
+        else:
+            psi = np.linspace(0.0, np.pi, rows)[:, None]
+            along, ring = r * np.cos(psi), r * np.sin(psi)
+        ring_y, ring_z = ring * np.cos(v), ring * np.sin(v)
+    grid = np.zeros((rows, cols, 3))
+    axis, across = (1, 0) if kind == "sphere" else (0, 1)
+    grid[..., axis] = along + (centre[1] if kind == "sphere" else 0.0)
+    grid[..., across] = ring_y + (0.0 if kind == "sphere" else centre[1])
+    grid[..., 2] = ring_z
+    # one vertex a pole, the ring closed: quads (i, j), (i + 1, j + 1) as two triangles
+    ids = np.arange(rows * cols).reshape(rows, cols)
+    poles = [i for i in (0, rows - 1) if kind != "box"]
+    ids[poles] = ids[poles, :1]
+    i, j = np.meshgrid(np.arange(rows - 1), np.arange(cols), indexing="ij")
+    a, b = ids[i, j], ids[i, (j + 1) % cols]
+    c, d = ids[i + 1, j], ids[i + 1, (j + 1) % cols]
+    faces = np.concatenate([np.stack([a, c, b], -1).reshape(-1, 3),
+                            np.stack([b, c, d], -1).reshape(-1, 3)])
+    faces = faces[(faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2])
+                  & (faces[:, 2] != faces[:, 0])]
+    used, faces = np.unique(faces, return_inverse=True)
+    scene = tcloth.Scene(gravity=(0, 0, 0))
+    scene.add_mesh_cloth(grid.reshape(-1, 3)[used], faces.reshape(-1, 3).tolist(),
+                         structural=None, flexion=None, pinned=[])
+    getattr(scene, "add_" + kind)(centre, **shape, thickness=thickness)
+    return scene
+
+
+@pytest.mark.parametrize("kind", ["box", "capsule", "sphere"])
+def test_no_collider_shows_through_cloth_resting_on_it(f32, kind):
+    """A coarse cloth wrapped all round a rod, a capsule or a sphere, its particles at the
+    collider's thickness (and, robustness, at a quarter of it): nothing of the collider
+    is visible from outside the cloth, although its flat triangles cut into it by up to
+    7 mm (a rod's edges, a capsule's caps)."""
+    thickness = 0.005
+    sim = tcloth.Simulator(wrapped_cloth(kind, thickness))
+    r = tcloth.Renderer(sim, 160, 120, camera=WRAPPED[kind][2], supersample=1, ground=False)
+    for rest in (thickness, 0.25 * thickness):
+        sim.set_state(positions=wrapped_cloth(kind, rest).positions)
+        r.render()
+        ids = r.ids()
+        assert (ids < r.tri_count).mean() > 0.15
+        assert not ((ids >= COLLIDER_ID) & (ids < COLLIDER_ID + 1000)).any(), \
+            (rest, ((ids >= COLLIDER_ID) & (ids < COLLIDER_ID + 1000)).sum())
+
+
+def test_colliders_are_drawn_where_they_are(f32):
+    """A coarse cloth (edges of 20 and 28 cm) 2.5 cm behind a thin plate, out of contact
+    reach: seen head-on, the plate hides it. Drawing colliders farther than they are by
+    half the cloth's longest edge (14 cm) put the cloth in front of it."""
+    scene = tcloth.Scene(gravity=(0, 0, 0))
+    scene.add_cloth(resolution=(3, 3), size=(0.4, 0.4), center=(0, 0, -0.03), plane="xy",
+                    structural=None, shear=None, flexion=None, pinned=[])
+    scene.add_box((0, 0, 0), (0.1, 0.1, 0.005), thickness=0.005)
+    sim = tcloth.Simulator(scene)
+    r = tcloth.Renderer(sim, 120, 120, camera={"eye": (0, 0, 1.2), "target": (0, 0, 0),
+                                               "fov": 30}, supersample=1, ground=False)
+    r.render()
+    ids = r.ids()
+    col, row = project(r.camera, np.array([[-0.09, -0.09, 0.005], [0.09, 0.09, 0.005]]),
+                       120, 120)
+    plate = ids[int(min(row)):int(max(row)), int(min(col)):int(max(col))]
+    assert plate.size and (plate == COLLIDER_ID).all()
+    assert (ids < r.tri_count).any()                       # the cloth round it
+
+
 def test_shadow_edges_ramp_smoothly(f32):
     """The shadow lookup weighs the 2 x 2 shadow-map texels bilinearly by the point's
     position between their centres: along a line across a cloth's straight shadow edge

@@ -61,6 +61,56 @@ def test_window_shows_the_cloth_where_the_offscreen_renderer_does(tmp_path):
     assert overlap > 0.95, overlap
 
 
+@pytest.mark.parametrize("kind", ["box", "capsule", "sphere"])
+def test_the_window_draws_resting_cloth_out_of_its_collider(kind):
+    """The window draws each collider's mesh, whose vertices lie on its surface (so the
+    mesh lies inside it), and the cloth where ``DrawnCloth`` puts it, as the off-screen
+    renderer does: for a coarse cloth wrapped round a rod, a capsule or a sphere at the
+    thickness or a quarter of it (``test_render.wrapped_cloth``), no point of the drawn
+    cloth is inside the collider (the independent signed distance of test_colliders, at
+    45 points a triangle), so no face of the collider's mesh can show through it."""
+    from test_colliders import numpy_sdf
+    from test_render import wrapped_cloth
+    from tcloth.drawables import DrawnCloth
+    from tcloth.viewer.meshes import collider_mesh
+    tcloth.init(arch="cpu")
+    sim = tcloth.Simulator(wrapped_cloth(kind, 0.005))
+    collider = sim.scene.colliders[0]
+    mesh = collider_mesh(collider, 0.0, 1.0, 0.1)[0]
+    assert max(numpy_sdf(collider, v)[0] for v in mesh) < 1e-9
+    triangles = sim.scene.cloths[0].triangles
+    drawn = DrawnCloth(sim.model.colliders, triangles, sim.scene.num_particles)
+    u, v = np.meshgrid(np.arange(9), np.arange(9), indexing="ij")
+    keep = u + v <= 8
+    weights = np.stack([8 - u[keep] - v[keep], u[keep], v[keep]], 1) / 8.0
+    for rest in (0.005, 0.00125):
+        x = wrapped_cloth(kind, rest).positions
+        assert np.min([numpy_sdf(collider, p)[0] for p in x]) == pytest.approx(rest)
+        sim.set_state(positions=x)
+        y = drawn.update(sim.state.x, 0.0).to_numpy().astype(np.float64)
+        points = np.einsum("sk,tkd->tsd", weights, y[triangles]).reshape(-1, 3)
+        assert min(numpy_sdf(collider, p)[0] for p in points) > 0.0
+        chords = np.einsum("sk,tkd->tsd", weights, x[triangles]).reshape(-1, 3)
+        assert min(numpy_sdf(collider, p)[0] for p in chords) < -0.002   # they cut in
+
+
+def test_drawn_cloth_on_a_flat_face_and_on_cloth_is_where_its_particles_are():
+    """A cloth lying flat on a box's top face at the thickness and a second one 1.2 cm
+    above it are drawn at their particles: flat triangles do not cut into a flat face."""
+    from tcloth.drawables import DrawnCloth
+    tcloth.init(arch="cpu")
+    scene = tcloth.Scene(gravity=(0, 0, 0))
+    for side, height in ((0.6, 0.055), (0.4, 0.067)):
+        scene.add_cloth(resolution=(8, 8), size=(side, side), center=(0, height, 0),
+                        structural=None, shear=None, flexion=None, pinned=[])
+    scene.add_box((0, 0, 0), (0.5, 0.05, 0.5), thickness=0.005)
+    sim = tcloth.Simulator(scene)
+    triangles = np.concatenate([c.triangles for c in scene.cloths])
+    drawn = DrawnCloth(sim.model.colliders, triangles, scene.num_particles)
+    y = drawn.update(sim.state.x, 0.0).to_numpy()
+    assert np.abs(y - scene.positions).max() < 1e-6
+
+
 def test_no_display_is_one_line_and_exit_code_2():
     env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
     run = subprocess.run([sys.executable, "-m", "tcloth", "view", SCRIPT], env=env,

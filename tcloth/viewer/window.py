@@ -12,7 +12,7 @@ import time
 import numpy as np
 
 from ..camera import Camera
-from ..drawables import cloth_palette, particle_spheres
+from ..drawables import DrawnCloth, cloth_palette, particle_spheres
 from ..errors import SceneError
 from ..integrators import INTEGRATORS
 from ..framing import ground_and_checker
@@ -77,6 +77,7 @@ class Viewer:
             return
         palette = cloth_palette(cloth_colours, len(tris))
         all_tris = self.triangles = np.concatenate(tris).astype(np.int32)
+        self.drawn = DrawnCloth(self.sim.model.colliders, all_tris, n)
         self.front_idx = ti.field(ti.i32, shape=3 * self.tri_count)
         self.back_idx = ti.field(ti.i32, shape=3 * self.tri_count)
         self.front_idx.from_numpy(all_tris.ravel())
@@ -150,12 +151,14 @@ class Viewer:
         s3.point_light(tuple(cam.eye), (0.35, 0.35, 0.35))
         x = sim.positions().astype(np.float64)
         if self.tri_count:
+            # where the off-screen renderer draws it too: out of the colliders it rests on
+            y = self.drawn.update(sim.state.x, sim.time).to_numpy().astype(np.float64)
             # each side a hair off the surface towards its own side, so that the side facing
             # the camera wins the depth test (GGUI draws both sides of every triangle)
-            normals = vertex_normals(x, self.triangles)
+            normals = vertex_normals(y, self.triangles)
             offset = SIDE_OFFSET * self.extent * normals
-            self.front_x.from_numpy((x + offset).astype(np.float32))
-            self.back_x.from_numpy((x - offset).astype(np.float32))
+            self.front_x.from_numpy((y + offset).astype(np.float32))
+            self.back_x.from_numpy((y - offset).astype(np.float32))
             self.front_n.from_numpy(normals.astype(np.float32))
             self.back_n.from_numpy(-normals.astype(np.float32))
             s3.mesh(self.front_x, indices=self.front_idx, normals=self.front_n,
