@@ -13,7 +13,7 @@ CONFIG = {
 
 
 def build(resolution=(48, 48), size=(1.2, 1.2), angle=0.5, friction=0.4):
-    scene = tcloth.Scene(gravity=(0.0, -9.81, 0.0), air_drag=2e-4)
+    scene = tcloth.Scene(gravity=(0.0, -9.81, 0.0), air_damping=2.304)
     scene.add_cloth(resolution=resolution, size=size, center=(0.0, 0.9, 0.0), plane="xz",
                     mass=0.2, structural=(400.0, 0.05), shear=(80.0, 0.02),
                     flexion=(10.0, 0.005), pinned=[])

@@ -14,7 +14,7 @@ CONFIG = {
 
 def build(resolution=(32, 32), size=(1.0, 1.0), structural=(400.0, 0.05),
           shear=(80.0, 0.02), flexion=(10.0, 0.005)):
-    scene = tcloth.Scene(gravity=(0.0, -9.81, 0.0), air_drag=2e-4)
+    scene = tcloth.Scene(gravity=(0.0, -9.81, 0.0), air_damping=1.024)
     nx, _ = resolution
     scene.add_cloth(resolution=resolution, size=size, center=(0.0, 1.0, 0.0), plane="xz",
                     mass=0.2, structural=structural, shear=shear, flexion=flexion,

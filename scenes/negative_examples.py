@@ -12,7 +12,7 @@ CONFIG = {
 
 def build(resolution=(32, 32), structural=(400.0, 0.05), shear=(80.0, 0.02),
           flexion=(10.0, 0.005)):
-    scene = tcloth.Scene(gravity=(0.0, -9.81, 0.0), air_drag=2e-4)
+    scene = tcloth.Scene(gravity=(0.0, -9.81, 0.0), air_damping=1.024)
     scene.add_plane(point=(0.0, 0.0, 0.0), normal=(0.0, 1.0, 0.0), friction=0.5)
     variants = [(-1.3, shear, flexion), (0.0, shear, None), (1.3, None, None)]
     for x, sh, fl in variants:

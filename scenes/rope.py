@@ -12,7 +12,7 @@ CONFIG = {
 
 
 def build(segments=40, length=1.0, stiffness=2000.0, damping=0.02):
-    scene = tcloth.Scene(gravity=(0.0, -9.81, 0.0), air_drag=1e-4)
+    scene = tcloth.Scene(gravity=(0.0, -9.81, 0.0), air_damping=0.041)
     scene.add_rope(start=(-0.5, 1.2, 0.0), end=(-0.5 + length, 1.2, 0.0), segments=segments,
                    mass=0.1, stiffness=stiffness, damping=damping, pinned=("start",))
     return scene

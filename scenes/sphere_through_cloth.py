@@ -11,7 +11,7 @@ CONFIG = {
 
 
 def build(resolution=(40, 40), speed=0.8, radius=0.25, friction=0.2):
-    scene = tcloth.Scene(gravity=(0.0, -9.81, 0.0), air_drag=2e-4)
+    scene = tcloth.Scene(gravity=(0.0, -9.81, 0.0), air_damping=1.6)
     nx, _ = resolution
     scene.add_cloth(resolution=resolution, size=(1.2, 1.2), center=(0.0, 0.8, 0.0), plane="xy",
                     mass=0.2, structural=(400.0, 0.05), shear=(80.0, 0.02),

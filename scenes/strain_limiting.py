@@ -14,7 +14,7 @@ CONFIG = {
 
 
 def build(resolution=(20, 20), stiffness=60.0):
-    scene = tcloth.Scene(gravity=(0.0, -9.81, 0.0), air_drag=1e-2)
+    scene = tcloth.Scene(gravity=(0.0, -9.81, 0.0), air_damping=2.0)
     nx, _ = resolution
     cloths = [scene.add_cloth(resolution=resolution, size=(1.0, 1.0), center=(x, 1.0, 0.0),
                               plane="xy", mass=2.0, structural=(stiffness, 0.2),

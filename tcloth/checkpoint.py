@@ -101,7 +101,7 @@ def scene_to_arrays(scene):
               "spring_stiffness": sp["stiffness"], "spring_damping": sp["damping"],
               "spring_rest": sp["rest_length"], "spring_kind": sp["kind"]}
     desc = {"gravity": scene.gravity.tolist(), "air_drag": scene.air_drag,
-            "cloths": [], "ropes": [], "colliders": []}
+            "air_damping": scene.air_damping, "cloths": [], "ropes": [], "colliders": []}
     for k, c in enumerate(scene.cloths):
         if c.is_grid:
             desc["cloths"].append({"offset": int(c.offset), "resolution": list(c.resolution),
@@ -135,7 +135,8 @@ def _runs(kinds):
 
 def scene_from_arrays(desc, arrays):
     """Rebuild a Scene with the validating Scene methods."""
-    scene = Scene(gravity=desc["gravity"], air_drag=desc["air_drag"])
+    scene = Scene(gravity=desc["gravity"], air_drag=desc["air_drag"],
+                  air_damping=desc.get("air_damping", 0.0))     # absent before air_damping
     scene.add_particles(arrays["positions"], mass=arrays["masses"],
                         velocities=arrays["velocities"], pinned=arrays["pinned"].astype(bool))
     kinds = arrays["spring_kind"]

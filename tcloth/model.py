@@ -51,7 +51,10 @@ class Model:
     Attributes:
         particle_count, spring_count, list_spring_count: sizes.
         mass, inv_mass: shape (particle_count,), kg and 1/kg (0 = pinned).
-        params: shape (4,): (g_x, g_y, g_z, air_drag), m/s^2 and N s/m.
+        params: shape (4,): (g_x, g_y, g_z, air_drag), m/s^2 and N s/m (air_drag alone:
+            the drag a particle feels is ``drag``).
+        drag: shape (particle_count,): each particle's viscous drag coefficient
+            c + gamma m_p from the scene's air_drag c and air_damping gamma, N s/m.
         spring_pairs: shape (spring_count,) of 2 x i32 particle ids.
         spring_rest, spring_ks, spring_kd: shape (spring_count,); m, N/m, N s/m.
         grids: list of GridBlock (empty when grid_stencil=False); grid_table: their
@@ -89,6 +92,7 @@ class Model:
 
         self.mass = ti.field(real, shape=n)
         self.inv_mass = ti.field(real, shape=n)
+        self.drag = ti.field(real, shape=n)
         m = scene.masses
         self.mass.from_numpy(m.astype(npr))
         self.inv_mass.from_numpy(np.where(scene.pinned, 0.0, 1.0 / m).astype(npr))
@@ -137,6 +141,7 @@ class Model:
         the model was built from."""
         scene, npr = self.scene, runtime.numpy_real()
         self.params.from_numpy(np.array([*scene.gravity, scene.air_drag], dtype=npr))
+        self.drag.from_numpy(scene.drag_coefficients().astype(npr))
         if self.spring_count:
             springs = scene.springs
             self.spring_ks.from_numpy(springs["stiffness"][self.spring_order].astype(npr))

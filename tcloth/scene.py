@@ -27,12 +27,19 @@ class Scene:
 
     Args:
         gravity: (3,) acceleration, m/s^2.
-        air_drag: viscous drag coefficient c >= 0: force -c * v on every particle (N s/m).
+        air_drag: viscous drag coefficient c >= 0: force -c * v on every particle (N s/m),
+            whatever its mass: a finer grid of the same cloth (lighter particles) is damped
+            harder.
+        air_damping: mass-proportional (Rayleigh) damping rate gamma >= 0: force
+            -gamma * m_p * v on particle p (1/s). A body falls at the terminal speed
+            g / gamma at any resolution. With both, particle p's coefficient is
+            c + gamma * m_p (``drag_coefficients``).
     """
 
-    def __init__(self, gravity=(0.0, -9.81, 0.0), air_drag=0.0):
+    def __init__(self, gravity=(0.0, -9.81, 0.0), air_drag=0.0, air_damping=0.0):
         self.gravity = as_vec3("gravity", gravity)
         self.air_drag = as_scalar("air_drag", air_drag, minimum=0.0)
+        self.air_damping = as_scalar("air_damping", air_damping, minimum=0.0)
         self._x, self._v, self._m, self._pin = [], [], [], []
         self._pairs, self._ks, self._kd, self._rest, self._kind = [], [], [], [], []
         self._spring_keys = np.zeros(0, dtype=np.int64)
@@ -276,6 +283,11 @@ class Scene:
     def masses(self):
         """(N,) masses, kg."""
         return self._cat(self._m, (0,), np.float64)
+
+    def drag_coefficients(self):
+        """(N,) each particle's viscous drag coefficient c + gamma m_p (N s/m) from
+        ``air_drag`` c and ``air_damping`` gamma."""
+        return self.air_drag + self.air_damping * self.masses
 
     @property
     def pinned(self):

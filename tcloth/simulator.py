@@ -336,8 +336,14 @@ class Simulator:
         self._parameters_changed()
 
     def set_air_drag(self, air_drag):
-        """The viscous air drag c >= 0 (N s/m) from now on."""
+        """The viscous air drag c >= 0 (N s/m): force -c v on every particle, from now on."""
         self.scene.air_drag = as_scalar("air_drag", air_drag, minimum=0.0)
+        self._parameters_changed()
+
+    def set_air_damping(self, air_damping):
+        """The mass-proportional air damping gamma >= 0 (1/s): force -gamma m_p v on
+        particle p, the same at every resolution, from now on."""
+        self.scene.air_damping = as_scalar("air_damping", air_damping, minimum=0.0)
         self._parameters_changed()
 
     def set_springs(self, kind, stiffness=None, damping=None):

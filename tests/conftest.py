@@ -72,7 +72,8 @@ def energy_gradient(sim, x0, term, entries=None, h=1e-6):
 def numpy_forces(scene, x, v):
     """Independent reference: gravity, drag and the lecture's spring + axial damping force."""
     sp = scene.springs
-    f = scene.masses[:, None] * scene.gravity - scene.air_drag * v
+    c = scene.air_drag + scene.air_damping * scene.masses      # per particle, N s/m
+    f = scene.masses[:, None] * scene.gravity - c[:, None] * v
     for (i, j), ks, kd, l0 in zip(sp["pairs"], sp["stiffness"], sp["damping"], sp["rest_length"]):
         d = x[i] - x[j]
         length = np.linalg.norm(d)

@@ -16,7 +16,8 @@ class Controls:
     """The sandbox's logic for one Simulator, without a window.
 
     ``values`` holds what the panel shows and edits: dt (s), substeps (per frame),
-    gravity (m/s^2, downwards along -y), springs {kind: [k_s, k_d]} for the kinds the
+    gravity (m/s^2, downwards along -y), air_damping (1/s, the scene's mass-proportional
+    air damping: the same at every resolution), springs {kind: [k_s, k_d]} for the kinds the
     scene has, wind_speed (m/s) and wind_direction (degrees about y, 0 = +x) when the scene
     has wind (not a Python-callable gust, which sets the velocity itself), colliders (one
     bool each), strain_limiting (when the scene has a limit).
@@ -28,8 +29,9 @@ class Controls:
         scene = sim.scene
         springs = scene.springs
         kinds = {k: springs["kind"] == KIND_CODE[k] for k in SPRING_KINDS}
-        self.values = {"dt": sim.dt, "substeps": int(substeps),
+        self.values = {"dt": sim.dt, "substeps": as_int("substeps", substeps, 1),
                        "gravity": float(-scene.gravity[1]),
+                       "air_damping": scene.air_damping,
                        "springs": {k: [_typical(springs[q][mask])
                                        for q in ("stiffness", "damping")]
                                    for k, mask in kinds.items() if mask.any()},
@@ -61,6 +63,8 @@ class Controls:
             g = sim.scene.gravity.copy()
             g[1] = -new["gravity"]
             sim.set_gravity(g)
+        if new["air_damping"] != old["air_damping"]:
+            sim.set_air_damping(new["air_damping"])
         for kind, (ks, kd) in new["springs"].items():
             if [ks, kd] != old["springs"][kind]:
                 sim.set_springs(kind, stiffness=ks, damping=kd)

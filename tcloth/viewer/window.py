@@ -220,6 +220,8 @@ class Viewer:
             v["substeps"] = w.slider_int("substeps", v["substeps"], 1,
                                          max(4 * c.initial["substeps"], 16))
             v["gravity"] = w.slider_float("gravity", v["gravity"], 0.0, 20.0)
+            v["air_damping"] = w.slider_float("air damping (1/s)", v["air_damping"], 0.0,
+                                              max(10 * c.initial["air_damping"], 10.0))
             for kind, pair in v["springs"].items():
                 k0, d0 = c.initial["springs"][kind]
                 pair[0] = w.slider_float(f"{kind} k_s", pair[0], 0.0, max(10 * k0, 1.0))
