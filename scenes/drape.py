@@ -1,6 +1,8 @@
 """Cusick's drape test: a 30 cm disc of fabric, clamped at its centre between two 18 cm
-discs, hangs into folds; its drape coefficient is the shadow's share of the ring outside
-the support (``tools/drape.py`` measures it for the fabric presets).
+discs, hangs into folds.
+
+Its drape coefficient is the shadow's share of the ring outside the support
+(``tools/drape.py`` measures it for the fabric presets).
 
     tcloth render scenes/drape.py --set fabric=denim --out out/drape.mp4
     tcloth view scenes/drape.py --set fabric=fleece
@@ -10,6 +12,7 @@ import numpy as np
 import tcloth
 from tcloth.fabric import preset
 from tcloth.primitives import disc
+from tcloth.validate import as_int, as_scalar
 
 CONFIG = {
     "integrator": "backward_euler",
@@ -26,6 +29,13 @@ def build(fabric="denim", rings=24, radius=0.15, support=0.09, height=0.3):
     along x, with the mean of its warp and weft bending: a mesh's hinges take one) on its
     support, a cylinder of radius ``support``; the particles within the support's radius
     are clamped (pinned)."""
+    rings = as_int("rings", rings, 1)
+    radius = as_scalar("radius", radius, minimum=0.0, strict=True)
+    support = as_scalar("support", support, minimum=0.0, strict=True)
+    if support >= radius:
+        raise tcloth.SceneError(f"support must be less than radius {radius:g} m (got "
+                                f"{support:g}): the disc must reach past its support")
+    height = as_scalar("height", height, minimum=0.01, strict=True)    # the support's 1 cm gap
     vertices, triangles = disc(rings, radius)
     vertices[:, 1] += height
     clamped = np.flatnonzero(np.hypot(vertices[:, 0], vertices[:, 2]) <= support + 1e-9)

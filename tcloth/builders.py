@@ -206,7 +206,16 @@ def add_mesh_cloth(scene, vertices, faces, mass, structural, shear, flexion, pin
     pin[ids] = True
     cloth = MeshCloth(scene.num_particles, n, triangles, params)
     if fabric is not None and max(fabric.bending) > 0:     # checked before anything is added
-        hinges.cloth_hinges(cloth, np.concatenate([scene.positions, x]), fabric.bending)
+        rest = np.concatenate([scene.positions, x])
+        try:
+            hinges.check_flat(*hinges.hinge_table(cloth.triangles, rest)[::3])
+        except SceneError as e:
+            raise SceneError(
+                f"{e}: a fabric with bending > 0 needs a flat mesh; a closed or curved mesh "
+                f"(a balloon) takes one with bending=0, the membrane alone, which keeps any "
+                f"rest shape: tcloth.Fabric(..., bending=0), or fabric.without_bending() "
+                f"({fabric.name!r} without its bending)") from None
+        hinges.cloth_hinges(cloth, rest, fabric.bending)
     scene.add_particles(x, mass=masses, pinned=pin)
     if fabric is not None:
         cloth.springs.update({family: np.zeros(0, dtype=np.int64) for family in params})
@@ -236,7 +245,8 @@ class Rope:
 def add_cloth(scene, resolution, size, center, plane, mass, structural, shear, flexion,
               pinned, rotation=None, fabric=None):
     """``Scene.add_cloth``: the particles and springs of a Provot cloth grid, or of a
-    fabric's grid (``fabric.py``)."""
+    fabric's grid (``fabric.py``). ``pinned`` None (the default, with or without a
+    fabric) pins the corners (0, 0) and (nx - 1, 0), as the API has it; [] pins none."""
     fabric = None if fabric is None else fabrics.preset(fabric)
     given = classic(fabric, mass=mass, structural=structural, shear=shear, flexion=flexion)
     if np.ndim(resolution) != 1 or len(resolution) != 2:

@@ -15,7 +15,7 @@ import warnings
 
 from .errors import DeviceWarning, InstabilityError, SceneError
 from .script import (ScriptError, build_scene, describe, load_script, parse_settings,
-                     timing)
+                     timing, with_options)
 
 
 def init(arch, precision):
@@ -44,8 +44,12 @@ def _render_parser(parser):
                                       "(default out/NAME.mp4)")
     parser.add_argument("--frames", type=int, help="number of frames")
     parser.add_argument("--integrator", help="integrator name")
-    parser.add_argument("--dt", type=float, help="time step, s")
-    parser.add_argument("--steps-per-frame", type=int, help="simulator steps per frame")
+    parser.add_argument("--dt", type=float, help="time step, s (steps per frame follow it: "
+                                                 "as many as fill a frame, unless "
+                                                 "--steps-per-frame is given too)")
+    parser.add_argument("--steps-per-frame", type=int, help="simulator steps per frame "
+                                                            "(default: the script's; with "
+                                                            "--dt: as many as fill a frame)")
     parser.add_argument("--arch", default="cpu", help="cpu | gpu | cuda | vulkan | metal | auto")
     parser.add_argument("--precision", choices=["f32", "f64"], help="float precision")
     parser.add_argument("--width", type=int, help="image width, pixels")
@@ -64,16 +68,19 @@ def render_script(path, args):
 
     module, cfg = load_script(path)
     params = parse_settings(module, path, args.set)
-    for key in ("frames", "integrator", "dt", "steps_per_frame", "precision", "width",
-                "height", "supersample"):
-        if getattr(args, key) is not None:
-            cfg[key] = getattr(args, key)
+    cfg = with_options(cfg, path, {key: ("--" + key.replace("_", "-"), getattr(args, key))
+                                   for key in ("frames", "integrator", "dt", "steps_per_frame",
+                                               "precision", "width", "height", "supersample")})
     name = os.path.splitext(os.path.basename(path))[0]
     out = args.out or os.path.join("out", name + ".mp4")
     check_writable(out)
     init(args.arch, cfg["precision"])
     scene = build_scene(module, path, params)
     dt, steps = timing(cfg, scene)
+    frames, fps = cfg["frames"], cfg["fps"]
+    print(f"tcloth: {frames} frames of {steps} step{'s' if steps > 1 else ''} of "
+          f"dt = {dt:.6g} s: {(frames - 1) * steps * dt:.4g} s simulated, {frames / fps:.4g} s "
+          f"of video at {fps:g} fps", file=sys.stderr)
     sim = Simulator(scene, cfg["integrator"], dt=dt, **cfg["options"])
     return record(sim, out, frames=cfg["frames"], steps_per_frame=steps, fps=cfg["fps"],
                   width=cfg["width"], height=cfg["height"], camera=cfg["camera"],
@@ -89,9 +96,11 @@ def view_script(path, args):
 
     module, cfg = load_script(path)
     params = parse_settings(module, path, args.set)
-    for key in ("integrator", "dt", "precision"):
-        if getattr(args, key) is not None:
-            cfg[key] = getattr(args, key)
+    cfg = with_options(cfg, path, {"integrator": ("--integrator", args.integrator),
+                                   "dt": ("--dt", args.dt), "precision": ("--precision",
+                                                                          args.precision),
+                                   "steps_per_frame": ("--substeps", args.substeps),
+                                   "frames": ("--frames", args.frames)})
     if args.screenshot is not None:
         check_writable(args.screenshot)
         if args.frames is None:
@@ -105,10 +114,12 @@ def view_script(path, args):
     if args.wind and scene.wind is None:
         scene.set_wind((0.0, 0.0, 0.0))
     dt, steps = timing(cfg, scene)
+    print(f"tcloth: {steps} substep{'s' if steps > 1 else ''} of dt = {dt:.6g} s a frame: "
+          f"{steps * dt:.4g} s simulated a frame", file=sys.stderr)
     sim = Simulator(scene, cfg["integrator"], dt=dt, grab=True, **cfg["options"])
     render = cfg["render"]
     try:
-        viewer = Viewer(sim, substeps=args.substeps or steps,
+        viewer = Viewer(sim, substeps=steps,
                         camera=cfg["camera"], width=args.width, height=args.height,
                         ground=render.get("ground"), cloth_colours=render.get("cloth_colours"),
                         title=f"tcloth: {os.path.basename(path)}")
@@ -195,9 +206,12 @@ def main(argv=None):
                                          "play with it")
     p_view.add_argument("script", help="path of a scene script, e.g. scenes/hanging_cloth.py")
     p_view.add_argument("--integrator", help="integrator name (switchable in the window)")
-    p_view.add_argument("--dt", type=float, help="time step, s")
-    p_view.add_argument("--substeps", type=int, help="simulator steps per frame "
-                                                     "(default: the script's steps_per_frame)")
+    p_view.add_argument("--dt", type=float, help="time step, s (substeps follow it: as "
+                                                 "many as fill a frame, unless --substeps "
+                                                 "is given too)")
+    p_view.add_argument("--substeps", type=int, help="simulator steps per frame (default: "
+                                                     "the script's steps_per_frame; with --dt: "
+                                                     "as many as fill a frame)")
     p_view.add_argument("--arch", default="cpu", help="cpu | gpu | cuda | vulkan | metal | auto")
     p_view.add_argument("--precision", choices=["f32", "f64"], help="float precision")
     p_view.add_argument("--width", type=int, default=1280, help="window width, pixels")

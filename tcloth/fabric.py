@@ -54,15 +54,18 @@ class Fabric:
     source: str = ""
 
     def __post_init__(self):
-        if not (np.isfinite(self.density) and self.density > 0):
-            raise SceneError(f"density must be kg/m^2 > 0 (got {fmt(self.density)})")
+        object.__setattr__(self, "density", _number("density", self.density, "kg/m^2 > 0"))
         object.__setattr__(self, "stretch", as_warp_weft("stretch", self.stretch, strict=True))
-        if not (np.isfinite(self.shear) and self.shear > 0):
-            raise SceneError(f"shear must be N/m > 0 (got {fmt(self.shear)})")
+        object.__setattr__(self, "shear", _number("shear", self.shear, "N/m > 0"))
         object.__setattr__(self, "bending", as_warp_weft("bending", self.bending))
-        if not (np.isfinite(self.damping) and self.damping >= 0):
-            raise SceneError(f"damping must be a ratio of critical >= 0 "
-                             f"(got {fmt(self.damping)})")
+        object.__setattr__(self, "damping", _number("damping", self.damping,
+                                                    "a ratio of critical >= 0", strict=False))
+
+    def without_bending(self):
+        """This fabric with bending 0: the membrane alone, for a closed or curved mesh (a
+        balloon), whose rest shape hinge bending cannot take (it needs a flat one)."""
+        return Fabric(self.density, self.stretch, self.shear, 0.0, self.damping,
+                      name=f"{self.name} (no bending)", source=self.source)
 
     def mean_bending(self):
         """This fabric with the geometric mean of its warp and weft bending (for a mesh
@@ -89,6 +92,18 @@ class Fabric:
                              f"with stretch {self.stretch}: its diagonals alone would be "
                              "stiffer than that along the grid (lower the shear)")
         return k1, k2, diagonal
+
+
+def _number(name, value, rule, strict=True):
+    """A finite float > 0 (>= 0 unless ``strict``), or SceneError naming ``name``, the
+    rule and the value."""
+    try:
+        x = float(value) if np.ndim(value) == 0 else np.nan
+    except (TypeError, ValueError):
+        x = np.nan
+    if not (np.isfinite(x) and (x > 0 if strict else x >= 0)):
+        raise SceneError(f"{name} must be {rule} (got {fmt(value)})")
+    return x
 
 
 def damping(fabric, ks, masses, pairs):

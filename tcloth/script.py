@@ -14,12 +14,16 @@ the video plays in real time.
     a frame (with steps_per_frame given: that bound or 1/(fps steps), the shorter).
   - Implicit integrators (stable at any dt): IMPLICIT_STEPS_PER_FRAME steps a frame, or
     steps_per_frame.
+A dt given on the command line (``with_options``) without steps_per_frame (``--steps-per-frame``,
+the viewer's ``--substeps``) drops the script's steps_per_frame: its steps fill a frame.
 """
 import ast
 import importlib.util
 import inspect
 import math
+import numbers
 import os
+import re
 
 from .errors import SceneError
 
@@ -96,11 +100,70 @@ def build_scene(module, path, params=None):
     except SceneError:
         raise
     except Exception as e:
-        raise ScriptError(f"scene script {path!r}: build() raised {type(e).__name__}: {e}") from e
+        call = ", ".join(f"{k}={v!r}" for k, v in (params or {}).items())
+        raise ScriptError(f"scene script {path!r}: build({call}) raised "
+                          f"{type(e).__name__}: {e}") from e
     if not isinstance(scene, Scene):
         raise ScriptError(f"scene script {path!r}: build() must return a tcloth.Scene "
                           f"(got {type(scene).__name__})")
     return scene
+
+
+def with_options(cfg, path, options):
+    """A merged CONFIG with the command line's values in it, every timing value checked.
+
+    Args:
+        cfg: the script's CONFIG merged over DEFAULTS (``load_script``).
+        options: {CONFIG key: (option, value)}, value None where the option was not given,
+            e.g. {"dt": ("--dt", 0.01), "steps_per_frame": ("--substeps", None)}.
+    Returns:
+        the new dict. A dt given without steps_per_frame drops the script's
+        steps_per_frame, so that as many steps of that dt as fill a frame follow
+        (``timing``: round(1 / (fps dt)), at least 1): a frame stays 1/fps s of simulated
+        time, where the script's count was made for its own dt.
+    Raises:
+        ScriptError naming the option and its value (or the CONFIG key) when dt is not a
+        finite time > 0, or steps_per_frame or frames a whole number >= 1, or fps finite
+        and > 0 (``check_timing``).
+    """
+    merged, named = dict(cfg), {}
+    for key, (option, value) in options.items():
+        if value is not None:
+            merged[key], named[key] = value, option
+    if "dt" in named and "steps_per_frame" not in named:
+        merged["steps_per_frame"] = None
+    check_timing(merged, path, named)
+    return merged
+
+
+def check_timing(cfg, path, named=None):
+    """ScriptError unless a merged CONFIG's dt (None or finite > 0, s), steps_per_frame
+    (None or a whole number >= 1), frames (a whole number >= 1) and fps (finite > 0) can
+    run; the message names the command-line option a value came from (``named``: {key:
+    option}), else the script's CONFIG key, and the value."""
+    named = named or {}
+
+    def refuse(key, rule):
+        where = (named[key] if key in named else
+                 f"scene script {path!r}: CONFIG[{key!r}] =")
+        raise ScriptError(f"{where} {cfg[key]!r}: must be {rule}")
+
+    def whole(value):
+        return isinstance(value, numbers.Integral) and not isinstance(value, bool)
+
+    def positive(value):
+        return (isinstance(value, numbers.Real) and not isinstance(value, bool)
+                and math.isfinite(value) and value > 0)
+
+    if cfg["dt"] is not None and not positive(cfg["dt"]):
+        refuse("dt", "a time step in seconds, finite and > 0")
+    if cfg["steps_per_frame"] is not None and not (whole(cfg["steps_per_frame"])
+                                                   and cfg["steps_per_frame"] >= 1):
+        refuse("steps_per_frame", "a whole number of steps a frame, >= 1")
+    if not (whole(cfg["frames"]) and cfg["frames"] >= 1):
+        refuse("frames", "a whole number of frames, >= 1")
+    if not positive(cfg["fps"]):
+        refuse("fps", "frames per second, finite and > 0")
 
 
 def timing(cfg, scene):
@@ -124,10 +187,16 @@ def timing(cfg, scene):
 
 
 def describe(path):
-    """The first line of a script's docstring, read without running it."""
+    """The first sentence of a script's docstring (of its first paragraph, on one line,
+    whole however its lines wrap), read without running it."""
     try:
         with open(path) as f:
             doc = ast.get_docstring(ast.parse(f.read())) or ""
     except (OSError, SyntaxError) as e:
         return f"(unreadable: {e})"
-    return doc.strip().splitlines()[0] if doc.strip() else "(no description)"
+    paragraph = " ".join(doc.strip().split("\n\n")[0].split()).replace("``", "")
+    if not paragraph:
+        return "(no description)"
+    # a sentence ends at . ! or ? before a capital letter or the paragraph's end
+    sentence = re.match(r"(.+?[.!?])(?:\s+(?=[A-Z])|$)", paragraph)
+    return sentence.group(1) if sentence else paragraph

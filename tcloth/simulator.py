@@ -311,6 +311,8 @@ class Simulator:
         self.num_steps = 0
         self._time_base, self._step_base = 0.0, 0
         self.state.t = 0.0
+        if self._contact is not None:
+            self._contact.reset_stats()          # a new run counts from zero
         self.set_state(self.scene.positions, self.scene.velocities)
 
     # -- live changes ------------------------------------------------------------------------

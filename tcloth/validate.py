@@ -57,8 +57,11 @@ def as_scalar(name, value, minimum=None, strict=False):
 def as_warp_weft(name, value, minimum=0.0, strict=False):
     """(warp, weft) floats from one number (both) or a pair, finite and bounded below
     (``minimum`` inclusive unless ``strict``)."""
-    pair = np.ravel(np.asarray(value, dtype=np.float64)) if np.ndim(value) else \
-        np.array([float(value)] * 2)
+    try:
+        pair = np.ravel(np.asarray(value, dtype=np.float64)) if np.ndim(value) else \
+            np.array([float(value)] * 2)
+    except (TypeError, ValueError):
+        pair = np.full(0, np.nan)             # not numbers: refused below
     low = pair <= minimum if strict else pair < minimum
     if pair.shape != (2,) or not np.all(np.isfinite(pair)) or np.any(low):
         raise SceneError(f"{name} must be a number {'>' if strict else '>='} {minimum:g} or a "

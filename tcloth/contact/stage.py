@@ -221,3 +221,12 @@ class ContactStage:
             out["candidates"] = self.broad.count
             out["rebuilds"] = self.broad.rebuilds
         return out
+
+    def reset_stats(self):
+        """Start the counts and the time of ``stats`` again from zero (a new run:
+        ``Simulator.reset``); the proximity list is kept."""
+        self.stats = {key: 0 for key in STATS}
+        self.stats["seconds"] = 0.0
+        self.batch_cuts.fill(0)
+        if self.broad is not None:
+            self.broad.rebuilds = 0

@@ -9,6 +9,7 @@ import numpy as np
 
 from ..errors import InstabilityError
 from ..scene import KIND_CODE, SPRING_KINDS
+from ..validate import as_int
 from .camera import pick
 
 
