@@ -14,8 +14,9 @@ CONFIG = {
 }
 
 
-def build(resolution=(40, 40), size=(1.0, 1.0), tilt=0.25, friction=0.3, thickness=0.006):
-    scene = tcloth.Scene(gravity=(0.0, -9.81, 0.0), air_damping=1.6)
+def build(resolution=(40, 40), size=(1.0, 1.0), tilt=0.25, friction=0.3, thickness=0.006,
+          air_damping=1.6):
+    scene = tcloth.Scene(gravity=(0.0, -9.81, 0.0), air_damping=air_damping)
     c, s = np.cos(tilt), np.sin(tilt)
     scene.add_cloth(resolution=resolution, size=size, plane="xy",
                     center=(0.0, 0.06 + 0.5 * size[1] * c, 0.5 * size[1] * s), mass=0.2,

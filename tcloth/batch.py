@@ -36,7 +36,7 @@ def _substep(integrator: ti.template(), limiter: ti.template(), contact: ti.temp
     if ti.static(bool(contact)):
         cut = sweep_colliders(contact.colliders, contact.inv_mass, contact.x_start, a.x, a.v,
                               ti.cast(t, float), ti.cast(dt, float), contact.held)
-    return budget.check(a.x, a.v, t + dt, x_bound, v_bound), cut
+    return budget.check(a.x, a.v, t + dt, x_bound, v_bound, 0.0), cut
 
 
 def kernel(integrator, limiter, contact, budget, a, b, start, x_bound, v_bound):

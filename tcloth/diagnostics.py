@@ -53,6 +53,21 @@ class Diagnostics:
         e["total"] = sum(e.values())
         return e
 
+    def stored(self, x, t):
+        """(P, strain) at positions x and time t: the potential energy of every term but
+        gravity (springs, bending, membrane, pressure, contacts, attraction, the grab
+        spring; J) and the largest strain of a spring or a membrane triangle (None
+        without either), for the instability test (``budget.py``)."""
+        total, strain = 0.0, None
+        for term in self.terms:
+            if term.name == "gravity":
+                continue
+            energy, stretch = term.stored(x, t, self._out)
+            total += 0.0 if energy is None else float(energy)
+            if stretch is not None:
+                strain = float(stretch) if strain is None else max(strain, float(stretch))
+        return total, strain
+
     def self_contacts(self, state):
         """Active self-contacts by kind (see ``SelfContact.active``)."""
         term = term_modules.find(self.terms, term_modules.SelfContact)

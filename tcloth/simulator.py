@@ -1,11 +1,12 @@
 """Simulator: a Scene turned into a Model, two States and an integrator."""
 import numpy as np
 
-from . import batch, checkpoint, runtime, stability
-from .budget import EnergyBudget, check_state
+from . import batch, checkpoint, runtime
+from .budget import EnergyBudget
 from .constraints import StrainLimiter
 from .diagnostics import Diagnostics
-from .errors import InstabilityError, SceneError
+from .errors import SceneError
+from .instability import StepCheck
 from .integrators import INTEGRATORS
 from .model import Model
 from .runtime import serial_count
@@ -13,10 +14,6 @@ from .scene import Scene
 from .terms.grab import GrabSpring
 from .terms.wind import wind_velocity
 from .validate import as_int, as_points, as_scalar, as_vec3
-
-_DEFAULT_HINT = ("try a smaller dt, more spring damping (k_d) or air drag, "
-                 "or an implicit integrator")
-
 
 def _integrator_class(name):
     if name not in INTEGRATORS:
@@ -52,11 +49,15 @@ class Simulator:
             rather than the spring list; both give the same forces.
         position_bound, velocity_bound: a step that leaves |x_k| <= position_bound (m,
             default 1e6) or |v_k| <= velocity_bound (m/s, default 1e8) in any coordinate
-            raises InstabilityError, as does any non-finite value, and a step that gives
-            the particles more kinetic and gravitational energy than the scene can supply
-            (``budget.py``: the energy at the last baseline plus what gravity, wind,
-            moving colliders and moving pins can add, plus a margin of the scene's
-            energy scale).
+            raises InstabilityError, as does any non-finite value, and a step that leaves
+            the scene with more energy (kinetic, gravitational and stored: springs,
+            hinges, membrane, pressure, contacts) than it can supply (``budget.py``: the
+            energy at the last baseline plus what wind, moving colliders and moving pins
+            can add, plus a margin of the scene's energy scale).
+        strain_bound: a step that stretches a spring or a membrane triangle beyond this
+            strain (default 1.0: twice its rest length, beyond any woven or knitted
+            fabric's breaking strain) raises InstabilityError; None switches it off
+            (rubber bands, soft ropes).
         energy_bound: apply that energy budget (default True); False leaves only the
             non-finite values and the two bounds (to study how an integrator's energy
             grows, as forward Euler's does on undamped springs).
@@ -73,13 +74,14 @@ class Simulator:
 
     Live changes (the viewer's controls) keep the state and recompile nothing, except a
     new integrator: ``set_integrator``, ``set_dt``, ``set_gravity``, ``set_air_drag``,
-    ``set_springs``, ``set_wind``, ``set_collider_enabled``, ``set_strain_limiting``,
-    ``grab``/``release``. Scene values they change are changed in ``scene`` too, and the
-    switches are settings, so a checkpoint saved afterwards continues the changed run.
+    ``set_air_damping``, ``set_springs``, ``set_wind``, ``set_collider_enabled``,
+    ``set_strain_limiting``, ``grab``/``release``. Scene values they change are changed
+    in ``scene`` too, and the switches are settings, so a checkpoint saved afterwards
+    continues the changed run.
     """
 
     def __init__(self, scene, integrator="symplectic_euler", dt=1e-3, grid_stencil=True,
-                 position_bound=1e6, velocity_bound=1e8, energy_bound=True,
+                 position_bound=1e6, velocity_bound=1e8, strain_bound=1.0, energy_bound=True,
                  strain_limiting=True, colliders_off=(), grab=False, batch=True, **options):
         if not isinstance(scene, Scene):
             raise SceneError(f"scene must be a tcloth.Scene (got {type(scene).__name__})")
@@ -87,11 +89,14 @@ class Simulator:
         self.dt = as_scalar("dt", dt, minimum=0.0, strict=True)
         self.position_bound = as_scalar("position_bound", position_bound, 0.0, strict=True)
         self.velocity_bound = as_scalar("velocity_bound", velocity_bound, 0.0, strict=True)
+        self.strain_bound = (None if strain_bound is None else
+                             as_scalar("strain_bound", strain_bound, 0.0, strict=True))
         self.integrator_name = integrator
         off = sorted({_index("collider index", i, len(scene.colliders)) for i in colliders_off})
         self.settings = {"grid_stencil": bool(grid_stencil),
                          "position_bound": self.position_bound,
                          "velocity_bound": self.velocity_bound,
+                         "strain_bound": self.strain_bound,
                          "energy_bound": bool(energy_bound),
                          "strain_limiting": bool(strain_limiting), "colliders_off": off,
                          "grab": bool(grab), "batch": bool(batch)}
@@ -104,8 +109,9 @@ class Simulator:
         limit = self.model.strain_limit
         self._limiter = (StrainLimiter(self.model) if limit is not None and self.model.limit_count
                          else None)
-        self._diag = Diagnostics(self.model)
-        self._budget = EnergyBudget(self.model, bool(energy_bound))
+        self.diagnostics = Diagnostics(self.model)
+        self.budget = EnergyBudget(self.model, bool(energy_bound))
+        self._checker = StepCheck(self)
         self.num_steps = 0
         self._time_base, self._step_base = 0.0, 0      # the time at step _step_base
         self._batch_start = None                        # a batch's start state (batch.py)
@@ -154,10 +160,9 @@ class Simulator:
                 self.integrator.invalidate()
             t_end = self.time + self.dt
             self._see_gust(t_end)
-            bad = check_state(self._budget, s_out.x, s_out.v, t_end, self.position_bound,
-                              self.velocity_bound)
-            if bad >= 0:
-                self._raise_instability(bad)
+            error = self._checker.verify(s_out, self.num_steps)
+            if error is not None:
+                raise error
             self._states.reverse()
             self.num_steps += 1
             self.state.t = self.time
@@ -189,83 +194,87 @@ class Simulator:
         return why
 
     def _step_batch(self, n, limiter):
+        """n steps in one launch (``batch.py``), whose kernel checks every substep's
+        particles and kinetic and gravitational energy; the stored energy and the strain
+        are checked at the end, and where they fail the steps run again one at a time
+        from the batch's start to find the first bad one. An integrator whose step costs
+        many force passes (``Integrator.checked_steps``: VBD, XPBD) runs one step a launch,
+        each checked whole."""
         a, b = self._states
         if self._batch_start is None:
             self._batch_start = self.model.state()
         key = (self.integrator, limiter, a)
         if key not in self._batch_kernels:
             self._batch_kernels[key] = batch.kernel(
-                self.integrator, limiter, self._contact, self._budget, a, b,
+                self.integrator, limiter, self._contact, self.budget, a, b,
                 self._batch_start, self.position_bound, self.velocity_bound)
         run = self._batch_kernels[key]
         fresh = 0 if self.integrator.holds_forces(a) else 1
         args = (fresh, self._time_base, self.num_steps - self._step_base, self.dt)
-        done, bad = n, -1
-        code = run(n, *args)
+        done, error = n, None
+        if self.integrator.checked_steps:
+            done, error = self._checked_steps(run, a, n, args)
+            code = -1
+        else:
+            code = run(n, *args)
         if code >= 0:
             done, bad = divmod(code, 2 * self.model.particle_count)
-            # back to the batch's start, and again through the good steps only
-            for name in ("x", "v", "f"):
-                getattr(a, name).copy_from(getattr(self._batch_start, name))
-            if done:
-                run(done, *args)
+            # a holds the bad state: checked whole, its stored energy in the message; the
+            # steps before it again, each checked whole (the kernel checked S only)
+            error = (self._checker.verify(a, self.num_steps + done)
+                     or self._checker.error(self.num_steps + done, bad))
+            self._restore_batch_start(a)
+            done, earlier = self._checked_steps(run, a, done, args)
+            error = earlier or error
+        elif error is None and self._checker.verify(a, self.num_steps + n - 1) is not None:
+            self._restore_batch_start(a)
+            done, error = self._checked_steps(run, a, n, args)
         self.num_steps += done
         self.state.t = self.time
         swept = self._contact is not None and self._contact.batch_cuts[1] > 0
-        if limiter is None and bad < 0 and not swept:
+        if limiter is None and error is None and not swept:
             self.integrator.adopt_forces(self.state)
         else:
             self.integrator.invalidate()
-        if bad >= 0:
-            self._raise_instability(bad)
+        if error is not None:
+            raise error
+
+    def _restore_batch_start(self, a):
+        for name in ("x", "v", "f"):
+            getattr(a, name).copy_from(getattr(self._batch_start, name))
+
+    def time_at(self, steps):
+        """The time after ``steps`` steps in all (at the current dt since its last change)."""
+        return self._time_base + (steps - self._step_base) * self.dt
+
+    def _checked_steps(self, run, a, n, args):
+        """n steps of the batch kernel ``run`` one at a time, each state checked with its
+        stored energy and strain. Returns (good steps, the InstabilityError of the first
+        bad one or None), State a at the last good state."""
+        fresh, time_base, before, dt = args
+        for k in range(n):
+            run(1, fresh, time_base, before + k, dt)       # keeps a's state as the start
+            error = self._checker.verify(a, self.num_steps + k)
+            if error is not None:
+                self._restore_batch_start(a)
+                return k, error
+            fresh = 1 if self._contact is not None and self._contact.batch_cuts[1] > 0 else 0
+        return n, None
 
     def _see_gust(self, t):
         """A callable gust's speed at t into the energy budget (its fastest so far)."""
         wind = self.model.wind
         if wind is not None and wind["callable"] is not None:
-            if self._budget.see_wind(float(np.linalg.norm(wind_velocity(wind, t)))):
+            if self.budget.see_wind(float(np.linalg.norm(wind_velocity(wind, t)))):
                 self._rebase()
 
     def _rebase(self):
         """A new energy baseline at the current state (``budget.py``): after a change
         that adds or removes energy from outside the equations of motion."""
         state = self.state
-        self._budget.rebase(self._diag.energy(state), runtime.to_numpy(state.x),
+        self.budget.rebase(self.diagnostics.energy(state), runtime.to_numpy(state.x),
                             runtime.to_numpy(state.v), self.time,
                             self.settings["colliders_off"])
-
-    def _raise_instability(self, code):
-        step = self.num_steps + 1
-        t = self.time + self.dt
-        n = self.model.particle_count
-        hint = self._hint()
-        if code < n:
-            what = (f"left particle {code} non-finite or beyond |x| <= "
-                    f"{self.position_bound:g} m, |v| <= {self.velocity_bound:g} m/s")
-        else:
-            budget = self._budget
-            what = (f"gave the particles more kinetic and gravitational energy than the "
-                    f"scene can supply (limit {budget.limit(t):.4g} J from its energy "
-                    f"{budget.values['baseline']:.4g} J at t = {budget.values['time']:.6g} s, "
-                    f"budget.py; the fastest particle is {code - n})")
-        raise InstabilityError(
-            f"step {step} (t = {t:.6g} s, dt = {self.dt:.3g} s) of integrator "
-            f"'{self.integrator_name}' {what}; the last good state (t = {self.time:.6g} s) "
-            f"is kept. Hint: {hint}.",
-            step=step, time=t, integrator=self.integrator_name)
-
-    def _hint(self):
-        if self.integrator_name in ("backward_euler", "projective", "vbd", "xpbd"):
-            return ("try a smaller dt, more solver iterations (newton_iterations, "
-                    "iterations) or more damping")
-        if self.integrator_name != "forward_euler":
-            return _DEFAULT_HINT
-        if not (self.scene.springs["damping"] > 0.0).any():
-            return ("forward Euler gains energy at every dt on undamped springs: use "
-                    "symplectic_euler, verlet or an implicit integrator")
-        return (f"forward Euler is stable only well below the springs' explicit limit "
-                f"(about {stability.gershgorin_dt(self.scene):.2g} s here) and with enough "
-                f"damping: use symplectic_euler, verlet or an implicit integrator")
 
     def positions(self):
         """(N,3) NumPy copy of the positions, m."""
@@ -461,12 +470,12 @@ class Simulator:
     def energy(self):
         """dict of energies, J: kinetic, spring, gravity, contact, total."""
         self._check()
-        return self._diag.energy(self.state)
+        return self.diagnostics.energy(self.state)
 
     def momentum(self):
         """(linear (3,), angular about the origin (3,))."""
         self._check()
-        return self._diag.momentum(self.state)
+        return self.diagnostics.momentum(self.state)
 
     def contact_stats(self):
         """dict of the contact stage's statistics (``contact.stage.STATS`` says what each
@@ -477,15 +486,15 @@ class Simulator:
         if self._contact is None:
             return {}
         return {**self._contact.contact_stats(), **self.self_contacts(),
-                "collider": self._diag.collider_contacts(self.state)}
+                "collider": self.diagnostics.collider_contacts(self.state)}
 
     def self_contacts(self):
         """{"point_triangle": n, "edge_edge": m}: the self-contacts closer than the
         thickness at the current state (both 0 without ``Scene.set_self_collision``)."""
         self._check()
-        return self._diag.self_contacts(self.state)
+        return self.diagnostics.self_contacts(self.state)
 
     def max_strain(self):
         """Max over springs of (length - rest) / rest."""
         self._check()
-        return self._diag.max_strain(self.state)
+        return self.diagnostics.max_strain(self.state)

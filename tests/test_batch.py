@@ -62,19 +62,28 @@ def test_a_batch_equals_single_steps_bit_for_bit(f32, integrator):
 
 def test_xpbd_batches_where_it_projects_nothing(f32):
     """XPBD's step runs in a batch where it has no projections to run from Python (no
-    colliders, no self-contact): bit for bit the single steps, substeps too; with
-    colliders it says why not."""
-    for substeps in (1, 3):
-        single = run("xpbd", False, [1] * 8, [1] * 32, 1e-3, colliders=False,
-                     substeps=substeps)
-        batched = run("xpbd", True, [7, 1], [20, 12], 1e-3, colliders=False,
-                      substeps=substeps)
+    self-contact; colliders act inside its iterations): bit for bit the single steps,
+    with colliders and substeps (counted by "auto" too: one iteration a substep, the
+    explicit limit 1.07e-3 s, so 4 substeps at dt = 4e-3 and 2 at 2e-3); with
+    self-contact it says why not."""
+    for substeps, dt, options in ((1, 1e-3, {}), (3, 1e-3, {}),
+                                  ("auto", 4e-3, {"iterations": 1})):
+        single = run("xpbd", False, [1] * 8, [1] * 32, dt, substeps=substeps, **options)
+        batched = run("xpbd", True, [7, 1], [20, 12], dt, substeps=substeps, **options)
+        if substeps == "auto":
+            assert single.integrator.stats["substeps"] == 2
         assert batched.time == single.time
         assert np.array_equal(batched.positions(), single.positions())
         assert np.array_equal(batched.velocities(), single.velocities())
         assert single.max_strain() < 0.03
-    sim = tcloth.Simulator(every_term_scene(), "xpbd", dt=1e-3)
-    assert "projects" in sim.fusion()
+        # the cloth starts inside the sphere's offset surface (radius 0.3, thickness
+        # 0.005) and the iterations pushed it out
+        def gap(x):
+            return (np.linalg.norm(x - (0.1, 0.705, 0.0), axis=1) - 0.305).min()
+        assert gap(single.scene.positions) < -1e-4 and gap(single.positions()) > -1e-5
+    scene = every_term_scene()
+    scene.set_self_collision(thickness=0.01)
+    assert "projects" in tcloth.Simulator(scene, "xpbd", dt=1e-3).fusion()
 
 
 def test_vbd_batches_without_colliders_or_self_contact(f32):

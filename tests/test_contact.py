@@ -139,9 +139,11 @@ def test_thrown_cloths_never_cross_at_any_step(integrator, dt):
     after 9 ms), the layer order kept, no blow-up (float32)."""
     tcloth.init()
     integrator, _, flag = integrator.partition(":")      # vbd:bounds: VBD with bounds=True
+    options = {flag: True} if flag else {}
+    if integrator in ("vbd", "xpbd"):
+        options["substeps"] = "auto"       # one substep tears the cloths (and says so)
     r = run_case("thrown_10", integrator, dt, seconds=0.1 if dt else 0.02,
-                 build=small_thrown(10.0), chunk=1 if dt else 20,
-                 options={flag: True} if flag else None)
+                 build=small_thrown(10.0), chunk=1 if dt else 20, options=options)
     assert r["blew_up"] is None
     assert r["crossings_start"] == 0 and r["crossings_max"] == 0, r
     assert r["order_kept"], r
@@ -164,9 +166,15 @@ def test_cloth_falling_at_10_m_per_s_stays_out_of_thin_colliders(integrator, dt,
     frame = dt > 1e-3
     # the real-time solvers on the 12 x 12 cloth (their own tests cover the solve)
     res = 24 if frame and integrator not in ("vbd", "xpbd") else 12
+    # VBD and XPBD with the substeps that follow this cloth's stress wave (one substep
+    # tears it, and the instability test says so); landing at 10 m/s, this soft cloth
+    # stretches by up to 70 % even in backward Euler's step, so the strain bound is 2
+    options = {"strain_bound": 2.0}
+    if integrator in ("vbd", "xpbd"):
+        options["substeps"] = "auto"
     r = run_case(f"{collider}_10", integrator, dt, seconds=0.4 if frame else 0.03,
                  build=lambda: falling(collider, res=res),
-                 chunk=1 if frame else 20)
+                 chunk=1 if frame else 20, options=options)
     assert r["blew_up"] is None
     # it reached the collider: paths cut by the guard, or (VBD, whose solve takes the
     # collider's penalty) particles resting within its offset of 5 mm
@@ -238,9 +246,12 @@ def crossed_at_start():
 def test_a_scene_that_starts_crossed_gets_no_worse(integrator, dt):
     """Pairs that touch or cross at a step's start have no separating plane and are left
     as they are; the others are kept apart: the crossing count never grows, nothing blows
-    up, and the fail-safe is not needed."""
+    up, and the fail-safe is not needed. Holding the crossed pairs while the cloths slide
+    apart stretches their springs: the first step's total energy is 3.3 times the
+    start's (0.13 -> 0.44 J), which the energy budget would stop; it is off here."""
     tcloth.init()
-    r = run_case("thrown_3", integrator, dt, seconds=0.2, build=crossed_at_start)
+    r = run_case("thrown_3", integrator, dt, seconds=0.2, build=crossed_at_start,
+                 options={"energy_bound": False})
     assert r["crossings_start"] > 0
     assert r["blew_up"] is None
     assert r["crossings_max"] <= r["crossings_start"], r

@@ -133,7 +133,9 @@ def test_absent_features_are_neither_built_nor_launched(f64, monkeypatch):
     sim = tcloth.Simulator(plain, dt=1e-4, batch=False)
     assert built(sim) == (["GravityDrag", "Springs"], False)
     # per step: one launch for every term's force, the update, the instability check
-    assert launches(monkeypatch, sim, 3) == ["_launch", "_phase", "check_state"] * 3
+    # (the springs' energy and strain, then the particles')
+    assert launches(monkeypatch, sim, 3) == ["_launch", "_phase", "spring_sums",
+                                             "check_state"] * 3
     full = tcloth.Scene()
     cloth = full.add_cloth(resolution=(4, 4))
     full.add_springs([cloth.particles[[0, 3], [0, 3]]], stiffness=1.0)
@@ -154,6 +156,9 @@ def test_absent_features_are_neither_built_nor_launched(f64, monkeypatch):
 
 
 def test_a_batch_is_one_launch_for_every_substep(f64, monkeypatch):
+    """step(n) of an explicit integrator: one launch for the n substeps (each checked for
+    its particles' kinetic and gravitational energy inside it), then the check of the
+    last state's stored energy and strain: the same launches for 20 substeps as for 40."""
     scene = tcloth.Scene(gravity=(0, -9.81, 0))
     scene.add_cloth(resolution=(5, 5), pinned=[(0, 0)])
     scene.add_sphere((0, -0.3, 0), 0.2)
@@ -161,8 +166,10 @@ def test_a_batch_is_one_launch_for_every_substep(f64, monkeypatch):
     for integrator in ("forward_euler", "symplectic_euler", "verlet", "rk4"):
         sim = tcloth.Simulator(scene, integrator, dt=1e-4)
         assert sim.fusion() is None
-        assert launches(monkeypatch, sim, 20) == ["run"]
-        assert sim.num_steps == 20
+        names = launches(monkeypatch, sim, 20)
+        assert names[0] == "run" and names.count("run") == 1 and names[-1] == "check_state"
+        assert launches(monkeypatch, sim, 40) == names
+        assert sim.num_steps == 60
 
 
 @pytest.mark.parametrize("precision", ["f32", "f64"])

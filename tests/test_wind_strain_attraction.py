@@ -91,7 +91,8 @@ def heavy_hanging_cloth(limit):
 def test_strain_limiting_caps_stretch_at_ten_percent(f64):
     worst = {}
     for limit in (False, True):
-        sim = tcloth.Simulator(heavy_hanging_cloth(limit), dt=5e-4)
+        # unlimited, the springs stretch past twice their length: no strain bound
+        sim = tcloth.Simulator(heavy_hanging_cloth(limit), dt=5e-4, strain_bound=None)
         w = 0.0
         for _ in range(40):
             sim.step(25)

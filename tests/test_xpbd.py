@@ -85,13 +85,15 @@ def test_xpbd_is_stable_on_stiff_cloth_at_one_step_per_frame(f64, k):
     """The stiff cloth (k_s up to 1e6, damped, pinned at two corners) at dt = 1/60 for a
     simulated second: no blow-up, strain bounded, the pinned corners never move. Ten
     iterations do not satisfy such springs: the strain they leave holds spring energy
-    above the start (k = 1e6: 73 J after the second from 2 J; docs/vbd.md), and more
-    iterations, or substeps, leave less."""
+    above the start (k = 1e6: 786 J at its peak from 2 J), which the energy budget sees
+    (InstabilityError, its hint naming the substeps that follow the stress wave); with
+    those substeps the run stays within the budget, and leaves less."""
     n = 12
     peaks = []
-    for iterations, substeps in ((10, 1), (10, 10)):
+    for iterations, substeps in ((10, 1), (10, "auto")):
         sim = tcloth.Simulator(cloth(k, kd=1.0, n=n, pinned=[(0, 0), (n - 1, 0)]), "xpbd",
-                               dt=1 / 60, iterations=iterations, substeps=substeps)
+                               dt=1 / 60, iterations=iterations, substeps=substeps,
+                               energy_bound=substeps == "auto")
         corners = sim.positions()[sim.scene.pinned]
         energy = []
         for _ in range(60):
@@ -101,6 +103,11 @@ def test_xpbd_is_stable_on_stiff_cloth_at_one_step_per_frame(f64, k):
         assert np.array_equal(sim.positions()[sim.scene.pinned], corners)
         peaks.append(max(energy))
     assert peaks[1] < peaks[0]
+    budgeted = tcloth.Simulator(cloth(k, kd=1.0, n=n, pinned=[(0, 0), (n - 1, 0)]), "xpbd",
+                                dt=1 / 60, iterations=10)
+    with pytest.raises(tcloth.InstabilityError, match="more energy than the scene can supply"
+                       ".*substeps='auto'"):
+        budgeted.step(60)
 
 
 def test_xpbd_reaches_the_hanging_chain_closed_form(f64):

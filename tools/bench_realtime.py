@@ -48,8 +48,11 @@ def strain(x, n):
 
 
 def run(n, steps, integrator, **options):
-    """(positions at the end, median seconds a step)."""
-    sim = tcloth.Simulator(hanging(n), integrator, dt=DT, **options)
+    """(positions at the end, median seconds a step). The instability test is off: the
+    study measures how far an unconverged solver strays (VBD and XPBD at few iterations
+    tear this cloth, which the test would stop)."""
+    sim = tcloth.Simulator(hanging(n), integrator, dt=DT, energy_bound=False,
+                           strain_bound=None, **options)
     start = sim.positions(), sim.velocities()
     sim.step(2)
     sim.set_state(*start)

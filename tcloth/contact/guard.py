@@ -20,8 +20,10 @@ x1. Kernels here change x1 (and v1 by the same change over dt) until that motion
     that would take it far for little), and the collider takes the rest of the
     reaction.
   - ``sweep_colliders``: a particle's path (relative to a moving collider) that enters a
-    collider ends at the entry point, BACK_OFF before it (a ray cast, so a thin box cannot
-    be stepped over), its normal velocity into the collider removed; one that started
+    collider ends where it came within the collider's thickness (a ray cast, so a thin
+    box cannot be stepped over; from a start already within the thickness, at the start:
+    a stop leaves no more contact energy than the path began with, so it adds none), its
+    normal velocity into the collider removed; one that started
     inside (by rounding, or a scene that started so) and would end deeper stays where it
     was relative to the collider (pushed out along the surface's normal at its end, it
     would go round the collider's edges, off its path, through cloth the pairs' guard
@@ -50,6 +52,7 @@ HELD_ALONG = 0.5         # a held vertex moves along a normal only if this much 
 KEEP = 0.9               # the fail-safe stops a vertex at this fraction of its way to a plane
 FLOOR = 0.25             # pairs end a step at least this fraction of the thickness apart
 BACK_OFF = 1e-6          # m: a path a collider stops ends this far before the surface
+STOP_BISECTIONS = 30     # halvings of the stop's search along a path (2^-30 of it)
 FAR_APART = -1.0         # the delta of a candidate that cannot come within reach
 LEAST_GAP = 1e-6         # m: a pair closer than this at x0 has no normal (float32 rounds
                          # coordinates near 1 m to 6e-8 m)
@@ -267,6 +270,28 @@ def _stop(p, at, n, u, dt, x1, v1, held):
 
 
 @ti.func
+def _offset_stop(shape: ti.template(), col, start, d, phi0, hit, t0):
+    """How far along the unit direction d from ``start`` (distance phi0 >= 0 from the
+    collider, whose surface the ray meets at ``hit``) a stopped path ends: where it comes
+    within the collider's thickness of the surface, or, from a start already inside the
+    thickness, where it started (BACK_OFF at the least). Its contact penalty is then no
+    larger than at its start or the offset surface's zero: a stop adds no energy. The
+    distance along a line to a convex shape is convex, so it crosses that depth once
+    before ``hit``: bisection."""
+    target = ti.max(ti.min(col.thickness, phi0), BACK_OFF)
+    lo, hi = 0.0, hit
+    if phi0 > target:
+        for _ in range(STOP_BISECTIONS):
+            mid = 0.5 * (lo + hi)
+            phi, normal = SHAPES[shape].signed_distance(col, start + mid * d, t0)
+            if phi >= target:
+                lo = mid
+            else:
+                hi = mid
+    return lo
+
+
+@ti.func
 def sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held):
     """Each free particle's path from x0 to x1 against every switched-on collider, in the
     collider's frame (it moves by dt times its velocity): a path from outside that enters
@@ -292,7 +317,8 @@ def sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held):
                             d = rel / length
                             hit = SHAPES[g.shape].ray_hit(col, start, d, t0)
                             if 0.0 <= hit < length - BACK_OFF:
-                                entry = start + ti.max(hit - BACK_OFF, 0.0) * d
+                                stop = _offset_stop(g.shape, col, start, d, phi0, hit, t0)
+                                entry = start + stop * d
                                 _, n = SHAPES[g.shape].signed_distance(col, entry, t0)
                                 _stop(p, entry, n, u, dt, x1, v1, held)
                                 entered = True

@@ -192,25 +192,37 @@ class PCG(ConjugateGradients):
         self._start()
         copy_into(self.x, self.p)
 
+    @ti.func
+    def _precondition_r(self):
+        """z = P^-1 r (0 on pinned particles, whose r is 0); returns r.z. A subclass may
+        precondition otherwise (``multigrid.MultigridPCG``: a V-cycle)."""
+        rz = ti.cast(0.0, ti.f64)
+        ti.loop_config(serialize=ti.static(serial(self.x)))
+        for p in range(self.x.shape[0]):
+            zp = ti.Vector.zero(float, 3)
+            if self.inv_mass[p] > 0.0:
+                zp = _apply(self.precond, p, self.r[p])
+            self.z[p] = zp
+            rz += ti.cast(self.r[p].dot(zp), ti.f64)
+        return rz
+
     @ti.kernel
     def _start(self) -> ti.f64:
         """x = 0, r = b, z = p = P^-1 r on free particles, 0 on pinned ones;
         scalars[0] = r.z. Returns r.r."""
-        self.scalars[0] = 0.0
         rr = ti.cast(0.0, ti.f64)
         ti.loop_config(serialize=ti.static(serial(self.x)))
         for p in range(self.x.shape[0]):
             rp = ti.Vector.zero(float, 3)
-            zp = ti.Vector.zero(float, 3)
-            self.x[p] = ti.Vector.zero(float, 3)
             if self.inv_mass[p] > 0.0:
                 rp = self.b[p]
-                zp = _apply(self.precond, p, rp)
+            self.x[p] = ti.Vector.zero(float, 3)
             self.r[p] = rp
-            self.z[p] = zp
-            self.p[p] = zp
-            self.scalars[0] += ti.cast(rp.dot(zp), ti.f64)
             rr += ti.cast(rp.dot(rp), ti.f64)
+        self.scalars[0] = self._precondition_r()
+        ti.loop_config(serialize=ti.static(serial(self.x)))
+        for p in range(self.x.shape[0]):
+            self.p[p] = self.z[p]
         return rr
 
     @ti.kernel
@@ -219,7 +231,6 @@ class PCG(ConjugateGradients):
         z = P^-1 r; p = z + beta p. Returns r.r, or -1 when p.Ap <= 0 (A not positive
         definite along p: x and r are left unchanged)."""
         self.scalars[1] = 0.0
-        self.scalars[2] = 0.0
         ti.loop_config(serialize=ti.static(serial(self.x)))
         for p in range(self.x.shape[0]):
             ap = self._product(self.p, p)
@@ -233,12 +244,11 @@ class PCG(ConjugateGradients):
                 alpha = ti.cast(self.scalars[0] / self.scalars[1], float)
                 self.x[p] += alpha * self.p[p]
                 self.r[p] -= alpha * self.ap[p]
-                self.z[p] = _apply(self.precond, p, self.r[p])
-                self.scalars[2] += ti.cast(self.r[p].dot(self.z[p]), ti.f64)
                 rr += ti.cast(self.r[p].dot(self.r[p]), ti.f64)
+        self.scalars[2] = self._precondition_r()
         ti.loop_config(serialize=ti.static(serial(self.x)))
         for p in range(self.x.shape[0]):
-            if self.scalars[0] > 0.0:
+            if self.scalars[0] > 0.0 and self.scalars[1] > 0.0:
                 beta = ti.cast(self.scalars[2] / self.scalars[0], float)
                 self.p[p] = self.z[p] + beta * self.p[p]
         if self.scalars[1] <= 0.0:

@@ -36,6 +36,7 @@ import taichi as ti
 
 from .. import runtime
 from ..errors import SceneError
+from . import linalg
 from .galerkin import (COARSEST_NODES, PAD, coarse_size, coarse_stencil, dense_matrix,
                        galerkin, smoothing_weight)
 
@@ -191,21 +192,42 @@ class GridMultigrid(GridLevels):
                   for s, shape in zip(self.stencils, self.shapes)]
         self.inv_diag = [ti.field(real, shape=shape) for shape in self.shapes]
         self.omega = ti.field(real, shape=len(self.shapes))
+        self.fine_base = ti.field(real, shape=self.shapes[0])
 
-    def set_matrix(self, weights):
-        """Fine stencil weights (ny, nx, len(stencil)); builds every level."""
+    def set_matrix(self, weights, omegas=None):
+        """Fine stencil weights (ny, nx, len(stencil)); builds every level. ``omegas``: the
+        levels' Jacobi weights to keep (those a matrix with no larger a diagonal got:
+        adding to the diagonal keeps them convergent), else computed. Returns them."""
         npr = runtime.numpy_real()
-        omegas = []
+        computed = []
         for level, stencil in enumerate(self.stencils):
             diag = weights[..., stencil.index((0, 0))]
             self.w[level].from_numpy(weights.astype(npr))
             self.inv_diag[level].from_numpy(
                 np.where(diag > 0, 1.0 / np.where(diag > 0, diag, 1.0), 0.0).astype(npr))
-            omegas.append(smoothing_weight(weights, stencil))
+            if omegas is None:
+                computed.append(smoothing_weight(weights, stencil))
             if level + 1 < self.levels:
                 weights = galerkin(weights, stencil)
+        omegas = computed if omegas is None else omegas
         self.omega.from_numpy(np.array(omegas, dtype=npr))
         self._set_coarsest(np.kron(dense_matrix(weights, self.stencils[-1]), np.eye(3)))
+        return omegas
+
+    def set_fine_base(self, centre):
+        """The fine level's diagonal (ny, nx) before ``set_fine_diagonal``'s additions."""
+        self.fine_base.from_numpy(centre.astype(runtime.numpy_real()))
+
+    @ti.func
+    def set_fine_diagonal(self, j, i, extra):
+        """The fine level's diagonal at node (j, i): its ``set_fine_base`` value plus extra
+        (an active node's only; before the node's ``set_rhs``). The coarse levels keep
+        what ``set_matrix`` gave them."""
+        d = self.fine_base[j, i]
+        if d > 0.0:
+            d += extra
+            self.w[0][j, i][ti.static(self.stencil.index((0, 0)))] = d
+            self.inv_diag[0][j, i] = 1.0 / d
 
     def _solution(self, level):
         return self.t[level]
@@ -280,3 +302,35 @@ def single_grid(model, linear_solver):
         raise SceneError("linear_solver='multigrid' needs a scene that is one cloth grid "
                          "and nothing else (no other particles or springs)")
     return grid if linear_solver in ("auto", "multigrid") else None
+
+
+@ti.data_oriented
+class MultigridPCG(linalg.PCG):
+    """``linalg.PCG``'s conjugate gradients on the adjacency matrix of a scene that is one
+    cloth grid (particle p = j nx + i), preconditioned by a V-cycle of ``mg`` (a
+    ``GridMultigrid``) instead of A's diagonal: projective dynamics' global solve where
+    colliders change A's diagonal at every iterate, which one V-cycle alone solves poorly
+    (a stiff point on the fine level is smeared by the coarse levels' interpolation)."""
+
+    def __init__(self, mg, n, diag, weights, adj_start, adj, inv_mass, couplings=()):
+        super().__init__(n, diag, weights, adj_start, adj, diag, inv_mass, couplings)
+        self.mg = mg
+
+    @ti.func
+    def _precondition_r(self):
+        """z = B r (a V-cycle), 0 on pinned particles; returns r.z."""
+        ny, nx = ti.static(self.mg.shapes[0])
+        ti.loop_config(serialize=ti.static(self.mg.serial))
+        for j, i in ti.ndrange(ny, nx):
+            self.mg.set_rhs(j, i, self.r[j * nx + i])
+        self.mg.cycle()
+        rz = ti.cast(0.0, ti.f64)
+        ti.loop_config(serialize=ti.static(self.mg.serial))
+        for j, i in ti.ndrange(ny, nx):
+            p = j * nx + i
+            zp = ti.Vector.zero(float, 3)
+            if self.inv_mass[p] > 0.0:
+                zp = self.mg.result(j, i)
+            self.z[p] = zp
+            rz += ti.cast(self.r[p].dot(zp), ti.f64)
+        return rz

@@ -54,6 +54,7 @@ class IncrementalPotential:
         self._begin_particles(x, v, h, x_start)
         for term in self.terms:
             term.begin_step(x, t0)
+            term.begin_solve(x, v, h, t0)
         if self.has_lagged:
             self.lagged.compute(x, v, t0, self.f_lag)
 

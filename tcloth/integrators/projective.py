@@ -19,9 +19,12 @@ the paper, and A carries the constant parts, M/h^2 + c/h + sum_s (k_s + k_d/h)
 A_s A_s^T (k_d/h A_s A_s^T bounds the axial damping's Jacobian: d d^T <= I) and the
 Hessian of hinge bending (constant: ``terms/bending.py``), whose energy is already
 quadratic, as Liu's constraints with projection p = 0 are, and the triangle membrane's
-rotation-invariant bound (``terms/membrane.py``), as Liu's springs' A_s A_s^T are. The fixed
-point is the backward Euler step with axial spring damping, so damped motion is as
-accurate as backward Euler's (Liu's paper damps only through the medium).
+rotation-invariant bound (``terms/membrane.py``), as Liu's springs' A_s A_s^T are. A
+pressure chamber's gas is in f too, and its stiffness k g g^T (``terms/pressure.py``;
+seven times the springs' against a sea-level balloon's breathing) in A, taken at each
+step's start (``update``) and applied in CG's products. The fixed point is the
+backward Euler step with axial spring damping, so damped motion is as accurate as
+backward Euler's (Liu's paper damps only through the medium).
 
 The global solve, A is constant per scene and dt:
   - a scene that is one cloth grid and nothing else: one geometric multigrid V-cycle per
@@ -29,10 +32,18 @@ The global solve, A is constant per scene and dt:
     per scene and dt), in one kernel launch with the force residual and the update;
   - any other scene: conjugate gradients with A's Jacobi preconditioner, each solve to
     cg_tol relative to |g|.
-Colliders act after the iterations, as in position-based schemes: a particle deeper than
-the collider's thickness is put back on the offset surface, its inward normal velocity
-removed, and its tangential velocity reduced by mu times that normal velocity change
-(Coulomb), relative to the collider's motion. Pinned particles follow x0 + h v0.
+Colliders act inside the iterations: their penalty and normal damping, against each
+particle's plane linearised at the step's start (``Colliders.begin_solve``), are in the
+force residual at every iterate, and their stiffness k + c_d / h is on A's diagonal for
+every particle the step can bring within a collider's thickness (its distance at the
+step's start less h |v0| + h^2 |g| and a thickness), so that the global solve carries a
+collider's push through the springs to the whole cloth in the step it lands (a
+projection after the iterations stopped only the particles that touched, and the rest
+of a falling cloth tore itself on them). A changes with that set of particles, and is
+rebuilt when it does. Friction follows the iterations: against each collider a particle
+touches, its approaching normal velocity is removed and its tangential velocity cut by
+mu times the normal velocity change the contact force gave it over the step (Coulomb).
+Pinned particles follow x0 + h v0.
 """
 import numpy as np
 import taichi as ti
@@ -42,10 +53,11 @@ from .. import runtime
 from .. import terms as term_modules
 from ..forces import Forces
 from ..runtime import serial
+from ..terms.colliders import Colliders
 from ..terms.springs import grid_spring_sum, owned_grid_springs
 from . import linalg
 from .base import Integrator
-from .multigrid import GridMultigrid, single_grid
+from .multigrid import GridMultigrid, MultigridPCG, single_grid
 
 
 @ti.data_oriented
@@ -70,7 +82,7 @@ class Projective(Integrator):
         super().__init__(model, **options)
         self.grid = single_grid(model, self.options["linear_solver"])
         # the model's fields, read by the kernels without being passed (Python launch time)
-        self.mass, self.params = model.mass, model.params
+        self.mass, self.drag = model.mass, model.drag
         n, real = model.particle_count, runtime.real()
         self.x0, self.y, self.f = (ti.Vector.field(3, real, shape=n) for _ in range(3))
         # the terms by their treatment: in the force residual, in y, or projected after
@@ -78,26 +90,42 @@ class Projective(Integrator):
         self.field_forces = Forces(model, lambda cls: cls.projective == "lagged")
         self.has_field_forces = bool(self.field_forces.terms)
         self.projections = term_modules.build(model, lambda cls: cls.projective == "projection")
+        self.colliders = Colliders(model) if Colliders.present(model) else None
+        self.has_colliders = self.colliders is not None
+        # one V-cycle an iteration on a grid without colliders; else CG, preconditioned by
+        # the V-cycle on a grid (the colliders' diagonal changes at every iterate)
+        self.gridded = self.grid is not None
+        self.vcycles = self.gridded and not self.has_colliders
+        self.stepped = ()
         if self.grid is not None:
+            self.mg = GridMultigrid(self.grid.nx, self.grid.ny,
+                                    grid_layout.stencil(self.grid.families))
+        if self.vcycles:
             self.body = self.residual_forces.first
             self.grid_reals = model.grid_table.reals
             springs = self.residual_forces.springs
             self.grid_forces = (springs.grid_forces() if springs is not None else
                                 ti.Vector.field(3, real, shape=(1, 6)))
-            self.mg = GridMultigrid(self.grid.nx, self.grid.ny,
-                                    grid_layout.stencil(self.grid.families))
         else:
             self.ks, self.kd = model.spring_ks, model.spring_kd
             springs = self.residual_forces.springs or term_modules.Springs(model)
             self.adj_start, self.adj = springs.adjacency()
             self.weight = ti.field(real, shape=self.adj.shape[0])
-            self.diag, self.precond = (ti.field(real, shape=n) for _ in range(2))
+            self.diag, self.precond, self.base_diag, self.row_rest = (
+                ti.field(real, shape=n) for _ in range(4))
             # terms with a constant matrix (bending's Hessian, the membrane's bound)
             # enter A whole: their diagonal here, their couplings in CG's products
             self.constant = tuple(t.constant_matrix() for t in self.residual_forces.terms
                                   if hasattr(t, "constant_matrix"))
-            self.solver = linalg.PCG(n, self.diag, self.weight, self.adj_start, self.adj,
-                                     self.precond, model.inv_mass, self.constant)
+            # the pressure's stand-in changes with the step's start (``varies``: ``update``)
+            self.stepped = tuple(m for m in self.constant if getattr(m, "varies", False))
+            if self.grid is not None:
+                self.solver = MultigridPCG(self.mg, n, self.diag, self.weight,
+                                           self.adj_start, self.adj, model.inv_mass,
+                                           self.constant)
+            else:
+                self.solver = linalg.PCG(n, self.diag, self.weight, self.adj_start, self.adj,
+                                         self.precond, model.inv_mass, self.constant)
         self.stats = {}
         self._h = None
 
@@ -108,40 +136,49 @@ class Projective(Integrator):
 
     def simulate(self, model, state_in, state_out, dt):
         h, t1 = dt, state_in.t + dt
-        if self._h != h:
+        rebuilt = self._h != h
+        if rebuilt:
             self._build_matrix(model, h)
             self._h = h
+        if self.has_colliders:
+            self.colliders.begin_solve(state_in.x, state_in.v, h, state_in.t)
+        for matrix in self.stepped:
+            matrix.update(state_in.x)
         x, v = state_out.x, state_out.v
         if self.has_field_forces:
             self.field_forces.compute(state_in.x, state_in.v, state_in.t, self.f)
         self._begin(state_in.x, state_in.v, h, x, v)
         cg_total, first, last = 0, None, None
-        if self.grid is not None and self.mg.serial:
+        if self.vcycles and self.mg.serial:
             first, last = self._grid_iterations(x, v, h, self.options["iterations"])
         else:
             for _ in range(self.options["iterations"]):
-                if self.grid is not None:
+                if self.vcycles:
                     last = self._grid_iteration(x, v, h)
                 else:
                     self.residual_forces.compute(x, v, t1, self.f)
-                    last = self._residual(x, h)
+                    last = self._residual(x, v, h)
                     if last > 0.0:
                         iters, _ = self.solver.solve(self.options["cg_tol"],
                                                      self.options["cg_max_iterations"])
                         cg_total += iters
                         self._update(x, v, h)
                 first = last if first is None else first
+        if self.has_colliders:
+            self._friction(x, v, h)
         for term in self.projections:
             term.project(x, v, t1)
         state_out.t = t1
         self.stats = {"iterations": self.options["iterations"], "cg_iterations": cg_total,
                       "residual": float(np.sqrt(last / first)) if first else 0.0}
 
-    # -- the constant matrix --------------------------------------------------------------
+    # -- the matrix ------------------------------------------------------------------------
     def _build_matrix(self, model, h):
         if self.grid is not None:
-            self.mg.set_matrix(self._grid_weights(model, h))
-        else:
+            weights = self._grid_weights(model, h)
+            self.mg.set_matrix(weights)
+            self.mg.set_fine_base(weights[..., self.mg.stencil.index((0, 0))])
+        if not self.vcycles:
             for term in self.constant:
                 term.set_step(h)
             self._build_adjacency_matrix(h)
@@ -163,7 +200,7 @@ class Projective(Integrator):
         free = model.inv_mass.to_numpy() > 0
         coupled = w * (free[pairs[:, 0]] & free[pairs[:, 1]])    # 0 towards a pinned end
         weights = np.zeros((g.ny, g.nx, len(stencil)))
-        diag = (model.mass.to_numpy() / h ** 2 + model.params[3] / h).reshape(g.ny, g.nx)
+        diag = (model.mass.to_numpy() / h ** 2 + model.drag.to_numpy() / h).reshape(g.ny, g.nx)
         for (j, i), (dj, di) in (((ja, ia), (jb - ja, ib - ia)), ((jb, ib), (ja - jb, ia - ib))):
             np.add.at(weights, (j, i, slot_of[(di + 2) * 5 + dj + 2]), -coupled)
             np.add.at(diag, (j, i), w)
@@ -173,18 +210,26 @@ class Projective(Integrator):
 
     @ti.kernel
     def _build_adjacency_matrix(self, h: float):
-        """A as per-particle diagonal and per-entry weights, and its inverse diagonal."""
+        """A as per-particle diagonal and per-entry weights, and its inverse diagonal (the
+        colliders' weights are added at each iteration: ``_set_diagonal``)."""
         ti.loop_config(serialize=ti.static(serial(self.diag)))
         for p in range(self.diag.shape[0]):
-            self.diag[p] = self.mass[p] / (h * h) + self.params[3] / h
+            self.base_diag[p] = self.mass[p] / (h * h) + self.drag[p] / h
             for term in ti.static(self.constant):
-                self.diag[p] += term.diagonal[p]
-            total = self.diag[p]
+                self.base_diag[p] += term.diagonal[p]
+            self.row_rest[p] = 0.0
             for k in range(self.adj_start[p], self.adj_start[p + 1]):
                 s = self.adj[k][0]
                 self.weight[k] = self.ks[s] + self.kd[s] / h
-                total += self.weight[k]
-            self.precond[p] = 1.0 / total
+                self.row_rest[p] += self.weight[k]
+            self._set_diagonal(p, 0.0)
+
+    @ti.func
+    def _set_diagonal(self, p, extra):
+        """A's diagonal at particle p with ``extra`` added (the colliders' weights of the
+        contacts active at the iterate), and its Jacobi preconditioner."""
+        self.diag[p] = self.base_diag[p] + extra
+        self.precond[p] = 1.0 / (self.diag[p] + self.row_rest[p])
 
     # -- the iterations -------------------------------------------------------------------
     @ti.kernel
@@ -203,13 +248,28 @@ class Projective(Integrator):
             if ti.static(self.has_field_forces):
                 self.y[p] += h * h * self.inv_mass[p] * self.f[p]
 
+
     @ti.func
-    def _force_residual(self, x, p, f, h):
-        """g_p = m/h^2 (y - x) + f (0 on pinned particles)."""
+    def _force_residual(self, x, v, p, f, h):
+        """g_p = m/h^2 (y - x) + f + the colliders' normal force against the particle's
+        planes (0 on pinned particles)."""
         g = ti.Vector.zero(float, 3)
         if self.inv_mass[p] > 0.0:
             g = self.mass[p] / (h * h) * (self.y[p] - x[p]) + f
+            if ti.static(self.has_colliders):
+                g += self.colliders.plane_force(p, x, v)
         return g
+
+    @ti.kernel
+    def _friction(self, x: ti.template(), v: ti.template(), h: float):
+        """Coulomb friction after the iterations (module docstring), on the velocities (the
+        positions are the solve's): the normal velocity change is the contact force's
+        impulse h |f_n| / m."""
+        ti.loop_config(serialize=ti.static(serial(x)))
+        for p in range(x.shape[0]):
+            if self.inv_mass[p] > 0.0:
+                fn = self.colliders.plane_force(p, x, v)
+                self.colliders.plane_coulomb(p, x, v, h * fn.norm() * self.inv_mass[p])
 
     @ti.kernel
     def _grid_iteration(self, x: ti.template(), v: ti.template(), h: float) -> ti.f64:
@@ -243,7 +303,7 @@ class Projective(Integrator):
             p = j * nx + i
             f = (self.body.force(p, x, v, 0.0)
                  + grid_spring_sum(0, nx, ny, i, j, families, self.grid_forces))
-            g = self._force_residual(x, p, f, h)
+            g = self._force_residual(x, v, p, f, h)
             self.mg.set_rhs(j, i, g)
             total += ti.cast(g.dot(g), ti.f64)
         self.mg.cycle()
@@ -255,12 +315,17 @@ class Projective(Integrator):
         return total
 
     @ti.kernel
-    def _residual(self, x: ti.template(), h: float) -> ti.f64:
+    def _residual(self, x: ti.template(), v: ti.template(), h: float) -> ti.f64:
         """The force residual into the CG right-hand side. Returns |g|^2."""
         total = ti.cast(0.0, ti.f64)
         ti.loop_config(serialize=ti.static(serial(x)))
         for p in range(x.shape[0]):
-            g = self._force_residual(x, p, self.f[p], h)
+            if ti.static(self.has_colliders):
+                w = self.colliders.plane_weight(p, x)
+                self._set_diagonal(p, w)
+                if ti.static(self.gridded):
+                    self.mg.set_fine_diagonal(p // self.grid.nx, p % self.grid.nx, w)
+            g = self._force_residual(x, v, p, self.f[p], h)
             self.solver.b[p] = g
             total += ti.cast(g.dot(g), ti.f64)
         return total

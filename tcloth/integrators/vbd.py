@@ -23,11 +23,13 @@ triangle get different colours. Self-contact couples vertices through
 the contact list, which changes every step: its gradient and diagonal blocks are evaluated
 once per iteration, before the colour passes, and held through them (a Jacobi update); the
 contact stage's guard (``contact/guard.py``) keeps the step free of crossings as for
-every integrator. With ``bounds=True`` every move is kept inside its vertex's
-conservative displacement bound (``contact/bounds.py``, as Offset Geometric Contact
-does), detected at the step's start and again after an iteration that clamped a move,
-so the iterations never take cloth through cloth, at the price of capping how fast
-cloth near other cloth can move.
+every integrator. Pressure couples every vertex of a chamber (``terms/pressure.py``): it
+is a Jacobi term too, with diagonal blocks that bound its rank-one part so that the
+vertices' simultaneous moves do not overshoot the chamber's volume. With
+``bounds=True`` every move is kept inside its vertex's conservative displacement bound
+(``contact/bounds.py``, as Offset Geometric Contact does), detected at the step's start
+and again after an iteration that clamped a move, so the iterations never take cloth
+through cloth, at the price of capping how fast cloth near other cloth can move.
 
 Where a scene has neither colliders nor self-contact, ``step(n)`` runs its n steps in one
 kernel launch (``advance``, ``batch.py``), the same functions as the launches from Python
@@ -47,8 +49,8 @@ from ..runtime import serial
 from ..terms import springs as spring_term
 from ..terms.colliders import Colliders
 from ..terms.springs import Springs
-from .base import ForceCache, Integrator
-from .linalg import copy
+from .base import ForceCache, Integrator, check_substeps, substep_count
+from .linalg import copy, copy_into
 from .potential import IncrementalPotential
 
 GUESSES = ("start", "inertia", "gravity", "adaptive")
@@ -87,6 +89,9 @@ class VBD(ForceCache, Integrator):
     initial_guess ("adaptive"): where the iterations start: "start" (x_t), "inertia"
         (x_t + h v_t), "gravity" (x_t + h v_t + h^2 g), or "adaptive" (the paper's:
         gravity scaled by how much of it the last step's acceleration had, in [0, 1]).
+    substeps (1): steps of dt / substeps a step, or "auto" (``base.substep_count``: enough
+        that the iterations outrun a stress wave, which a Gauss-Seidel sweep carries one
+        particle further: a stiff cloth at one step per frame needs several).
     bounds (False): with self-collision, keep every move inside Offset Geometric Contact's
         conservative displacement bounds (module docstring). The solve then never takes
         cloth through cloth and the contact guard has almost nothing to do, but the
@@ -104,7 +109,9 @@ class VBD(ForceCache, Integrator):
     solve.
     """
     name = "vbd"
-    defaults = {"iterations": 10, "rho": 0.9, "initial_guess": "adaptive", "bounds": False}
+    checked_steps = True
+    defaults = {"iterations": 10, "rho": 0.9, "initial_guess": "adaptive", "bounds": False,
+                "substeps": 1}
 
     def __init__(self, model, **options):
         super().__init__(model, **options)
@@ -126,16 +133,21 @@ class VBD(ForceCache, Integrator):
             self.pairs, self.rest = self.springs.pairs, self.springs.rest
             self.ks, self.kd = self.springs.ks, self.springs.kd
         # pair terms with a per-vertex system (bending, membrane) are Gauss-Seidel like
-        # the springs; the others (self-contact) Jacobi, held through an iteration
+        # the springs; the others (self-contact, pressure) Jacobi, held through an
+        # iteration, with diagonal blocks that bound their couplings (``jacobi``)
         self.local_terms = tuple(t for t in self.potential.pair_terms
                                  if hasattr(t, "local_system"))
         self.pair_terms = tuple(t for t in self.potential.pair_terms
                                 if t not in self.local_terms)
+        for term in self.pair_terms:
+            if hasattr(term, "jacobi"):
+                term.jacobi = True
         self.mass, self.params = model.mass, model.params
         self.order, self.colour_start = self._colouring(n)
         self.colours = len(self.colour_start) - 1
-        self.prev, self.prev2, self.contact_grad = (
-            ti.Vector.field(3, real, shape=n) for _ in range(3))
+        self.prev, self.prev2, self.contact_grad, self.v_start = (
+            ti.Vector.field(3, real, shape=n) for _ in range(4))
+        self._explicit_limit = check_substeps("vbd", opt["substeps"], model.scene)
         self.acc = ti.field(real, shape=2)
         stage = model.contact
         self.bounds = (DisplacementBounds(stage.broad, model.inv_mass)
@@ -172,6 +184,17 @@ class VBD(ForceCache, Integrator):
         return field, colour_start
 
     def simulate(self, model, state_in, state_out, dt):
+        count = substep_count(self.options["substeps"], dt, self.options["iterations"],
+                              self._explicit_limit)
+        source = state_in
+        for _ in range(count):
+            self._substep(model, source, state_out, dt / count)
+            source = state_out
+        self.stats["substeps"] = count
+
+    def _substep(self, model, state_in, state_out, dt):
+        """One step of dt from state_in to state_out (which may be the same State)."""
+        copy_into(self.v_start, state_in.v)
         h, t1 = dt, state_in.t + dt
         opt = self.options
         x, e = state_out.x, self.potential
@@ -199,7 +222,7 @@ class VBD(ForceCache, Integrator):
                         term.begin_step(state_in.x, state_in.t)
         if self.track_potential:
             energies.append(e.evaluate(x, h, t1, False)[0])
-        self._finish(x, state_in.v, 1.0 / h, state_out.v, state_out.f)
+        self._finish(x, self.v_start, 1.0 / h, state_out.v, state_out.f)
         self._cached = state_out
         state_out.t = t1
         self.stats = {"iterations": opt["iterations"], "potential": energies}
@@ -208,8 +231,11 @@ class VBD(ForceCache, Integrator):
         """None where a step can run inside a batch of substeps (``batch.py``): not with
         self-contact (gathered from Python every iteration) or colliders (their contacts
         at the step's start are stored by a launch)."""
+        if self.options["substeps"] != 1:
+            return "vbd runs its substeps from Python"
         if self.pair_terms:
-            return "vbd gathers the self-contacts from Python every iteration"
+            return ("vbd gathers its Jacobi terms (self-contact, pressure) from Python "
+                    "every iteration")
         if any(isinstance(t, Colliders) for t in self.potential.terms):
             return "vbd stores the colliders' contacts at each step's start with a launch"
         for term in self.potential.terms:

@@ -7,7 +7,10 @@ The springs are compliant distance constraints C_s = |x_i - x_j| - l0 with compl
 constraint s = 0 with compliance 1, and a membrane triangle (``terms/membrane.py``) the
 three constraints of its stretch and shear conditions, compliances 1 / (A k_c) and
 damping beta k_c; hinges and triangles are coloured like the springs (``spring_pass``
-takes all three). A step of h (dt / substeps):
+takes all three). A pressure chamber (``terms/pressure.py``) is one constraint on all its
+particles: every pass ends with a Newton step on its multiplier, the pressure applied,
+towards p(V) at the current volume (compliance 1 / (U''(V) h^2), recomputed at each),
+moving the particles along dV/dx at the substep's start. A step of h (dt / substeps):
 
   1. the other forces (gravity, drag, wind, attraction, the grab spring) at the start
      move every velocity, v += h f / m, and x_prev = x, x += h v (pinned particles move
@@ -19,8 +22,15 @@ takes all three). A step of h (dt / substeps):
                    / ((1 + gamma)(w_i + w_j) + alpha),
      x_i += w_i dlambda n, x_j -= w_j dlambda n, lambda += dlambda (n the unit x_ij,
      w the inverse masses, lambda starting at 0 each step);
-  3. v = (x - x_prev) / h, then the projections of colliders and self-contact, as in
-     projective dynamics (``terms.Colliders.project``).
+     After each pass every particle inside a collider's offset surface (its plane of the
+     substep's start, ``terms.Colliders.begin_solve``) is put back on it (a hard
+     contact constraint, ``push_out``): the iterations see the colliders, so a cloth that
+     lands on one is held by it through its springs within the step, not only where its
+     particles touch;
+  3. v = (x - x_prev) / h; against the colliders it touches, a particle's approaching
+     normal velocity is removed and its tangential velocity cut by mu times the normal
+     velocity its pushes gave it (Coulomb, ``terms.Colliders.coulomb``); then the
+     self-contact projection, as in projective dynamics.
 
 With many iterations a step solves alpha lambda = -C(x) and M (x - x_pred) = grad C^T
 lambda (up to the term XPBD drops, Macklin 2016 eq. 11): backward Euler's step of the
@@ -35,9 +45,11 @@ from ..errors import SceneError
 from ..forces import Forces
 from ..runtime import serial
 from ..terms.bending import Bending
+from ..terms.colliders import Colliders
 from ..terms.membrane import Membrane
+from ..terms.pressure import Pressure
 from ..terms.springs import Springs
-from .base import Integrator
+from .base import Integrator, check_substeps, substep_count
 
 
 def colour_springs(pairs, n):
@@ -72,27 +84,34 @@ class XPBD(Integrator):
 
     iterations (10): Gauss-Seidel passes over the springs a substep.
     substeps (1): substeps a step (Small Steps: many substeps of one iteration each are
-        more accurate than one substep of many iterations, at the same cost).
+        more accurate than one substep of many iterations, at the same cost), or "auto"
+        (``base.substep_count``: enough that the iterations outrun a stress wave; a stiff
+        cloth at one step per frame needs several).
 
     ``colours`` is the springs' colour count.
     """
     name = "xpbd"
+    checked_steps = True
     defaults = {"iterations": 10, "substeps": 1}
 
     def __init__(self, model, **options):
         super().__init__(model, **options)
-        for key in ("iterations", "substeps"):
-            value = self.options[key]
-            if not (isinstance(value, int) and value >= 1):
-                raise SceneError(f"xpbd's {key} must be an int >= 1 (got {value!r})")
+        value = self.options["iterations"]
+        if not (isinstance(value, int) and value >= 1):
+            raise SceneError(f"xpbd's iterations must be an int >= 1 (got {value!r})")
+        self._explicit_limit = check_substeps("xpbd", self.options["substeps"], model.scene)
+        self.auto_substeps = self._explicit_limit is not None
         n, real = model.particle_count, runtime.real()
         self.mass = model.mass
         springs = Springs(model) if Springs.present(model) else None
         self.has_springs = springs is not None
         self.external = Forces(model, lambda cls: cls.projective in ("force", "lagged")
-                               and cls not in (Springs, Bending, Membrane))
+                               and cls not in (Springs, Bending, Membrane, Pressure))
         self.projections = term_modules.build(model, lambda cls: cls.projective == "projection")
+        self.colliders = Colliders(model) if Colliders.present(model) else None
+        self.has_colliders = self.colliders is not None
         self.x_prev, self.f = (ti.Vector.field(3, real, shape=n) for _ in range(2))
+        self.pushed = ti.field(real, shape=n)   # how far the colliders pushed, this substep
         self.colour_start = [0]
         if self.has_springs:
             count = springs.count
@@ -117,21 +136,30 @@ class XPBD(Integrator):
                 self.membrane.tris.to_numpy(), n)
         self.triangle_colours = len(self.triangle_start) - 1
         self.has_triangles = self.membrane is not None
-        self.constrained = self.has_springs or self.has_hinges or self.has_triangles
+        self.pressure = Pressure(model) if Pressure.present(model) else None
+        self.has_pressure = self.pressure is not None
+        self.constrained = (self.has_springs or self.has_hinges or self.has_triangles
+                            or self.has_pressure)
+        self.iterated = self.constrained or self.has_colliders
+        self.stats = {}
 
     def simulate(self, model, state_in, state_out, dt):
         opt = self.options
-        h = dt / opt["substeps"]
+        count = substep_count(opt["substeps"], dt, opt["iterations"], self._explicit_limit)
+        self.stats = {"substeps": count}
+        h = dt / count
         x, v = state_out.x, state_out.v
         self._copy(state_in.x, state_in.v, x, v)
         t = state_in.t
-        for _ in range(opt["substeps"]):
+        for _ in range(count):
             self.external.compute(x, v, t, self.f)
+            if self.has_colliders:
+                self.colliders.begin_solve(x, v, h, t)
             self._predict(x, v, h)
-            if self.constrained:
+            if self.iterated:
                 self._zero_multipliers()
                 for _ in range(opt["iterations"]):
-                    self._springs(x, h)
+                    self._iterate(x, h)
             self._velocities(x, v, 1.0 / h)
             t += h
             for term in self.projections:
@@ -145,24 +173,36 @@ class XPBD(Integrator):
             return ("xpbd projects " + " and ".join(t.name or type(t).__name__
                                                     for t in self.projections)
                     + " between its launches")
+        if self.has_pressure and self.pressure.batch_obstacle() is not None:
+            return self.pressure.batch_obstacle()
         return self.external.batch_obstacle()
 
     @ti.func
     def advance(self, a, b, t, dt, fresh):
         """``simulate`` of State a in place, as a ``ti.func`` for the batches (where
         ``batch_obstacle`` is None: no projections); the same functions, in the same
-        order. Its iteration and substep counts are compiled in: ``set_integrator``
-        changes them."""
+        order. Its iteration count (and substep count, but for "auto") is compiled in:
+        ``set_integrator`` changes them."""
+        count = 1
+        if ti.static(self.auto_substeps):      # base.substep_count, in float64 as there
+            count = ti.max(1, ti.cast(ti.ceil(dt / (self.options["iterations"]
+                                                    * self._explicit_limit) - 1e-9), ti.i32))
+        else:
+            count = self.options["substeps"]
         # h and 1 / h in float64 first, then rounded, as simulate's Python floats are
-        h64 = dt / self.options["substeps"]
+        h64 = dt / count
         h = ti.cast(h64, float)
-        for sub in range(self.options["substeps"]):
-            self.external.accumulate(a.x, a.v, ti.cast(t + sub * h64, float), self.f)
+        for sub in range(count):
+            t0 = ti.cast(t + sub * h64, float)
+            self.external.accumulate(a.x, a.v, t0, self.f)
+            if ti.static(self.has_colliders):
+                self.colliders.set_planes(a.x, a.v, h, t0)
             self.predict(a.x, a.v, h)
-            if ti.static(self.constrained):
+            if ti.static(self.iterated):
                 self.zero_multipliers()
                 for _ in range(self.options["iterations"]):
                     self.pass_in_order(a.x, h)
+                    self.push_out(a.x)
             self.velocities(a.x, a.v, ti.cast(1.0 / h64, float))
 
     @ti.kernel
@@ -186,8 +226,18 @@ class XPBD(Integrator):
             x[p] += h * v[p]
 
     @ti.kernel
-    def _springs(self, x: ti.template(), h: float):
+    def _iterate(self, x: ti.template(), h: float):
         self.spring_pass(x, h)
+        self.push_out(x)
+
+    @ti.func
+    def push_out(self, x):
+        """Every particle inside a collider's offset surface (its planes of the substep's
+        start, ``Colliders.begin_solve``) back on it, the distance added to ``pushed``."""
+        if ti.static(self.has_colliders):
+            ti.loop_config(serialize=ti.static(serial(x)))
+            for p in range(x.shape[0]):
+                self.pushed[p] += self.colliders.push_out(p, x)
 
     @ti.kernel
     def _zero_multipliers(self):
@@ -195,7 +245,12 @@ class XPBD(Integrator):
 
     @ti.func
     def zero_multipliers(self):
-        """lambda = 0 for every spring, hinge and triangle: a step starts without them."""
+        """lambda = 0 for every spring, hinge, triangle and pressure chamber, and no
+        collider push yet: a step starts without them."""
+        if ti.static(self.has_colliders):
+            ti.loop_config(serialize=ti.static(serial(self.pushed)))
+            for p in range(self.pushed.shape[0]):
+                self.pushed[p] = 0
         if ti.static(self.has_springs):
             ti.loop_config(serialize=True)
             for s in range(self.lam.shape[0]):
@@ -208,12 +263,15 @@ class XPBD(Integrator):
             ti.loop_config(serialize=True)
             for e in range(self.triangle_lam.shape[0]):
                 self.triangle_lam[e] = ti.Vector.zero(float, 3)
+        if ti.static(self.has_pressure):
+            self.pressure.zero_multipliers(self.x_prev)
 
     @ti.func
     def spring_pass(self, x, h):
         """One Gauss-Seidel pass over the springs, then the hinges, then the membrane's
-        triangles, colour after colour, the constraints of a colour in parallel (module
-        docstring; one launch: the colours' loops are unrolled, each a top-level loop)."""
+        triangles, colour after colour, the constraints of a colour in parallel, then the
+        pressure's chambers (module docstring; one launch: the colours' loops are
+        unrolled, each a top-level loop)."""
         for c in ti.static(range(self.colours)):
             for k in range(ti.static(self.colour_start[c]), ti.static(self.colour_start[c + 1])):
                 self._spring(x, h, self.order[k])
@@ -224,6 +282,8 @@ class XPBD(Integrator):
             for k in range(ti.static(self.triangle_start[c]),
                            ti.static(self.triangle_start[c + 1])):
                 self._triangle(x, h, self.triangle_order[k])
+        if ti.static(self.has_pressure):
+            self.pressure.project(x, self.inv_mass, h)
 
     @ti.func
     def pass_in_order(self, x, h):
@@ -239,6 +299,8 @@ class XPBD(Integrator):
         if ti.static(self.has_triangles):
             for k in range(ti.static(self.triangle_start[-1])):
                 self._triangle(x, h, self.triangle_order[k])
+        if ti.static(self.has_pressure):
+            self.pressure.project(x, self.inv_mass, h)
 
     @ti.func
     def _triangle(self, x, h, e):
@@ -304,6 +366,10 @@ class XPBD(Integrator):
 
     @ti.func
     def velocities(self, x, v, inv_h):
+        """v = (x - x_prev) / h, then Coulomb friction against the colliders touched (the
+        pushes' distance over h is the normal velocity change)."""
         ti.loop_config(serialize=ti.static(serial(x)))
         for p in range(x.shape[0]):
             v[p] = (x[p] - self.x_prev[p]) * inv_h
+            if ti.static(self.has_colliders):
+                self.colliders.plane_coulomb(p, x, v, self.pushed[p] * inv_h)

@@ -16,13 +16,17 @@ keeps its own scratch. Every term gives:
   - ``batch_obstacle()``: None when its force may run in a batch of substeps without
     Python between them, else the reason why not (one line, for ``Simulator.fusion``);
   - ``energy(x, t, out)``: its potential energy (J, a float), or None when it has none;
+  - ``stored(x, t, out)``: (its potential energy or None, the largest strain of its
+    elements or None) for the instability test (``budget.py``); the default is
+    (``energy``, None), springs and the membrane give their strain from the same pass;
   - ``name``: its key in ``Simulator.energy()``;
   - ``implicit``: how backward Euler takes it: "potential" (its energy, gradient and
     Hessian enter Newton's incremental potential) or "lagged" (its force at the start of
     the step enters as a constant, explicitly);
   - ``projective``: how projective dynamics takes it: "force" (in the force residual of
-    every iteration), "lagged" (in Liu's y at the start of the step) or "projection" (a
-    position projection after the iterations).
+    every iteration), "lagged" (in Liu's y at the start of the step), "contact" (the
+    colliders, which projective dynamics and XPBD take inside their iterations) or
+    "projection" (a position projection after the iterations).
 
 A per-particle term (``per_particle = True``) also gives ``ti.func``s on one particle p,
 which the integrators' kernels call in loops over their term lists (so that all terms of
@@ -111,8 +115,16 @@ class Term:
     def energy(self, x, t, out):
         return None
 
+    def stored(self, x, t, out):
+        """(potential energy or None, largest strain or None) at x: see the module."""
+        return self.energy(x, t, out), None
+
     def begin_step(self, x0, t0):
         """Lagged quantities of backward Euler's step from positions x0 at time t0."""
+
+    def begin_solve(self, x0, v0, h, t0):
+        """What an iterative solve of a step of h from (x0, v0) at time t0 fixes at its
+        start (the colliders' contact planes)."""
 
 
 @ti.kernel

@@ -14,11 +14,17 @@ Below eps the friction is a viscous regularisation of sticking: a particle held 
 friction on an incline creeps at eps tan(theta) / mu. For explicit integrators keep
 eps > mu g dt / 2 so that the regularised stick regime is itself stable.
 
+The implicit and frame-rate solvers take the contact inside their solve, against a plane
+per particle and collider linearised at the step's start (``begin_solve``): its depth is
+the thickness less the particle's height above that plane, so that a cloth landing on a
+collider is held by it through the solve, and a step cannot take it through a thin one.
 Backward Euler takes the penalty as a potential k/2 depth^2 at the end of the step, and
 normal damping and friction with the normal force and normal of the step's start, as a
 convex dissipation potential whose gradient is exactly the explicit law at the end
-velocity. Projective dynamics projects penetrating particles back onto the offset surface
-after its iterations (inelastic normal, Coulomb tangential).
+velocity; VBD likewise. Projective dynamics has the penalty and normal damping in its
+residual and their stiffness in its matrix (``plane_force``, ``plane_weight``), XPBD
+pushes particles out (``push_out``), and both apply friction after the solve with the
+normal velocity change it gave (``plane_coulomb``).
 
 The shapes (signed distance and normal) are in ``shapes.py``. All colliders of a scene
 are handled by one kernel launch; shapes the scene lacks are compiled out; a scene
@@ -75,11 +81,12 @@ def add_dissipation(e, g, block, v, n0, fn0, cd, mu, eps, h):
 @ti.data_oriented
 class Colliders(Term):
     """Penalty contact and Coulomb friction against the scene's colliders; skipped for
-    pinned particles. Backward Euler: a potential (with lagged friction and damping);
-    projective: a projection after the iterations."""
+    pinned particles. Backward Euler and VBD: a potential (with lagged friction and
+    damping); projective dynamics and XPBD: "contact", which they take inside their
+    iterations themselves."""
     name = "contact"
     implicit = "potential"
-    projective = "projection"
+    projective = "contact"
     per_particle = True
 
     @staticmethod
@@ -88,8 +95,13 @@ class Colliders(Term):
 
     def __init__(self, model):
         self.table = model.colliders
-        self.mass, self.inv_mass = model.mass, model.inv_mass
+        self.mass, self.inv_mass, self.params = model.mass, model.inv_mass, model.params
         self._lagged = None
+        # (normal, offset) per particle and collider: ``begin_solve``
+        shape = (model.particle_count, max(self.table.count, 1))
+        self._planes = (ti.Vector.field(3, runtime.real(), shape=shape),
+                        ti.field(runtime.real(), shape=shape))
+        self._h = ti.field(runtime.real(), shape=())     # the planes' step
 
     # -- explicit force and energy ---------------------------------------------------------
     @ti.func
@@ -168,12 +180,14 @@ class Colliders(Term):
         self.table.for_each_contact(x0, p, t0, self._begin_body, 0, 0)
 
     @ti.func
-    def _incremental_parts(self, col, c, x, p, phi, n, x0p, h):
+    def _incremental_parts(self, col, c, gap, n, ctx):
         """(energy, gradient, Hessian block) of one contact in the step's incremental
-        potential: penalty k/2 depth^2 at x (its block k n n^T without the curvature
-        term), normal damping and friction with the start-of-step normal and force as
-        convex potentials of the end velocity."""
-        depth = col.thickness - phi
+        potential at x[p] (ctx: (x[p], x0[p], h, p)): penalty k/2 depth^2 against the
+        particle's plane of the step's start (``begin_solve``; depth = thickness - its
+        height above it), its block k n n^T, normal damping and friction with the
+        start-of-step normal and force as convex potentials of the end velocity."""
+        xp, x0p, h, p = ctx
+        depth = col.thickness - gap
         e = 0.0
         g = ti.Vector.zero(float, 3)
         block = ti.Matrix.zero(float, 3, 3)
@@ -185,15 +199,14 @@ class Colliders(Term):
         fn0 = self._lagged[0][p, c]
         if fn0 > 0.0:
             cd = 2.0 * col.damping * ti.sqrt(k * self.mass[p])
-            e, g, block = add_dissipation(e, g, block, (x[p] - x0p) / h - col.velocity,
+            e, g, block = add_dissipation(e, g, block, (xp - x0p) / h - col.velocity,
                                           self._lagged[1][p, c], fn0, cd, col.friction,
                                           col.stick_velocity, h)
         return e, g, block
 
     @ti.func
-    def _incremental_body(self, col, c, x, p, phi, n, ctx):
-        x0p, h = ctx
-        e, g, _ = self._incremental_parts(col, c, x, p, phi, n, x0p, h)
+    def _incremental_body(self, col, c, gap, n, ctx):
+        e, g, _ = self._incremental_parts(col, c, gap, n, ctx)
         return ti.Vector([e, g[0], g[1], g[2]])
 
     @ti.func
@@ -202,13 +215,12 @@ class Colliders(Term):
         incremental potential at positions x; x0 the step's start."""
         eg = ti.Vector.zero(float, 4)
         if self.inv_mass[p] > 0.0:
-            eg = self.table.for_each_contact(x, p, t, self._incremental_body, eg, (x0[p], h))
+            eg = self._for_each_plane(p, x, self._incremental_body, eg, (x[p], x0[p], h, p))
         return eg[0], eg[0], ti.Vector([eg[1], eg[2], eg[3]])
 
     @ti.func
-    def _block_body(self, col, c, x, p, phi, n, ctx):
-        x0p, h = ctx
-        _, _, block = self._incremental_parts(col, c, x, p, phi, n, x0p, h)
+    def _block_body(self, col, c, gap, n, ctx):
+        _, _, block = self._incremental_parts(col, c, gap, n, ctx)
         return block
 
     @ti.func
@@ -216,30 +228,120 @@ class Colliders(Term):
         """The sum of particle p's contact Hessian blocks (zero when pinned)."""
         block = ti.Matrix.zero(float, 3, 3)
         if self.inv_mass[p] > 0.0:
-            block = self.table.for_each_contact(x, p, t, self._block_body, block, (x0[p], h))
+            block = self._for_each_plane(p, x, self._block_body, block, (x[p], x0[p], h, p))
         return block
 
-    # -- projective dynamics ---------------------------------------------------------------
+    # -- the step's contact planes (every implicit and frame-rate solver) --------------------
+    def begin_solve(self, x0, v0, h, t0):
+        """At the start of a step of h from (x0, v0) at t0, each free particle's contact
+        plane with each collider it can reach in the step (its distance less h (|v0| + the
+        collider's speed) + h^2 |g| and a thickness, below the thickness): the tangent
+        plane at its closest point on the surface, normal n0 there, placed where the
+        collider is at the step's end. The solvers keep the particle on its outer side,
+        offset by the thickness, through their iterations: backward Euler and VBD by the
+        penalty against it, projective dynamics in its residual and matrix, XPBD by
+        pushing. A linearisation at the step's start, as Newton's planar contact: an
+        iterate that lands deep inside a curved collider is pushed back the way it came
+        rather than along the radius at the deep point (which spreads a landing cloth
+        apart), and one that a step would take through a thin collider is held on the
+        side it came from (the shape's own distance at such an iterate points out of the
+        far side)."""
+        _begin_planes(self, x0, v0, h, t0)
+
     @ti.func
-    def _project_body(self, col, c, x, p, phi, n, v):
-        depth = col.thickness - phi
-        if depth > 0.0 and col.stiffness > 0.0:
-            x[p] += depth * n
-            v_rel = v[p] - col.velocity
-            vn = v_rel.dot(n)
-            if vn < 0.0:
-                vt = v_rel - vn * n
-                speed = vt.norm()
-                cut = ti.min(col.friction * (-vn), speed)
-                vt -= cut * vt / ti.max(speed, 1e-30)
-                v[p] = col.velocity + vt
+    def set_planes(self, x0, v0, h, t0):
+        """``begin_solve`` as a ``ti.func``."""
+        self._h[None] = h
+        g = ti.Vector([self.params[0], self.params[1], self.params[2]])
+        ti.loop_config(serialize=ti.static(serial(x0)))
+        for p in range(x0.shape[0]):
+            self.table.for_each_contact(x0, p, t0, self._plane_body, 0,
+                                        (v0[p], h, h * h * g.norm()))
+
+    @ti.func
+    def _plane_body(self, col, c, x0, p, phi, n, ctx):
+        v0, h, fall = ctx
+        self._planes[0][p, c] = n
+        self._planes[1][p, c] = -1e30
+        reach = h * (v0.norm() + col.velocity.norm()) + fall + col.thickness
+        if col.stiffness > 0.0 and self.inv_mass[p] > 0.0 and phi < col.thickness + reach:
+            self._planes[1][p, c] = n.dot(x0[p] - phi * n + h * col.velocity)
         return 0
 
-    def project(self, x, v, t):
-        """Put penetrating particles back on the offset surface; remove their inward normal
-        velocity and cut the tangential one by mu times that change (Coulomb), relative to
-        the collider's motion."""
-        project_contacts(self, x, v, t)
+    @ti.func
+    def _for_each_plane(self, p, x, body: ti.template(), zero, ctx):
+        """The sum over colliders c of ``body(col, c, gap, n, ctx)``, gap the height of x[p]
+        above collider c's plane (``begin_solve``; huge where it has none)."""
+        acc = zero
+        for c in range(self.table.count):
+            n = self._planes[0][p, c]
+            acc += body(self.table.data[c], c, n.dot(x[p]) - self._planes[1][p, c], n, ctx)
+        return acc
+
+    @ti.func
+    def _plane_force_body(self, col, c, gap, n, ctx):
+        vp, m = ctx
+        f = ti.Vector.zero(float, 3)
+        depth = col.thickness - gap
+        if depth > 0.0:
+            k = col.stiffness
+            cd = 2.0 * col.damping * ti.sqrt(k * m)
+            f = ti.max(k * depth - cd * (vp - col.velocity).dot(n), 0.0) * n
+        return f
+
+    @ti.func
+    def plane_force(self, p, x, v):
+        """The contact law's penalty and normal damping against particle p's planes at
+        (x, v[p]), without friction (``plane_coulomb`` applies it after the solve)."""
+        return self._for_each_plane(p, x, self._plane_force_body, ti.Vector.zero(float, 3),
+                                    (v[p], self.mass[p]))
+
+    @ti.func
+    def _weight_body(self, col, c, gap, n, m):
+        w = 0.0
+        if gap < col.thickness:
+            w = col.stiffness + 2.0 * col.damping * ti.sqrt(col.stiffness * m) / self._h[None]
+        return w
+
+    @ti.func
+    def plane_weight(self, p, x):
+        """k + c_d / h summed over particle p's planes it is within the thickness of at x:
+        the stiffness of its active contacts (projective's diagonal at an iterate)."""
+        return self._for_each_plane(p, x, self._weight_body, 0.0, self.mass[p])
+
+    @ti.func
+    def _push_body(self, col, c, gap, n, x):
+        return ti.max(col.thickness - gap, 0.0) * n
+
+    @ti.func
+    def push_out(self, p, x):
+        """Particle p back onto the outer side of its planes, offset by the thickness (a
+        hard contact constraint, XPBD's); returns the distance moved (m)."""
+        move = self._for_each_plane(p, x, self._push_body, ti.Vector.zero(float, 3), 0)
+        x[p] += move
+        return move.norm()
+
+    @ti.func
+    def _coulomb_body(self, col, c, gap, n, ctx):
+        vp, dvn = ctx
+        change = ti.Vector.zero(float, 3)
+        if gap <= col.thickness * (1.0 + 1e-3):
+            v_rel = vp - col.velocity
+            vn = v_rel.dot(n)
+            vt = v_rel - vn * n
+            speed = vt.norm()
+            cut = ti.min(col.friction * (dvn + ti.max(-vn, 0.0)), speed)
+            change = -ti.min(vn, 0.0) * n - cut * vt / ti.max(speed, 1e-30)
+        return change
+
+    @ti.func
+    def plane_coulomb(self, p, x, v, dvn):
+        """After a solve whose contact changed particle p's normal velocity by dvn (m/s):
+        at each of its planes it touches at x, its approaching normal velocity removed
+        and its tangential velocity, relative to the collider, cut by mu times the normal
+        velocity change (Coulomb's bound on the friction impulse)."""
+        v[p] += self._for_each_plane(p, x, self._coulomb_body, ti.Vector.zero(float, 3),
+                                     (v[p], dvn))
 
 
 @ti.kernel
@@ -260,8 +362,6 @@ def begin_contacts(term: ti.template(), x0: ti.template(), t0: float):
 
 
 @ti.kernel
-def project_contacts(term: ti.template(), x: ti.template(), v: ti.template(), t: float):
-    ti.loop_config(serialize=ti.static(serial(x)))
-    for p in range(x.shape[0]):
-        if term.inv_mass[p] > 0.0:
-            term.table.for_each_contact(x, p, t, term._project_body, 0, v)
+def _begin_planes(term: ti.template(), x0: ti.template(), v0: ti.template(), h: float,
+                  t0: float):
+    term.set_planes(x0, v0, h, t0)

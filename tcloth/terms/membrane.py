@@ -272,18 +272,26 @@ class Membrane(Term):
             f_out[p] -= self.gather(p)
 
     @ti.kernel
-    def _energy(self, x: ti.template(), out: ti.template()) -> ti.f64:
+    def _sums(self, x: ti.template(), out: ti.template()) -> ti.types.vector(2, ti.f64):
+        """[sum over triangles of W, the largest stretch |f_u| - 1 or |f_v| - 1]."""
         out[0] = 0
+        out[1] = -1e30
         ti.loop_config(serialize=ti.static(serial(self.tris)))
         for e in range(self.tris.shape[0]):
             fu, fv = self.frame(e, x)
             w, _, _ = self.elastic(fu, fv, self.c[e])
             out[0] += ti.cast(w, out.dtype)
-        return ti.cast(out[0], ti.f64)
+            ti.atomic_max(out[1], ti.cast(ti.max(fu.norm(), fv.norm()) - 1.0, out.dtype))
+        return ti.Vector([ti.cast(out[0], ti.f64), ti.cast(out[1], ti.f64)])
 
     def energy(self, x, t, out):
         """sum over triangles of W, in the accumulator's type."""
-        return self._energy(x, out)
+        return self.stored(x, t, out)[0]
+
+    def stored(self, x, t, out):
+        """(W summed, the largest stretch of a triangle along warp or weft)."""
+        values = self._sums(x, out)
+        return float(values[0]), float(values[1])
 
     # -- backward Euler, VBD, projective ------------------------------------------------------
     @ti.func

@@ -188,8 +188,10 @@ def grid_springs(grids, k, families: ti.template(), first: ti.template(), x, v, 
 # -- diagnostics ------------------------------------------------------------------------------
 @ti.kernel
 def spring_sums(x: ti.template(), pairs: ti.template(), ks: ti.template(),
-                rest: ti.template(), count: ti.i32, out: ti.template()):
-    """out = [spring potential sum k_s/2 (|x_ij| - l0)^2, max strain (|x_ij| - l0)/l0]."""
+                rest: ti.template(), count: ti.i32,
+                out: ti.template()) -> ti.types.vector(2, ti.f64):
+    """[spring potential sum k_s/2 (|x_ij| - l0)^2, max strain (|x_ij| - l0)/l0],
+    accumulated in ``out``'s type."""
     out[0] = 0
     out[1] = -1e30
     ti.loop_config(serialize=ti.static(serial(pairs)))
@@ -199,6 +201,7 @@ def spring_sums(x: ti.template(), pairs: ti.template(), ks: ti.template(),
         stretch = length - rest[s]
         out[0] += ti.cast(0.5 * ks[s] * stretch * stretch, out.dtype)
         ti.atomic_max(out[1], ti.cast(stretch / rest[s], out.dtype))
+    return ti.Vector([ti.cast(out[0], ti.f64), ti.cast(out[1], ti.f64)])
 
 
 # -- backward Euler over the spring list ------------------------------------------------------
@@ -308,12 +311,14 @@ class Springs(Term):
 
     def sums(self, x, out):
         """(spring energy, max strain) over all springs."""
-        spring_sums(x, self.pairs, self.ks, self.rest, self.count, out)
-        values = out.to_numpy()
+        values = spring_sums(x, self.pairs, self.ks, self.rest, self.count, out)
         return float(values[0]), float(values[1])
 
     def energy(self, x, t, out):
         return self.sums(x, out)[0]
+
+    def stored(self, x, t, out):
+        return self.sums(x, out)
 
     def adjacency(self):
         """The springs at each particle, for per-particle gathers (built on first use).
