@@ -9,6 +9,98 @@ from tcloth.script import load_script
 SCENES = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "scenes")
 
 
+# The long set: stress, convergence and every-scene tests that take from 9 to 45 s each on
+# two cores, mostly compiling kernels for scenes of their own. Marked ``slow``: the README's
+# test command leaves them out (``-m "not slow"``, the ten-minute set); its full-set line
+# and .ci/run run them too. The same physics keeps a quick representative in the short set
+# (a stress case per family, the cheapest resolution or parameter).
+LONG = {
+    "test_batch::test_a_batch_equals_single_steps_bit_for_bit[forward_euler]",
+    "test_batch::test_a_batch_equals_single_steps_bit_for_bit[rk4]",
+    "test_batch::test_a_batch_equals_single_steps_bit_for_bit[verlet]",
+    "test_batch::test_fusion_names_what_keeps_a_scene_out_of_batches",
+    "test_batch::test_vbd_batches_without_colliders_or_self_contact",
+    "test_batch::test_xpbd_batches_where_it_projects_nothing",
+    "test_bending::test_vbd_xpbd_and_projective_converge_to_backward_euler",
+    "test_contact::test_a_scene_that_starts_crossed_gets_no_worse[backward_euler-0.016666666666666666]",
+    "test_contact::test_cloth_falling_at_10_m_per_s_stays_out_of_thin_colliders[backward_euler-0.016666666666666666-box]",
+    "test_contact::test_cloth_falling_at_10_m_per_s_stays_out_of_thin_colliders[backward_euler-0.016666666666666666-sphere]",
+    "test_contact::test_cloth_falling_at_10_m_per_s_stays_out_of_thin_colliders[projective-0.016666666666666666-box]",
+    "test_contact::test_cloth_falling_at_10_m_per_s_stays_out_of_thin_colliders[symplectic_euler-0.0001-box]",
+    "test_contact::test_cloth_falling_at_10_m_per_s_stays_out_of_thin_colliders[vbd-0.016666666666666666-box]",
+    "test_contact::test_cloth_falling_at_10_m_per_s_stays_out_of_thin_colliders[xpbd-0.016666666666666666-sphere]",
+    "test_contact::test_contact_stats_count_what_the_stage_did",
+    "test_contact::test_thrown_cloths_never_cross_at_any_step[backward_euler-0.016666666666666666]",
+    "test_contact::test_thrown_cloths_never_cross_at_any_step[projective-0.016666666666666666]",
+    "test_contact::test_thrown_cloths_never_cross_at_any_step[rk4-None]",
+    "test_contact::test_thrown_cloths_never_cross_at_any_step[symplectic_euler-None]",
+    "test_contact::test_thrown_cloths_never_cross_at_any_step[vbd-0.016666666666666666]",
+    "test_contact::test_thrown_cloths_never_cross_at_any_step[vbd:bounds-0.016666666666666666]",
+    "test_contact::test_thrown_cloths_never_cross_at_any_step[xpbd-0.016666666666666666]",
+    "test_fabric::test_cantilever_follows_the_elastica[grid-20]",
+    "test_fabric::test_cantilever_follows_the_elastica[mesh-20]",
+    "test_fabric::test_cantilever_follows_the_elastica[mesh-30]",
+    "test_fabric::test_flexion_springs_cannot_pass_the_cantilever",
+    "test_fabric::test_render_takes_a_fabric_preset_by_name",
+    "test_field_forces::test_every_field_force_acts_under_every_integrator[backward_euler]",
+    "test_field_forces::test_every_field_force_acts_under_every_integrator[forward_euler]",
+    "test_field_forces::test_every_field_force_acts_under_every_integrator[projective]",
+    "test_field_forces::test_every_field_force_acts_under_every_integrator[vbd]",
+    "test_frame_rate_honesty::test_a_cloth_landing_on_a_small_sphere_holds_at_one_step_per_frame[vbd-options1]",
+    "test_implicit::test_backward_euler_converges_with_order_one",
+    "test_implicit::test_multigrid_and_block_jacobi_cg_give_the_same_backward_euler_steps",
+    "test_implicit::test_newton_never_raises_the_incremental_potential_and_reports_non_convergence[f32]",
+    "test_implicit::test_newton_on_the_exact_hessian_converges_quadratically_on_folded_cloth",
+    "test_implicit::test_parallel_loops_give_the_serial_results[general_paths]",
+    "test_implicit::test_parallel_loops_give_the_serial_results[grid_paths]",
+    "test_implicit::test_projective_converges_to_backward_euler_with_axial_spring_damping",
+    "test_implicit::test_projective_converges_to_the_backward_euler_step",
+    "test_implicit::test_stiff_cloth_explodes_explicitly_but_is_stable_and_dissipative_implicitly[10000.0]",
+    "test_implicit::test_stiff_cloth_explodes_explicitly_but_is_stable_and_dissipative_implicitly[1000000.0]",
+    "test_live::test_collider_and_strain_limit_switches",
+    "test_membrane::test_a_batch_of_steps_equals_single_steps_bit_for_bit[vbd]",
+    "test_membrane::test_a_batch_of_steps_equals_single_steps_bit_for_bit[xpbd]",
+    "test_membrane::test_vbd_xpbd_and_projective_converge_to_backward_euler",
+    "test_mesh_cloth::test_mesh_cloth_checkpoint_render_and_self_collision",
+    "test_pressure::test_every_solver_reaches_the_same_inflated_balloon[vbd]",
+    "test_pressure::test_vbd_and_projective_converge_to_the_backward_euler_step",
+    "test_reliability::test_a_checkpoint_of_format_version_1_still_loads_and_continues",
+    "test_reliability::test_random_valid_scenes_only_ever_raise_instability",
+    "test_reliability::test_save_load_continue_is_bit_identical",
+    "test_render::test_every_scene_script_renders_headless[cloth_on_box.py]",
+    "test_render::test_every_scene_script_renders_headless[cloth_pile.py]",
+    "test_render::test_every_scene_script_renders_headless[drape.py]",
+    "test_render::test_every_scene_script_renders_headless[fold.py]",
+    "test_render::test_every_scene_script_renders_headless[negative_examples.py]",
+    "test_render::test_every_scene_script_renders_headless[tablecloth.py]",
+    "test_scene_regression::test_every_scene_script_matches_its_snapshot_after_0_1_s[cloth_pile]",
+    "test_scene_regression::test_every_scene_script_matches_its_snapshot_after_0_1_s[drape]",
+    "test_scene_regression::test_every_scene_script_matches_its_snapshot_after_0_1_s[tablecloth]",
+    "test_self_collision::test_checkpoint_with_self_collision_continues_the_run",
+    "test_self_collision::test_cloths_thrown_at_each_other_never_cross_and_keep_momentum[backward_euler-0.001-options1]",
+    "test_self_collision::test_cloths_thrown_at_each_other_never_cross_and_keep_momentum[symplectic_euler-0.0001-options0]",
+    "test_self_collision::test_displacement_test_matches_numpy_on_one_thread_and_on_several",
+    "test_self_collision::test_folding_cloth_never_crosses_itself",
+    "test_self_collision::test_kept_candidate_list_misses_no_contact",
+    "test_self_collision::test_top_cloth_rests_a_thickness_above_the_lower_one",
+    "test_simulator::test_a_batch_is_one_launch_for_every_substep",
+    "test_sweep::test_pool_gives_the_serial_table",
+    "test_vbd::test_each_vertex_gradient_and_block_match_finite_differences[0.0]",
+    "test_vbd::test_each_vertex_gradient_and_block_match_finite_differences[0.3]",
+    "test_vbd::test_vbd_converges_to_the_backward_euler_step",
+    "test_xpbd::test_xpbd_converges_near_the_backward_euler_step",
+    "test_xpbd::test_xpbd_is_stable_on_stiff_cloth_at_one_step_per_frame[1000000.0]",
+    "test_xpbd::test_xpbd_substeps_converge_at_first_order",
+}
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        module, _, name = item.nodeid.partition("::")
+        if f"{os.path.splitext(os.path.basename(module))[0]}::{name}" in LONG:
+            item.add_marker(pytest.mark.slow)
+
+
 @pytest.fixture(scope="module")
 def f64():
     """Taichi on the CPU in float64, for accuracy tests."""
