@@ -7,15 +7,12 @@ rope segments, alpha = (1 - s, s, -(1 - u), -u)). Pairs that touch by constructi
 left out (``topology.py``).
 
 ``BroadPhase`` keeps a candidate list: every pair whose gap was within thickness + skin at
-the positions x_ref of its last build. Particles and edge midpoints are binned in hashed
-uniform cells of size max(longest edge, reach) and sorted by counting sort
-(``hashgrid.py``); each triangle visits the particles in its box grown by the reach, each
-edge the edges of higher index whose midpoints lie in its box grown by the reach and half
-the longest edge; a shared particle is skipped before the exact distance and the
-exclusion rule, which marks the pair as one that does not repel (``ContactList.repels``)
-but is still listed for the guard. The queries run in blocks of QUERY_BLOCK in parallel, each block writing
-to its own slots laid out by a prefix sum, so on CPUs the list's order (and every sum
-over it) is that of a serial search whatever the threads.
+the positions x_ref of its last build. It runs the candidate search (``search.py``) on
+particles and edge midpoints binned in hashed uniform cells of size max(longest edge,
+reach) (``hashgrid.PointGrid``): each triangle visits the particles in its box grown by
+the reach, each edge the edges of higher index whose midpoints lie in its box grown by
+the reach and half the longest edge, and a pair is kept where its gap at x_ref is within
+the reach.
 
 The list covers a set of configurations when no two particles have moved, from x_ref to
 any of them, by more than the skin relative to each other: twice the largest distance of
@@ -33,14 +30,10 @@ import taichi as ti
 
 from .. import runtime
 from ..runtime import serial_count
-from .hashgrid import HashGrid, blocks_for, exclusive_scan
+from .hashgrid import PointGrid, blocks_for
 from .proximity import contact_weights
+from .search import CandidateSearch
 
-POINT_TRIANGLE, EDGE_EDGE = 0, 1
-# one query of the search costs about as much as this many items of the loops that
-# runtime.SERIAL_BELOW is set for, so its loop goes parallel from that many / this
-SEARCH_COST = 16
-QUERY_BLOCK = 64
 # particles per block of the displacement test's reduction
 DISPLACEMENT_BLOCK = 1024
 
@@ -97,105 +90,6 @@ class ContactList:
         return w
 
 
-@ti.func
-def record(search, ids, n_a, query, item):
-    """Append ``item`` to the query's block (``search.found``, ``fill``, ``found_count``)
-    with whether the pair touches by construction (``topology.excluded``) in its lowest
-    bit, unless all four particles are pinned."""
-    free = False
-    for k in ti.static(range(4)):
-        if search.inv_mass[ids[k]] > 0.0:
-            free = True
-    if free:
-        blk = query // QUERY_BLOCK
-        k = search.fill[blk]
-        if k < search.block_slots:
-            search.found[blk * search.block_slots + k] = 2 * item + ti.cast(
-                search.table.excluded(ids, n_a), ti.i32)
-        search.fill[blk] = k + 1
-        search.found_count[query] += 1
-
-
-@ti.func
-def lay_out(search, cl, q, slot, row):
-    """Write found entry ``slot`` of query q as list row ``row``."""
-    T = ti.static(cl.table.triangle_count)
-    entry = search.found[slot]
-    item = entry // 2
-    if q < T:
-        tri = cl.table.triangles[q]
-        cl.ids[row] = ti.Vector([cl.table.points[item], tri[0], tri[1], tri[2]])
-        cl.kind[row] = POINT_TRIANGLE
-    else:
-        a, b = cl.table.edges[q - T], cl.table.edges[item]
-        cl.ids[row] = ti.Vector([a[0], a[1], b[0], b[1]])
-        cl.kind[row] = EDGE_EDGE
-    cl.repels[row] = ti.cast(1 - entry % 2, ti.u8)
-
-
-@ti.data_oriented
-class Search:
-    """The particles' and edge midpoints' hash grids, and what the queries found.
-
-    There is one query per triangle (the particles near it) and one per edge (the edges
-    of higher index near it). Blocks of QUERY_BLOCK consecutive queries run in parallel,
-    each block on one thread appending what its queries find to its own ``block_slots``
-    slots; a prefix sum over the queries' counts lays out the rows."""
-
-    def __init__(self, table, inv_mass, grids, x_ref, reach, block_slots):
-        self.table, self.inv_mass = table, inv_mass
-        self.points_grid, self.edges_grid = grids
-        self.x_ref, self.reach = x_ref, reach
-        self.queries = table.triangle_count + table.edge_count
-        self.blocks = blocks_for(self.queries, QUERY_BLOCK)
-        self.block_slots = block_slots
-        self.found = ti.field(ti.i32, shape=self.blocks * block_slots)
-        self.fill = ti.field(ti.i32, shape=self.blocks)
-        self.found_count = ti.field(ti.i32, shape=self.queries)
-        self.found_start = ti.field(ti.i32, shape=self.queries + 1)
-        self.scan_blocks = ti.field(ti.i32, shape=blocks_for(self.queries))
-
-    @ti.func
-    def _consider(self, ids, kind, n_a, query, item):
-        """Record ``item`` for the query if the contact ids is not between pinned
-        particles only and its gap at x_ref is within the reach (``record``)."""
-        alpha, g = gap(ids, kind, self.x_ref)
-        if g.norm() <= self.reach[None]:
-            record(self, ids, n_a, query, item)
-        return 0
-
-    @ti.func
-    def _point_triangle(self, item, t):
-        tri, p = self.table.triangles[t], self.table.points[item]
-        if p != tri[0] and p != tri[1] and p != tri[2]:
-            self._consider(ti.Vector([p, tri[0], tri[1], tri[2]]), POINT_TRIANGLE, 1, t, item)
-
-    @ti.func
-    def _edge_edge(self, item, e):
-        a, b = self.table.edges[e], self.table.edges[item]
-        if a[0] != b[0] and a[0] != b[1] and a[1] != b[0] and a[1] != b[1]:
-            self._consider(ti.Vector([a[0], a[1], b[0], b[1]]), EDGE_EDGE, 2,
-                           self.table.triangle_count + e, item)
-
-    @ti.func
-    def query(self, q, x, reach, longest):
-        """Run query q (a triangle, then the edges) at positions x."""
-        T = ti.static(self.table.triangle_count)
-        self.found_count[q] = 0
-        if q < T:
-            tri = self.table.triangles[q]
-            a, b, c = x[tri[0]], x[tri[1]], x[tri[2]]
-            self.points_grid.for_each_in_box(ti.min(a, b, c) - reach,
-                                             ti.max(a, b, c) + reach, -1,
-                                             self._point_triangle, q)
-        else:
-            e = q - T
-            a, b = x[self.table.edges[e][0]], x[self.table.edges[e][1]]
-            grow = reach + 0.5 * longest
-            self.edges_grid.for_each_in_box(ti.min(a, b) - grow, ti.max(a, b) + grow, e,
-                                            self._edge_edge, e)
-
-
 @ti.kernel
 def _spread(broad: ti.template(), x: ti.template(), y: ti.template(),
             both: ti.template()) -> ti.f64:
@@ -250,52 +144,43 @@ def _spread(broad: ti.template(), x: ti.template(), y: ti.template(),
 def _rebuild(broad: ti.template(), search: ti.template(), cl: ti.template(),
              x: ti.template()) -> ti.types.vector(2, ti.i32):
     """Bin the particles and edge midpoints at x and list the candidate contacts within
-    the reach; x_ref = x. Returns (the number of candidates, the most a block of queries
-    found): more than the list's capacity or the search's block_slots means rebuild
-    larger."""
+    the reach; x_ref = x. Returns ``Search.run``'s (rows found, the most a block of
+    queries found)."""
     P, E, T = ti.static(cl.table.point_count, cl.table.edge_count, cl.table.triangle_count)
-    Q, B, slots = ti.static(search.queries, search.blocks, search.block_slots)
     ti.loop_config(serialize=ti.static(serial_count(P)))
     for i in range(P):
         p = cl.table.points[i]
         broad.x_ref[p] = x[p]
-        search.points_grid.pos[i] = x[p]
+        search.points.pos[i] = x[p]
     longest = 0.0
     ti.loop_config(serialize=ti.static(serial_count(E)))
     for e in range(E):
         a, b = x[cl.table.edges[e][0]], x[cl.table.edges[e][1]]
-        search.edges_grid.pos[e] = 0.5 * (a + b)
+        search.edges.pos[e] = 0.5 * (a + b)
         ti.atomic_max(longest, (a - b).norm())
     reach = broad.reach[None]
     cell = ti.max(longest, reach)
-    search.points_grid.set_cell(cell)
-    search.edges_grid.set_cell(cell)
-    search.points_grid.build(P)
-    search.edges_grid.build(E)
-    ti.loop_config(serialize=ti.static(serial_count(SEARCH_COST * Q)))
-    for blk in range(B):
-        search.fill[blk] = 0
-        for q in range(blk * QUERY_BLOCK, ti.min((blk + 1) * QUERY_BLOCK, Q)):
-            search.query(q, x, reach, longest)
-    exclusive_scan(search.found_count, search.found_start, search.scan_blocks, Q,
-                   ti.static(serial_count(Q)), False)
-    most = 0
-    ti.loop_config(serialize=ti.static(serial_count(Q)))
-    for blk in range(B):
-        ti.atomic_max(most, search.fill[blk])
-        slot = blk * slots
-        for q in range(blk * QUERY_BLOCK, ti.min((blk + 1) * QUERY_BLOCK, Q)):
-            row = search.found_start[q]
-            for _ in range(search.found_count[q]):
-                if slot < (blk + 1) * slots and row < cl.capacity:
-                    lay_out(search, cl, q, slot, row)
-                slot += 1
-                row += 1
-    return ti.Vector([search.found_start[Q], most])
+    search.points.set_cell(cell)
+    search.edges.set_cell(cell)
+    search.points.build(P)
+    search.edges.build(E)
+    # a triangle's box grown by the reach; an edge's by the reach and half the longest
+    # edge, since the edges are binned by their midpoints
+    grow = reach + 0.5 * longest
+    ti.loop_config(serialize=ti.static(serial_count(T)))
+    for t in range(T):
+        tri = cl.table.triangles[t]
+        a, b, c = x[tri[0]], x[tri[1]], x[tri[2]]
+        search.lo[t], search.hi[t] = ti.min(a, b, c) - reach, ti.max(a, b, c) + reach
+    ti.loop_config(serialize=ti.static(serial_count(E)))
+    for e in range(E):
+        a, b = x[cl.table.edges[e][0]], x[cl.table.edges[e][1]]
+        search.lo[T + e], search.hi[T + e] = ti.min(a, b) - grow, ti.max(a, b) + grow
+    return search.run(cl)
 
 
 @ti.data_oriented
-class BroadPhase:
+class BroadPhase(CandidateSearch):
     """The candidate list of one model's self-contact and the positions it was built at.
 
     Attributes:
@@ -305,7 +190,6 @@ class BroadPhase:
     """
 
     def __init__(self, table, inv_mass, particle_count):
-        self.table, self.inv_mass = table, inv_mass
         real = runtime.real()
         self.x_ref = ti.Vector.field(3, real, shape=particle_count)
         self.reach = ti.field(real, shape=())
@@ -314,19 +198,19 @@ class BroadPhase:
         self.moved_lo = ti.Vector.field(3, ti.f64, shape=moved_blocks)
         self.moved_hi = ti.Vector.field(3, ti.f64, shape=moved_blocks)
         self.moved_far = ti.field(ti.f64, shape=moved_blocks)
-        self._grids = (HashGrid(table.point_count), HashGrid(table.edge_count))
-        self.search = self._search(4 * QUERY_BLOCK)
-        self.candidates = self._list(8 * (table.point_count + table.edge_count))
-        self.count = 0
+        super().__init__(table, inv_mass, (PointGrid(table.point_count),
+                                           PointGrid(table.edge_count)), self._within)
         self.skin = None
         self.rebuilds = 0
 
-    def _search(self, block_slots):
-        return Search(self.table, self.inv_mass, self._grids, self.x_ref, self.reach,
-                      block_slots)
-
     def _list(self, capacity):
         return ContactList(self.table, self.inv_mass, capacity)
+
+    @ti.func
+    def _within(self, ids, kind):
+        """Whether the contact ids is within the reach at x_ref."""
+        _, g = gap(ids, kind, self.x_ref)
+        return g.norm() <= self.reach[None]
 
     def covers(self, x, y=None):
         """Whether the list holds every pair that can be within the thickness at x, at y,
@@ -344,18 +228,10 @@ class BroadPhase:
     def build(self, x, skin):
         """List the pairs within thickness + skin at x."""
         self.reach[None] = float(self.table.settings["thickness"] + skin)
-        while True:
-            count, most = (int(c) for c in _rebuild(self, self.search, self.candidates, x))
-            if most > self.search.block_slots:
-                self.search = self._search(2 * most)
-            elif count > self.candidates.capacity:
-                self.candidates = self._list(2 * count)
-            else:
-                break
-        self.count, self.skin = count, float(skin)
+        self.fit(lambda: _rebuild(self, self.search, self.candidates, x))
+        self.skin = float(skin)
         self.rebuilds += 1
 
     def invalidate(self):
         """The next ``covers`` is False (the state was set from outside)."""
         self.skin = None
-

@@ -42,7 +42,8 @@ import taichi as ti
 
 from ..runtime import serial
 from ..shapes import SHAPES
-from .broad import POINT_TRIANGLE, gap
+from .broad import gap
+from .search import POINT_TRIANGLE
 
 # the (first side, second side) vertex pairs of a point-triangle and an edge-edge contact
 POINT_TRIANGLE_PAIRS = ((0, 1), (0, 2), (0, 3))

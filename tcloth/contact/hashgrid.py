@@ -1,15 +1,21 @@
-"""A uniform grid of cubic cells hashed into a table, sorted by counting sort in kernels.
+"""Uniform grids of cubic cells hashed into a table, sorted by counting sort in kernels.
 
-Items (points) are binned by the cell that holds them; the cells are hashed into a table
-of ``size`` buckets (a power of two, at least twice the number of items), counted, the
-counts turned into bucket starts by a blocked prefix sum (per-block sums in parallel, a
-serial scan over the blocks, per-block scans in parallel) and the items scattered into
-``order`` (on CPUs in increasing order per bucket). ``for_each_in_box`` visits the
-items in a box, each once: it scans the cells the box overlaps, and a bucket shared by
-two cells (a hash collision) is filtered by the item's own cell.
+``CellHash`` is the table: cells of a size set in kernels (``set_cell``) hashed into
+``size`` buckets (a power of two, at least twice the number of items), entries counted
+per bucket, the counts turned into bucket starts by a blocked prefix sum (per-block sums
+in parallel, a serial scan over the blocks, per-block scans in parallel) and the entries
+scattered into ``order`` (in increasing order per bucket where the scatter runs on one
+thread). Two grids bin on it:
 
-The cost of a build is O(items + size); of a query, the cells the box covers times the
-items per cell, which the caller bounds by choosing the cell size (``set_cell``).
+  - ``PointGrid``: points, each in the cell that holds it. ``for_each`` visits the points
+    in a box, each once: it scans the cells the box overlaps, and a bucket shared by two
+    cells (a hash collision) is filtered by the point's own cell.
+  - ``BoxGrid``: boxes, each in every cell it overlaps (an entry per cell, up to a
+    capacity). ``for_each`` visits the boxes that overlap a box, each once: in the first
+    cell of the overlap of the two boxes' cell ranges.
+
+The cost of a build is O(entries + size); of a query, the cells the box covers times the
+entries per cell, which the caller bounds by choosing the cell size.
 """
 import taichi as ti
 
@@ -56,22 +62,21 @@ def exclusive_scan(count: ti.template(), start: ti.template(), blocks: ti.templa
 
 
 @ti.data_oriented
-class HashGrid:
-    """Cells for ``n`` items. Fill ``pos`` (n,) vec3 with the items' positions, then call
-    ``build`` inside a kernel (it has top-level loops)."""
+class CellHash:
+    """The hashed table of a grid of ``n`` items: cells of 1 / ``inv_cell`` a side (of
+    float type ``real``), a bucket per cell, and ``order``, up to ``capacity`` entries
+    sorted by bucket (``start``: each bucket's first)."""
 
-    def __init__(self, n):
+    def __init__(self, n, capacity, real):
         size = 1024
         while size < 2 * n:
             size *= 2
-        self.n, self.size = max(n, 1), size
-        self.pos = ti.Vector.field(3, runtime.real(), shape=self.n)
-        self.cell = ti.Vector.field(3, ti.i32, shape=self.n)
-        self.order = ti.field(ti.i32, shape=self.n)
+        self.n, self.size, self.capacity, self.real = max(n, 1), size, capacity, real
+        self.order = ti.field(ti.i32, shape=capacity)
         self.count = ti.field(ti.i32, shape=size)
         self.start = ti.field(ti.i32, shape=size + 1)
         self.blocks = ti.field(ti.i32, shape=blocks_for(size))
-        self.inv_cell = ti.field(runtime.real(), shape=())
+        self.inv_cell = ti.field(real, shape=())
 
     @ti.func
     def cell_of(self, x):
@@ -84,33 +89,58 @@ class HashGrid:
 
     @ti.func
     def set_cell(self, size):
-        self.inv_cell[None] = 1.0 / size
+        self.inv_cell[None] = ti.cast(1.0 / size, self.real)
 
     @ti.func
-    def build(self, count: ti.template()):
-        """Bin the first ``count`` items of ``pos`` (count: a Python int)."""
-        serial = ti.static(runtime.serial_count(max(count, self.size)))
+    def clear(self, serial: ti.template()):
+        """Zero the buckets' counts (a top-level loop)."""
         ti.loop_config(serialize=serial)
         for b in range(self.size):
             self.count[b] = 0
+
+    @ti.func
+    def sort(self, cells: ti.template(), entries, serial: ti.template(),
+             in_order: ti.template()):
+        """``order``: entries 0..entries - 1 by the bucket of their cell ``cells[e]``, each
+        of which ``count`` counted (it is 0 after). The scatter runs on one thread where
+        ``in_order``: each bucket then lists its entries in increasing order. Call at a
+        kernel's top level."""
+        exclusive_scan(self.count, self.start, self.blocks, self.size, serial, True)
+        ti.loop_config(serialize=in_order)
+        for e in range(entries):
+            b = self.bucket(cells[e])
+            self.order[self.start[b] + ti.atomic_add(self.count[b], 1)] = e
+
+
+@ti.data_oriented
+class PointGrid(CellHash):
+    """Cells for ``n`` points. Fill ``pos`` (n,) vec3 with their positions, then call
+    ``build`` inside a kernel (it has top-level loops)."""
+
+    def __init__(self, n):
+        super().__init__(n, max(n, 1), runtime.real())
+        self.pos = ti.Vector.field(3, self.real, shape=self.n)
+        self.cell = ti.Vector.field(3, ti.i32, shape=self.n)
+
+    @ti.func
+    def build(self, count: ti.template()):
+        """Bin the first ``count`` points of ``pos`` (count: a Python int)."""
+        serial = ti.static(runtime.serial_count(max(count, self.size)))
+        self.clear(serial)
         ti.loop_config(serialize=serial)
         for i in range(count):
             c = self.cell_of(self.pos[i])
             self.cell[i] = c
             ti.atomic_add(self.count[self.bucket(c)], 1)
-        exclusive_scan(self.count, self.start, self.blocks, self.size, serial, True)
-        # on CPUs one thread: each bucket then lists its items in increasing order, so a
+        # on CPUs one thread: each bucket then lists its points in increasing order, so a
         # query visits them in the same order whatever the threads (on GPUs a serial loop
         # would cost more than the whole search; the order within a bucket may vary)
-        ti.loop_config(serialize=ti.static(runtime.cpu()))
-        for i in range(count):
-            b = self.bucket(self.cell[i])
-            self.order[self.start[b] + ti.atomic_add(self.count[b], 1)] = i
+        self.sort(self.cell, count, serial, ti.static(runtime.cpu()))
 
     @ti.func
-    def for_each_in_box(self, lo, hi, after, body: ti.template(), ctx):
-        """body(item, ctx) for every item above ``after`` (-1: all) whose position lies in
-        the box [lo, hi]."""
+    def for_each(self, lo, hi, after, body: ti.template(), ctx):
+        """body(item, ctx) for every point above ``after`` (-1: all) that lies in the box
+        [lo, hi]."""
         a, b = self.cell_of(lo), self.cell_of(hi)
         # nested ranges: ti.ndrange recovers i, j, k by two integer divisions per cell
         for i in range(a[0], b[0] + 1):
@@ -123,4 +153,68 @@ class HashGrid:
                             d, p = self.cell[item], self.pos[item]
                             if d[0] == i and d[1] == j and d[2] == k and (lo <= p).all() \
                                     and (p <= hi).all():
+                                body(item, ctx)
+
+
+@ti.data_oriented
+class BoxGrid(CellHash):
+    """Boxes of ``n`` items (``lo``, ``hi``, float32) binned into every cell they overlap,
+    up to ``capacity`` entries. Fill lo and hi, then call ``build`` inside a kernel."""
+
+    def __init__(self, n, capacity):
+        super().__init__(n, capacity, ti.f32)
+        self.lo = ti.Vector.field(3, ti.f32, shape=self.n)
+        self.hi = ti.Vector.field(3, ti.f32, shape=self.n)
+        self.cells = ti.field(ti.i32, shape=self.n)          # cells each box overlaps
+        self.first = ti.field(ti.i32, shape=self.n + 1)       # its first entry
+        self.item_blocks = ti.field(ti.i32, shape=blocks_for(self.n))
+        self.entry_item = ti.field(ti.i32, shape=capacity)
+        self.entry_cell = ti.Vector.field(3, ti.i32, shape=capacity)
+
+    @ti.func
+    def build(self, count: ti.template()):
+        """Bin the first ``count`` boxes of lo/hi (count: a Python int). Returns the
+        entries needed: above ``capacity`` nothing was binned past it (build larger)."""
+        serial = ti.static(runtime.serial_count(max(count, self.size)))
+        ti.loop_config(serialize=serial)
+        for i in range(count):
+            a, b = self.cell_of(self.lo[i]), self.cell_of(self.hi[i])
+            self.cells[i] = (b[0] - a[0] + 1) * (b[1] - a[1] + 1) * (b[2] - a[2] + 1)
+        exclusive_scan(self.cells, self.first, self.item_blocks, count, serial, False)
+        self.clear(serial)
+        ti.loop_config(serialize=serial)
+        for i in range(count):
+            a, b = self.cell_of(self.lo[i]), self.cell_of(self.hi[i])
+            e = self.first[i]
+            for ci in range(a[0], b[0] + 1):
+                for cj in range(a[1], b[1] + 1):
+                    for ck in range(a[2], b[2] + 1):
+                        if e < self.capacity:
+                            c = ti.Vector([ci, cj, ck])
+                            self.entry_item[e] = i
+                            self.entry_cell[e] = c
+                            ti.atomic_add(self.count[self.bucket(c)], 1)
+                        e += 1
+        total = self.first[count]
+        # one thread, on GPUs too, so that each bucket lists its entries in increasing order
+        self.sort(self.entry_cell, ti.min(total, self.capacity), serial, True)
+        return total
+
+    @ti.func
+    def for_each(self, lo, hi, after, body: ti.template(), ctx):
+        """body(item, ctx) once for every box above ``after`` (-1: all) that overlaps
+        [lo, hi]: in the first cell of the overlap of the two cell ranges."""
+        a, b = self.cell_of(lo), self.cell_of(hi)
+        for ci in range(a[0], b[0] + 1):
+            for cj in range(a[1], b[1] + 1):
+                for ck in range(a[2], b[2] + 1):
+                    c = ti.Vector([ci, cj, ck])
+                    bk = self.bucket(c)
+                    for s in range(self.start[bk], self.start[bk + 1]):
+                        e = self.order[s]
+                        item = self.entry_item[e]
+                        if item > after and (self.entry_cell[e] == c).all() \
+                                and (self.lo[item] <= hi).all() and (lo <= self.hi[item]).all():
+                            first = ti.max(a, self.cell_of(self.lo[item]))
+                            if (first == c).all():
                                 body(item, ctx)

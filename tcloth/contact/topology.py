@@ -14,6 +14,7 @@ import taichi as ti
 
 from .. import runtime
 from ..errors import SceneError
+from ..graph import csr_layout
 
 # the order of SelfCollisionTable.params
 PARAMS = ("thickness", "stiffness", "friction", "damping", "stick_velocity", "skin")
@@ -31,10 +32,9 @@ def contact_topology(scene):
     points = np.unique(np.concatenate([c.particles.ravel() for c in scene.cloths]
                                       + [r.particles for r in scene.ropes]))
     both = np.concatenate([edges, edges[:, ::-1]])
-    both = both[np.lexsort((both[:, 1], both[:, 0]))]
-    start = np.searchsorted(both[:, 0], np.arange(scene.num_particles + 1))
+    start, order = csr_layout(both[:, 0], scene.num_particles, then=both[:, 1])
     return {"points": points, "triangles": triangles, "edges": edges,
-            "start": start, "neighbours": both[:, 1]}
+            "start": start, "neighbours": both[order, 1]}
 
 
 def resolve(scene):
