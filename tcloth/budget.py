@@ -97,7 +97,7 @@ class EnergyBudget:
         u_up = float(max((motions @ up).max(), 0.0)) if len(motions) else 0.0
         u_pin = float(np.linalg.norm(pins, axis=1).max()) if len(pins) else 0.0
         w = 0.0
-        wind = model.wind
+        wind = None if model.wind is None else model.wind.settings
         if wind is not None:
             w = (self.wind_seen if wind["callable"] is not None else
                  float(np.linalg.norm(wind["velocity"]) + np.linalg.norm(wind["amplitude"])))

@@ -15,6 +15,7 @@ import zipfile
 
 import numpy as np
 
+from . import runtime
 from .errors import SceneError
 from .builders import Cloth, MeshCloth, Rope
 from .features import FEATURES
@@ -185,7 +186,7 @@ def save(sim, path):
     """Write ``sim`` to ``path`` (.npz) atomically."""
     desc, arrays = scene_to_arrays(sim.scene)
     meta = {"format": FORMAT, "version": VERSION, "scene": desc,
-            "integrator": sim.integrator_name, "dt": sim.dt, "options": sim.integrator.options,
+            "integrator": sim.integrator_name, "dt": sim.dt, "options": dict(sim.integrator.options),
             "settings": sim.settings, "precision": sim.precision,
             "num_steps": sim.num_steps, "time_base": sim._time_base,
             "step_base": sim._step_base, "grabbed": _plain(sim.grabbed),
@@ -265,3 +266,35 @@ def read(path):
                              f"expected ({n}, 3) for its {n} particles")
     scene_arrays = {k[len("scene_"):]: v for k, v in files.items() if k.startswith("scene_")}
     return meta, scene_arrays, files
+
+
+def load(simulator_class, path):
+    """A ``simulator_class`` (``Simulator``) continuing exactly where the one saved at
+    ``path`` stopped (``Simulator.load``)."""
+    meta, scene_arrays, files = read(path)
+    runtime.ensure_init()
+    if meta["precision"] != runtime.precision():
+        raise SceneError(f"checkpoint {path!r} was saved in precision "
+                         f"{meta['precision']!r}; call tcloth.init(precision="
+                         f"{meta['precision']!r}) before loading it")
+    scene = scene_from_arrays(meta["scene"], scene_arrays)
+    sim = simulator_class(scene, meta["integrator"], dt=meta["dt"], **meta["settings"],
+                          **meta["options"])
+    npr = runtime.numpy_real()
+    state = sim.state
+    state.x.from_numpy(files["state_x"].astype(npr))
+    state.v.from_numpy(files["state_v"].astype(npr))
+    state.f.from_numpy(files["state_f"].astype(npr))
+    if meta["forces_valid"]:
+        sim.integrator.adopt_forces(state)
+    if sim._contact is not None:
+        sim._contact.refresh(state.x)
+    sim.num_steps = int(meta["num_steps"])
+    sim._time_base = float(meta.get("time_base", 0.0))
+    sim._step_base = int(meta.get("step_base", 0))
+    state.t = sim.time
+    if meta.get("grabbed"):
+        held = meta["grabbed"]
+        sim.grab(held["particle"], held["target"], held["stiffness"], held["damping"])
+    sim._rebase()
+    return sim

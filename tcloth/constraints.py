@@ -4,65 +4,15 @@ After a step, every limited spring longer than (1 + max_stretch) rest length is 
 back to that length by moving its ends, weighted by inverse mass (a pinned end stays put).
 Corrections of one pass are computed for all springs in parallel and averaged per particle
 (Jacobi); ``iterations`` passes. Velocities get the position change divided by dt, so the
-state stays consistent with the corrected motion.
+state stays consistent with the corrected motion. ``Scene.limit_strain`` and the limited
+springs of the model (``model.strain_limit``) are ``features.strain_limit``'s.
 """
 import numpy as np
 import taichi as ti
 
 from . import runtime
-from .errors import SceneError
 from .integrators.linalg import copy
 from .runtime import serial
-from .scene import KIND_CODE, SPRING_KINDS
-from .terms.base import Feature
-from .validate import as_int, as_scalar, fmt
-
-
-class StrainLimitFeature(Feature):
-    """``Scene.limit_strain``; the model's ``limit_index`` (model rows of the limited
-    springs) and ``limit_count``."""
-    name, method = "strain_limit", "limit_strain"
-
-    def set(self, scene, max_stretch=0.1, iterations=20, kinds=("structural", "shear"),
-            springs=None):
-        """Provot (1995) strain limiting, applied after every step.
-
-        Limited springs longer than (1 + max_stretch) rest length are shortened by moving
-        their ends (inverse-mass weighted: a pinned end stays put), ``iterations`` Jacobi
-        passes in parallel; velocities get the same correction divided by dt.
-
-        Args:
-            max_stretch: > 0 (0.1 = 10 %). iterations: passes per step, >= 1.
-            kinds: the spring kinds limited (default structural and shear).
-            springs: None, or spring ids to limit instead of whole kinds.
-        """
-        if springs is None:
-            if isinstance(kinds, str) or not kinds or any(k not in KIND_CODE for k in kinds):
-                raise SceneError(f"kinds must be a non-empty tuple of {SPRING_KINDS} "
-                                 f"(got {kinds!r})")
-            ids = np.flatnonzero(np.isin(scene.springs["kind"], [KIND_CODE[k] for k in kinds]))
-        else:
-            ids = np.asarray(springs)
-            if ids.ndim != 1 or ids.dtype.kind not in "iu" or len(ids) == 0 or \
-                    ids.min() < 0 or ids.max() >= scene.num_springs:
-                raise SceneError(f"springs must be a 1-D array of spring ids in "
-                                 f"[0, {scene.num_springs}) (got {fmt(springs)})")
-        return {"max_stretch": as_scalar("max_stretch", max_stretch, 0.0, strict=True),
-                "iterations": as_int("iterations", iterations, 1),
-                "springs": np.unique(ids)}
-
-    def build(self, model, limit):
-        position = np.empty(len(model.spring_order), dtype=np.int64)
-        position[model.spring_order] = np.arange(len(model.spring_order))  # scene id -> row
-        idx = position[limit["springs"]].astype(np.int32)
-        model.limit_count = len(idx)
-        model.limit_index = ti.field(ti.i32, shape=max(len(idx), 1))
-        if len(idx):
-            model.limit_index.from_numpy(idx)
-        return limit
-
-
-STRAIN_LIMIT = StrainLimitFeature()
 
 
 @ti.kernel
@@ -88,11 +38,12 @@ class StrainLimiter:
         self.hits = ti.field(ti.i32, shape=n)
         self.x_before = ti.Vector.field(3, real, shape=n)
         self.inv_mass, self.pairs, self.rest = model.inv_mass, model.spring_pairs, model.spring_rest
-        self.index, self.count = model.limit_index, model.limit_count
+        limit = model.strain_limit
+        self.index, self.count = limit.index, limit.count
         # the longest length over the rest length, rounded as the working precision adds
         real_np = np.dtype(runtime.numpy_real()).type
-        self.stretch_factor = float(real_np(1.0) + real_np(model.strain_limit["max_stretch"]))
-        self.iterations = model.strain_limit["iterations"]
+        self.stretch_factor = float(real_np(1.0) + real_np(limit.max_stretch))
+        self.iterations = limit.iterations
 
     def batch_obstacle(self):
         if not serial(self.index):

@@ -58,17 +58,18 @@ class Forces:
     """
 
     def __init__(self, model, select=None):
-        self.terms = term_modules.build(model, select)
-        self.springs = springs = term_modules.find(self.terms, term_modules.Springs)
-        self.first = first = self.terms[0] if self.terms and isinstance(
-            self.terms[0], term_modules.GravityDrag) else None
-        order = list(self.terms)
+        terms = term_modules.build(model, select)
+        springs = term_modules.find(terms, term_modules.Springs)
+        self.first = first = terms[0] if terms and isinstance(
+            terms[0], term_modules.GravityDrag) else None
+        order = list(terms)
+        if springs is not None and first is not None and springs.sets_forces:
+            # the first grid's gather sets f = gravity and drag + springs: one pass fewer
+            terms[terms.index(springs)] = springs = term_modules.Springs(model, lead=first)
+            order = [t for t in terms if t is not first]
+        self.terms, self.springs = terms, springs
         if springs is not None:
             springs.grid_forces()
-            if first is not None and springs.sets_forces:
-                # the first grid's gather sets f = gravity and drag + springs: one pass fewer
-                springs.first = first
-                order.remove(first)
         self.runs = []
         init = "first" if first is not None else "zero"     # GravityDrag leads TERMS
         run = []

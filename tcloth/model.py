@@ -61,13 +61,22 @@ class Model:
             numbers as fields (``grid.GridTable``).
         spring_order: (spring_count,) the scene spring id of each model row.
         colliders: ``collider_table.ColliderTable``.
-        one attribute per scene feature (``features.FEATURES``), named as the feature: what
-            its ``build`` made of the scene's value, or None. wind: the scene's wind dict
-            (None without cloth triangles), with ``triangles`` (shape (triangle_count,) of
-            3 x i32) and ``wind_params`` (11,); attraction: (G, softening); pressure: see
-            ``terms.pressure``; strain_limit: its dict, with ``limit_index`` (limit_count,),
-            the model rows of the limited springs; self_collision:
-            ``contact.topology.SelfCollisionTable``.
+        one attribute per scene feature (``features.FEATURES``), named as the feature: the
+            object its ``build`` made of the scene's value (its class documents each
+            field), or None where the scene does not set it. The Model has no other
+            attribute of a feature's. They are:
+            bending: ``features.bending.BendingData``: count, hinges, weights, start,
+                entries, diagonal;
+            membrane: ``features.membrane.MembraneData``: count, triangles, weights,
+                coefficients, start, entries;
+            wind: ``features.wind.WindData`` (None without cloth triangles): settings (the
+                scene's wind dict), triangles, params;
+            attraction: ``features.attraction.AttractionData``: G, softening;
+            pressure: ``features.pressure.PressureData``: triangles, chamber, gas, start,
+                entries;
+            self_collision: ``contact.topology.SelfCollisionTable``;
+            strain_limit: ``features.strain_limit.StrainLimitData``: count, index,
+                max_stretch, iterations.
         contact: ``contact.stage.ContactStage`` (self-collision's candidates and the guard
             of every step) or None in a scene with neither self-collision nor colliders.
         grab: the grab spring (``terms.grab.GrabSpring``, the mouse spring of the viewer)
@@ -151,8 +160,9 @@ class Model:
             self.grids = [self._grid_block(c) for c in grid_cloths]
             self.grid_table.upload(self.grids)
         for feature in FEATURES:
-            if feature.live and getattr(self, feature.name) is not None:
-                setattr(self, feature.name, feature.refresh(self, getattr(scene, feature.name)))
+            data = getattr(self, feature.name)
+            if feature.live and data is not None:
+                feature.refresh(data, getattr(scene, feature.name))
         self.colliders.upload(scene.colliders, colliders_off)
 
     def single_grid(self):

@@ -13,6 +13,7 @@ gives the same image, bit for bit, every run.
 Shadows come from a shadow map: the same splatting seen from the light (orthographic).
 """
 import math
+import weakref
 
 import numpy as np
 import taichi as ti
@@ -412,6 +413,10 @@ class Renderer:
             self.image[r, c] = ti.cast(v * 255.0 + 0.5, ti.u8)
 
 
+# each simulator's last Renderer and the arguments it was made for (``renderer_for``)
+_RENDERERS = weakref.WeakKeyDictionary()
+
+
 def render(sim, width=640, height=480, camera=None, supersample=2, **options):
     """(H,W,3) uint8 image of ``sim``'s current state; no display needed.
 
@@ -426,7 +431,8 @@ def renderer_for(sim, width=640, height=480, camera=None, supersample=2, **optio
     (a new Renderer compiles its kernels again)."""
     key = (width, height, repr(camera), supersample, repr(sorted(options.items())),
            runtime.generation())
-    cached = getattr(sim, "_renderer", None)
+    cached = _RENDERERS.get(sim)
     if cached is None or cached[0] != key:
-        sim._renderer = (key, Renderer(sim, width, height, camera, supersample, **options))
-    return sim._renderer[1]
+        cached = _RENDERERS[sim] = (key, Renderer(sim, width, height, camera, supersample,
+                                                  **options))
+    return cached[1]

@@ -128,6 +128,11 @@ def precision():
     return _Runtime.precision
 
 
+def serial_below():
+    """Loops over fewer items than this run on one CPU thread (``init(serial_below=...)``)."""
+    return _Runtime.serial_below
+
+
 def numpy_real():
     return "float64" if _Runtime.precision == "f64" else "float32"
 

@@ -23,7 +23,7 @@ class Scene:
     shape (``add_sphere``, ``add_plane``, ... from ``shapes.SHAPES``); the optional features
     (``set_wind``, ``add_attraction``, ``set_pressure``, ``limit_strain``,
     ``set_self_collision``) are methods given by ``tcloth.features``, each defined in the
-    module of what it sets up.
+    feature's module there.
 
     Args:
         gravity: (3,) acceleration, m/s^2.

@@ -6,13 +6,13 @@ from .budget import EnergyBudget
 from .constraints import StrainLimiter
 from .diagnostics import Diagnostics
 from .errors import SceneError
+from .features.wind import wind_velocity
 from .instability import StepCheck
 from .integrators import INTEGRATORS
 from .model import Model
 from .runtime import serial_count
 from .scene import Scene
 from .terms.grab import GrabSpring
-from .terms.wind import wind_velocity
 from .validate import as_int, as_points, as_scalar, as_vec3
 
 def _integrator_class(name):
@@ -107,7 +107,7 @@ class Simulator:
         self._generation = self.model.generation
         self._states = [self.model.state(), self.model.state()]
         limit = self.model.strain_limit
-        self._limiter = (StrainLimiter(self.model) if limit is not None and self.model.limit_count
+        self._limiter = (StrainLimiter(self.model) if limit is not None and limit.count
                          else None)
         self.diagnostics = Diagnostics(self.model)
         self.budget = EnergyBudget(self.model, bool(energy_bound))
@@ -181,14 +181,13 @@ class Simulator:
         if not runtime.cpu():
             return (f"on {runtime.arch_name()} the loops of a step run in parallel, which a "
                     "batch's one thread would not")
-        if not hasattr(self.integrator, "advance"):
+        if not self.integrator.batched:
             return (f"integrator '{self.integrator_name}' steps from Python (its solver "
                     "decides between launches)")
         n = self.model.particle_count
         if not serial_count(n):
             return f"the {n} particles' loops run on several threads"
-        own = getattr(self.integrator, "batch_obstacle", None)
-        why = own() if own is not None else self.integrator.forces.batch_obstacle()
+        why = self.integrator.batch_obstacle()
         if why is None and self._limiter is not None and self.settings["strain_limiting"]:
             why = self._limiter.batch_obstacle()
         return why
@@ -264,8 +263,8 @@ class Simulator:
     def _see_gust(self, t):
         """A callable gust's speed at t into the energy budget (its fastest so far)."""
         wind = self.model.wind
-        if wind is not None and wind["callable"] is not None:
-            if self.budget.see_wind(float(np.linalg.norm(wind_velocity(wind, t)))):
+        if wind is not None and wind.settings["callable"] is not None:
+            if self.budget.see_wind(float(np.linalg.norm(wind_velocity(wind.settings, t)))):
                 self._rebase()
 
     def _rebase(self):
@@ -331,6 +330,15 @@ class Simulator:
         self._check()
         self.integrator = _integrator_class(integrator)(self.model, **options)
         self.integrator_name = integrator
+        self._batch_kernels.clear()
+        self._fusion = None
+
+    def set_integrator_options(self, **changes):
+        """Change the integrator's live options (``Integrator.set_options``: e.g. VBD's,
+        XPBD's and projective's iterations) from the next step on, keeping its compiled
+        kernels; the batches, which compile options in, compile again."""
+        self._check()
+        self.integrator.set_options(**changes)
         self._batch_kernels.clear()
         self._fusion = None
 
@@ -439,33 +447,7 @@ class Simulator:
         """A Simulator continuing exactly where the saved one stopped (bit for bit on the
         CPU where the kernels are deterministic: grid stencils and scenes below
         SERIAL_BELOW particles). The current precision must match the checkpoint's."""
-        meta, scene_arrays, files = checkpoint.read(path)
-        runtime.ensure_init()
-        if meta["precision"] != runtime.precision():
-            raise SceneError(f"checkpoint {path!r} was saved in precision "
-                             f"{meta['precision']!r}; call tcloth.init(precision="
-                             f"{meta['precision']!r}) before loading it")
-        scene = checkpoint.scene_from_arrays(meta["scene"], scene_arrays)
-        sim = cls(scene, meta["integrator"], dt=meta["dt"], **meta["settings"],
-                  **meta["options"])
-        npr = runtime.numpy_real()
-        state = sim.state
-        state.x.from_numpy(files["state_x"].astype(npr))
-        state.v.from_numpy(files["state_v"].astype(npr))
-        state.f.from_numpy(files["state_f"].astype(npr))
-        if meta["forces_valid"]:
-            sim.integrator.adopt_forces(state)
-        if sim._contact is not None:
-            sim._contact.refresh(state.x)
-        sim.num_steps = int(meta["num_steps"])
-        sim._time_base = float(meta.get("time_base", 0.0))
-        sim._step_base = int(meta.get("step_base", 0))
-        state.t = sim.time
-        if meta.get("grabbed"):
-            held = meta["grabbed"]
-            sim.grab(held["particle"], held["target"], held["stiffness"], held["damping"])
-        sim._rebase()
-        return sim
+        return checkpoint.load(cls, path)
 
     def energy(self):
         """dict of energies, J: kinetic, spring, gravity, contact, total."""

@@ -101,11 +101,26 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(pytest.mark.slow)
 
 
-@pytest.fixture(scope="module")
+def use_runtime(precision):
+    """Taichi on the CPU in PRECISION with the default loop settings, initialised again only
+    where this worker runs otherwise now (a test may call tcloth.init itself): tests in a
+    row share their compiled kernels and the simulators their modules keep."""
+    rt = tcloth.runtime
+    if (rt.generation() == 0 or rt.precision() != precision or not rt.cpu()
+            or rt.serial_below() != rt.SERIAL_BELOW):
+        tcloth.init(arch="cpu", precision=precision, serial_below=rt.SERIAL_BELOW)
+
+
+@pytest.fixture
 def f64():
-    """Taichi on the CPU in float64, for accuracy tests."""
-    tcloth.init(arch="cpu", precision="f64")
-    yield
+    """float64, for accuracy tests."""
+    use_runtime("f64")
+
+
+@pytest.fixture
+def f32():
+    """float32, the default, where a changed rounding would show soonest."""
+    use_runtime("f32")
 
 
 def scene_module(name):

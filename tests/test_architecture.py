@@ -1,7 +1,9 @@
 """What docs/architecture.md promises about the code's shape: the imports of tcloth's
-modules form no cycle (read from the source, function-level imports included), the model
-imports no term, the scene no Taichi module of the physics, and no file is over 500
-lines."""
+modules form no cycle (read from the source, function-level imports included), nothing the
+model reaches (directly or through the modules it imports) is a term or an integrator,
+nothing the scene reaches is those or the model, and no file is over 500 lines; and that
+every term's feature is registered and the model keeps each feature's data on its own
+object."""
 import ast
 import os
 
@@ -86,13 +88,57 @@ def test_imports_form_no_cycle():
 
 def test_model_and_scene_stay_upstream():
     graph = import_graph()
-    assert not {m for m in graph["tcloth.model"] if m.startswith("tcloth.terms")}
+    below_model = reaches(graph, "tcloth.model")
+    assert not sorted(m for m in below_model if m.startswith(("tcloth.terms",
+                                                               "tcloth.integrators")))
     below_scene = reaches(graph, "tcloth.scene")
-    assert not {m for m in below_scene if m.startswith(("tcloth.terms", "tcloth.model",
-                                                        "tcloth.integrators"))}
+    assert not sorted(m for m in below_scene if m.startswith(("tcloth.terms", "tcloth.model",
+                                                               "tcloth.integrators")))
+    # transitive: a module reached through another counts
+    assert reaches({"a": {"b"}, "b": {"c"}, "c": set()}, "a") == {"b", "c"}
 
 
 def test_no_file_is_over_500_lines():
     long = {path: n for path in modules().values()
             if (n := sum(1 for _ in open(path))) > 500}
     assert not long, long
+
+
+def test_every_term_feature_is_registered():
+    """``features.FEATURES`` holds each term's feature (the same object), in the terms'
+    order, then the strain limit: the model builds, refreshes and saves a feature only
+    through that list."""
+    from tcloth.features import FEATURES
+    from tcloth.terms import TERMS
+    of_terms = [t.feature for t in TERMS if t.feature is not None]
+    assert list(FEATURES[:len(of_terms)]) == of_terms
+    assert [f.name for f in FEATURES[len(of_terms):]] == ["strain_limit"]
+
+
+def test_the_model_keeps_each_feature_on_its_own_object(f32):
+    """Every feature's build is one object, ``model.<feature name>``, of the class the
+    Model's docstring names; the model has no loose ``<feature>_*`` attributes."""
+    import tcloth
+    from tcloth.features import FEATURES
+    from tcloth.model import Model
+    scene = tcloth.Scene()
+    scene.add_cloth(resolution=(4, 4), size=(0.3, 0.3), structural=(100.0, 0.0),
+                    shear=(10.0, 0.0), flexion=None)
+    tetrahedron = [[0.0, 2.0, 0.0], [0.1, 2.0, 0.0], [0.0, 2.1, 0.0], [0.0, 2.0, 0.1]]
+    scene.add_mesh_cloth(tetrahedron, [[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
+                         structural=(100.0, 0.0), flexion=None)
+    scene.set_bending(1e-4, cloths=[0])
+    scene.set_membrane(stretch=50.0, shear=5.0, cloths=[0])
+    scene.set_wind(velocity=(1.0, 0.0, 0.0))
+    scene.add_attraction(1e-3, softening=0.1)
+    scene.set_pressure(100.0, cloths=[1])
+    scene.set_self_collision()
+    scene.limit_strain()
+    model = Model(scene)
+    for feature in FEATURES:
+        data = getattr(model, feature.name)
+        assert not isinstance(data, (type(None), dict, tuple)), feature.name
+        assert f"``features.{feature.name}.{type(data).__name__}``" in Model.__doc__ or \
+            f"``contact.topology.{type(data).__name__}``" in Model.__doc__, feature.name
+    prefixes = tuple(f"{f.name}_" for f in FEATURES) + ("limit_", "triangle")
+    assert not [name for name in vars(model) if name.startswith(prefixes)]

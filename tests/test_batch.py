@@ -10,13 +10,6 @@ import tcloth
 from tcloth.errors import InstabilityError
 
 
-@pytest.fixture(scope="module")
-def f32():
-    """float32, the default, where a changed rounding would show soonest."""
-    tcloth.init(arch="cpu", precision="f32")
-    yield
-
-
 def every_term_scene(colliders=True):
     scene = tcloth.Scene(gravity=(0.0, -9.81, 0.0), air_drag=0.01)
     cloth = scene.add_cloth(resolution=(8, 8), size=(1.0, 1.0), center=(0.0, 1.0, 0.0),

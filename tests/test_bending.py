@@ -17,9 +17,7 @@ cantilever = importlib.util.module_from_spec(_spec)
 _spec.loader.exec_module(cantilever)
 
 
-@pytest.fixture(autouse=True)
-def f64():
-    tcloth.init(arch="cpu", precision="f64")
+pytestmark = pytest.mark.usefixtures("f64")
 
 
 def _grid(nx, ny, dx, dy):

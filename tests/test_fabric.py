@@ -24,9 +24,7 @@ cantilever = _tool("cantilever")
 elastica = _tool("elastica")
 
 
-@pytest.fixture(autouse=True)
-def f64():
-    tcloth.init(arch="cpu", precision="f64")
+pytestmark = pytest.mark.usefixtures("f64")
 
 
 def test_fabric_checks_its_parameters():

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 import tcloth
+from conftest import use_runtime
 
 INTEGRATORS = ["forward_euler", "symplectic_euler", "verlet", "rk4", "backward_euler",
                "projective", "vbd", "xpbd"]
@@ -79,7 +80,7 @@ def run(scene, integrator, dt, steps, quantity):
 @pytest.fixture(scope="module")
 def references():
     """name -> (reference, its change from the start), NumPy."""
-    tcloth.init(arch="cpu", precision="f64")
+    use_runtime("f64")
     out = {}
     for name, (make, quantity) in CASES.items():
         scene = make()
@@ -94,8 +95,7 @@ def references():
 
 
 @pytest.mark.parametrize("integrator", INTEGRATORS)
-def test_every_field_force_acts_under_every_integrator(references, integrator):
-    tcloth.init(arch="cpu", precision="f64")
+def test_every_field_force_acts_under_every_integrator(f64, references, integrator):
     for name, (make, quantity) in CASES.items():
         got = run(make(), integrator, DT, STEPS, quantity)
         reference, change = references[name]
@@ -103,10 +103,9 @@ def test_every_field_force_acts_under_every_integrator(references, integrator):
         assert error < 0.1 * np.abs(change).max(), (name, got, reference)
 
 
-def test_backward_euler_takes_a_callable_gust():
+def test_backward_euler_takes_a_callable_gust(f64):
     """The gust callable's wind reaches backward Euler, not only the constant velocity: a
     gust-only wind lifts the cloth as it lifts it under symplectic Euler."""
-    tcloth.init(arch="cpu", precision="f64")
     lifts = {}
     for integrator in ("symplectic_euler", "backward_euler"):
         sim = tcloth.Simulator(wind_scene(gust=lambda t: (0.0, 5.0, 0.0)), integrator, dt=DT)

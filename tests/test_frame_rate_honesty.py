@@ -12,12 +12,6 @@ INTEGRATORS = ["forward_euler", "symplectic_euler", "verlet", "rk4", "backward_e
                "projective", "vbd", "xpbd"]
 
 
-@pytest.fixture(scope="module")
-def f64():
-    tcloth.init(arch="cpu", precision="f64")
-    yield
-
-
 def spring_energy(scene, x):
     springs = scene.springs
     d = np.linalg.norm(x[springs["pairs"][:, 0]] - x[springs["pairs"][:, 1]], axis=1)

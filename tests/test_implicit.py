@@ -263,7 +263,7 @@ def test_projective_converges_to_the_backward_euler_step(f64):
     pd = tcloth.Simulator(scene(), "projective", dt=1 / 60)
     runs = {}
     for iterations in (10, 100, 1000):          # one simulator (one compile), re-run
-        pd.integrator.options["iterations"] = iterations
+        pd.set_integrator_options(iterations=iterations)
         pd.set_state(positions=x0, velocities=v0)
         pd.step()
         runs[iterations] = (pd.positions(), pd.integrator.stats["residual"])

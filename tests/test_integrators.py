@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 import tcloth
-from conftest import random_network
+from conftest import random_network, use_runtime
 
 EXPLICIT = ["forward_euler", "symplectic_euler", "verlet", "rk4"]
 
@@ -121,8 +121,9 @@ T_END = 0.4
 
 
 @pytest.fixture(scope="module")
-def converged(f64):
+def converged():
     """An undamped nonlinear network and its end state by RK4 at a tiny dt (reference)."""
+    use_runtime("f64")
     scene = random_network(n=5, seed=11, k=(20.0, 60.0))
     ref = tcloth.Simulator(scene, "rk4", dt=T_END / 3200)
     ref.step(3200)
@@ -131,7 +132,7 @@ def converged(f64):
 
 @pytest.mark.parametrize("integrator,order", [("forward_euler", 1), ("symplectic_euler", 1),
                                               ("verlet", 2), ("rk4", 4)])
-def test_convergence_order(converged, integrator, order):
+def test_convergence_order(f64, converged, integrator, order):
     scene, x_ref = converged
     t_end = T_END
     errors = []

@@ -59,8 +59,7 @@ def test_missing_and_faceless_obj_files(tmp_path):
         tcloth.load_obj(write(tmp_path, "v 0 0 0\n"))
 
 
-def test_export_then_load_round_trips_the_deformed_cloth(tmp_path):
-    tcloth.init()
+def test_export_then_load_round_trips_the_deformed_cloth(f32, tmp_path):
     scene = tcloth.Scene()
     scene.add_cloth(resolution=(6, 5), pinned=[(0, 0)])
     sim = tcloth.Simulator(scene, dt=1e-3)
@@ -202,8 +201,7 @@ def test_free_mesh_cloth_conserves_linear_momentum(f64):
     np.testing.assert_allclose(sim.momentum()[0], p0, atol=1e-12)
 
 
-def test_mesh_cloth_checkpoint_render_and_self_collision(tmp_path):
-    tcloth.init()
+def test_mesh_cloth_checkpoint_render_and_self_collision(f32, tmp_path):
     x, faces = disc()
     scene = tcloth.Scene()
     scene.add_mesh_cloth(x + [0, 0.3, 0], faces, mass=0.2, structural=(300.0, 0.1),
@@ -222,11 +220,10 @@ def test_mesh_cloth_checkpoint_render_and_self_collision(tmp_path):
 @pytest.mark.parametrize("integrator,dt", [
     ("forward_euler", 5e-5), ("symplectic_euler", 2e-4), ("verlet", 2e-4), ("rk4", 5e-4),
     ("backward_euler", 1 / 120), ("projective", 1 / 120)])
-def test_every_integrator_drapes_a_mesh_cloth_over_a_cylinder(integrator, dt):
+def test_every_integrator_drapes_a_mesh_cloth_over_a_cylinder(f32, integrator, dt):
     """A small irregular disc with wind and strain limiting dropped on a cylinder: every
     integrator runs it through the general (spring list) paths, and it ends resting on
     the top (within the contact thickness) and hanging over the rim."""
-    tcloth.init()
     x, faces = disc(rings=4, radius=0.3)
     scene = tcloth.Scene(air_drag=0.01)
     scene.add_mesh_cloth(x + [0, 0.45, 0], faces, mass=0.1, structural=(200.0, 0.2),

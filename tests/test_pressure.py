@@ -328,7 +328,7 @@ def test_vbd_and_projective_converge_to_the_backward_euler_step(f64, inflated):
         sim = tcloth.Simulator(scene, integrator, dt=1 / 60, batch=False)
         gaps = []
         for n in (10, 40, 160):
-            sim.integrator.options["iterations"] = n
+            sim.set_integrator_options(iterations=n)
             sim.set_state(positions=x, velocities=v)
             sim.step(1)
             gaps.append(np.abs(sim.positions() - goal).max())

@@ -17,11 +17,6 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RED, GREEN, BLUE = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)
 
 
-@pytest.fixture(scope="module")
-def f32():
-    tcloth.init(arch="cpu")
-
-
 def project(camera, points, width, height):
     """Independent pinhole projection to pixel (col, row)."""
     d = points - camera.eye

@@ -26,9 +26,11 @@ LOADED = ("curtain", "flag", "hanging_cloth", "rope", "sphere_through_cloth",
           "strain_limiting", "tablecloth")
 
 
+pytestmark = pytest.mark.usefixtures("f64")
+
+
 @pytest.fixture(scope="module")
 def stored():
-    tcloth.init(arch="cpu", precision="f64")
     return np.load(os.path.join(HERE, "data", "scene_positions.npz"))
 
 

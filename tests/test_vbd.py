@@ -8,7 +8,7 @@ import pytest
 
 import tcloth
 from conftest import hanging_chain
-from tcloth.integrators.vbd import colour_graph
+from tcloth.graph import colour_graph
 from tcloth.contact.topology import contact_topology
 
 
@@ -45,7 +45,7 @@ def test_vbd_converges_to_the_backward_euler_step(f64):
                                batch=False)        # the iterations change between steps
         gaps = []
         for iterations in counts:
-            vbd.integrator.options["iterations"] = iterations
+            vbd.set_integrator_options(iterations=iterations)
             vbd.set_state(positions=x0, velocities=v0)
             vbd.step()
             gaps.append(np.abs(vbd.positions() - target).max())
@@ -172,7 +172,7 @@ def test_vbd_keeps_the_momentum_of_a_free_cloth_as_it_converges(f64):
     drift = []
     sim = tcloth.Simulator(scene, "vbd", dt=1 / 60, rho=0.95, batch=False)
     for iterations in (10, 100, 1000):
-        sim.integrator.options["iterations"] = iterations
+        sim.set_integrator_options(iterations=iterations)
         sim.set_state(velocities=v)
         sim.step()
         drift.append(np.abs((m * sim.velocities()).sum(0) - p0).max() / scale)

@@ -7,7 +7,7 @@ import pytest
 
 import tcloth
 from conftest import hanging_chain
-from tcloth.integrators.xpbd import colour_springs
+from tcloth.graph import colour_springs
 
 
 def cloth(k, kd=0.0, n=8, pinned=None, gravity=(0.0, -9.81, 0.0)):
@@ -40,7 +40,7 @@ def test_xpbd_converges_near_the_backward_euler_step(f64):
     xpbd = tcloth.Simulator(scene(), "xpbd", dt=1 / 60, batch=False)
     gaps = []
     for iterations in (1, 10, 100, 1000):
-        xpbd.integrator.options["iterations"] = iterations
+        xpbd.set_integrator_options(iterations=iterations)
         xpbd.set_state(positions=x0, velocities=v0)
         xpbd.step()
         gaps.append(np.abs(xpbd.positions() - be.positions()).max())

@@ -1,6 +1,7 @@
 """Integrator base class: option parsing and the force workspace; the real-time solvers'
 substep count."""
 import math
+from types import MappingProxyType
 
 from .. import stability
 from ..errors import SceneError
@@ -36,8 +37,11 @@ class Integrator:
     cache of forces where it says so (``Verlet``).
 
     Subclasses list their options in ``defaults`` (name -> default); an unknown option
-    raises SceneError naming it. Every integrator has ``forces`` (its ``Forces``) and
-    ``inv_mass`` (the model's field, read by its kernels).
+    raises SceneError naming it. ``options`` is read-only: ``set_options`` changes the
+    ``live_options`` (those read from Python at every step, or re-derived by ``_configure``)
+    in place and refuses the others, which shape what the integrator built (a new
+    integrator takes them: ``Simulator.set_integrator``). Every integrator has ``forces``
+    (its ``Forces``) and ``inv_mass`` (the model's field, read by its kernels).
     """
     name = "integrator"
     defaults = {}
@@ -45,15 +49,53 @@ class Integrator:
     # whole (the energy stored in springs included) from Python: for integrators whose
     # step costs many force passes, where a launch is cheap beside it
     checked_steps = False
+    # True: the integrator gives ``advance(a, b, t, dt, fresh)``, its step as a ``ti.func``
+    # that a batch of substeps (``batch.py``) runs in one launch where ``batch_obstacle()``
+    # is None
+    batched = False
+    live_options = frozenset()
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        if cls.batched != callable(getattr(cls, "advance", None)):
+            raise TypeError(f"{cls.__name__}: batched = {cls.batched} but it "
+                            f"{'lacks' if cls.batched else 'defines'} advance")
 
     def __init__(self, model, **options):
         unknown = sorted(set(options) - set(self.defaults))
         if unknown:
             raise SceneError(f"unknown option {unknown[0]!r} for integrator {self.name!r} "
                              f"(its options: {sorted(self.defaults) or 'none'})")
-        self.options = {**self.defaults, **options}
+        self._options = {**self.defaults, **options}
+        self.options = MappingProxyType(self._options)
         self.forces = Forces(model)
         self.inv_mass = model.inv_mass
+
+    def set_options(self, **changes):
+        """Change live options (``live_options``) from the next step on; an option that
+        shapes what the integrator built raises SceneError saying how to change it. A
+        simulator's ``set_integrator_options`` calls this and recompiles its batches (which
+        compile options in)."""
+        unknown = sorted(set(changes) - set(self.defaults))
+        if unknown:
+            raise SceneError(f"unknown option {unknown[0]!r} for integrator {self.name!r} "
+                             f"(its options: {sorted(self.defaults) or 'none'})")
+        fixed = sorted(set(changes) - self.live_options)
+        if fixed:
+            raise SceneError(f"{self.name}'s option {fixed[0]!r} shapes what the integrator "
+                             f"built: give it to Simulator.set_integrator({self.name!r}, "
+                             f"{fixed[0]}=...) (live options: {sorted(self.live_options)})")
+        before = dict(self._options)
+        self._options.update(changes)
+        try:
+            self._configure()
+        except SceneError:
+            self._options.update(before)
+            raise
+
+    def _configure(self):
+        """Check the options and derive what depends on the live ones (at construction
+        and after ``set_options``)."""
 
     def forces_at(self, state):
         """Make ``state.f`` hold the forces at (state.x, state.v) and time state.t."""
@@ -74,6 +116,10 @@ class Integrator:
 
     def adopt_forces(self, state):
         """``state.f`` holds the forces a saved simulator had cached (checkpoints)."""
+
+    def batch_obstacle(self):
+        """None when ``advance`` may run in a batch of substeps, else why not (one line)."""
+        return self.forces.batch_obstacle()
 
     def simulate(self, model, state_in, state_out, dt):
         raise NotImplementedError

@@ -35,6 +35,7 @@ def _phase(integrator: ti.template(), phase: ti.template(), a: ti.template(),
 class _OneEvaluation(Integrator):
     """A step that evaluates the forces at its start and then updates every particle
     (``update(a, b, dt)``)."""
+    batched = True
 
     def simulate(self, model, state_in, state_out, dt):
         self.forces_at(state_in)
@@ -49,7 +50,8 @@ class _OneEvaluation(Integrator):
 
 @ti.data_oriented
 class ForwardEuler(_OneEvaluation):
-    """Forward Euler exactly as in lecture 4. First order; unstable for k_d = 0 at any dt."""
+    """Forward Euler: x' = x + dt v, v' = v + dt f(x, v) / m, both from the state at the
+    start of the step. First order; unstable for k_d = 0 at any dt."""
     name = "forward_euler"
 
     @ti.func
@@ -88,6 +90,7 @@ class Verlet(ForceCache, Integrator):
     of a step are kept in ``state_out.f`` and reused by the next step, unless the state was
     changed in between (``invalidate``)."""
     name = "verlet"
+    batched = True
 
     def forces_at(self, state):
         if self._cached is not state:
@@ -155,6 +158,7 @@ def _rk4_stage(integrator: ti.template(), a: ti.template(), xs: ti.template(),
 class RK4(Integrator):
     """Classical fourth-order Runge-Kutta on (x, v); four force evaluations per step."""
     name = "rk4"
+    batched = True
 
     def __init__(self, model, **options):
         super().__init__(model, **options)

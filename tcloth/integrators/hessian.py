@@ -31,9 +31,6 @@ class BlockHessian:
     def __init__(self, model, potential, exact):
         n, real = model.particle_count, runtime.real()
         self.potential, self.exact = potential, exact
-        for term in potential.pair_terms:     # the membrane's products, as the springs'
-            if hasattr(term, "exact"):
-                term.exact = exact
         self.springs = potential.springs
         self.has_springs = self.springs is not None
         self.adj_start, self.adj = (self.springs or Springs(model)).adjacency()

@@ -82,6 +82,7 @@ class BackwardEuler(Integrator):
     defaults = {"newton_iterations": 20, "newton_tol": 1e-4, "cg_tol": 1e-2,
                 "cg_max_iterations": 500, "line_search": True, "linear_solver": "auto",
                 "exact_hessian": None}
+    live_options = frozenset({"newton_iterations", "newton_tol", "cg_tol", "cg_max_iterations"})
 
     def __init__(self, model, **options):
         super().__init__(model, **options)
@@ -100,7 +101,7 @@ class BackwardEuler(Integrator):
                                  "couplings: use 'cg' (or 'auto')")
             solver = "cg"
         self.grid = single_grid(model, solver)
-        self.potential = IncrementalPotential(model)
+        self.potential = IncrementalPotential(model, exact=self.exact)
         self.hessian = hessian.make(model, self.potential, self.exact, self.grid)
         self.x_try = ti.Vector.field(3, model.mass.dtype, shape=model.particle_count)
         self.stats = {}

@@ -27,15 +27,16 @@ class IncrementalPotential:
         grad: the gradient of the last evaluation with ``with_grad``, (n,) vec3.
         particle_terms: the per-particle potential terms (gravity and drag, colliders).
         springs: the Springs term or None.
-        pair_terms: the other potential terms (bending, membrane, self-contact): each gives
-            ``add_incremental`` like the springs, its Hessian's diagonal blocks
-            (``prepare_blocks``, then the ti.func ``diagonal_block(p)``) and its couplings'
-            product (``add_product``, for CG).
+        pair_terms: the other potential terms (bending, membrane, pressure, self-contact),
+            which provide "couplings" (``terms/base.py``).
+
+    ``term_options`` go to the terms that declare them (``terms.build``).
     """
 
-    def __init__(self, model):
+    def __init__(self, model, **term_options):
         n, real = model.particle_count, runtime.real()
-        terms = term_modules.build(model, lambda cls: cls.implicit == "potential")
+        terms = term_modules.build(model, lambda cls: cls.implicit == "potential",
+                                   **term_options)
         self.particle_terms = tuple(t for t in terms if t.per_particle)
         self.springs = term_modules.find(terms, term_modules.Springs)
         self.pair_terms = tuple(t for t in terms if not t.per_particle and t is not self.springs)

@@ -77,6 +77,7 @@ class Projective(Integrator):
     name = "projective"
     defaults = {"iterations": 10, "linear_solver": "auto", "cg_tol": 1e-3,
                 "cg_max_iterations": 200}
+    live_options = frozenset({"iterations", "cg_tol", "cg_max_iterations"})
 
     def __init__(self, model, **options):
         super().__init__(model, **options)
@@ -116,9 +117,9 @@ class Projective(Integrator):
             # terms with a constant matrix (bending's Hessian, the membrane's bound)
             # enter A whole: their diagonal here, their couplings in CG's products
             self.constant = tuple(t.constant_matrix() for t in self.residual_forces.terms
-                                  if hasattr(t, "constant_matrix"))
+                                  if t.has("constant_matrix"))
             # the pressure's stand-in changes with the step's start (``varies``: ``update``)
-            self.stepped = tuple(m for m in self.constant if getattr(m, "varies", False))
+            self.stepped = tuple(m for m in self.constant if m.varies)
             if self.grid is not None:
                 self.solver = MultigridPCG(self.mg, n, self.diag, self.weight,
                                            self.adj_start, self.adj, model.inv_mass,

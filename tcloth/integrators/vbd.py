@@ -45,9 +45,9 @@ import taichi as ti
 
 from ..contact.bounds import DisplacementBounds
 from ..errors import SceneError
+from ..graph import colour_graph, colour_order, csr_layout
 from ..runtime import serial
 from ..terms import springs as spring_term
-from ..terms.colliders import Colliders
 from ..terms.springs import Springs
 from .base import ForceCache, Integrator, check_substeps, substep_count
 from .linalg import copy, copy_into
@@ -55,19 +55,6 @@ from .potential import IncrementalPotential
 
 GUESSES = ("start", "inertia", "gravity", "adaptive")
 GRAVITY_GUESS = GUESSES.index("gravity")
-
-
-def colour_graph(start, neighbours, n):
-    """Greedy colouring of a graph given as CSR adjacency (neighbours[start[i]:start[i+1]]
-    of vertex i): each vertex in index order takes the smallest colour none of its
-    coloured neighbours has. Returns (n,) int colours; no two neighbours share one."""
-    colours = np.full(n, -1, dtype=np.int64)
-    for i in range(n):
-        taken = colours[neighbours[start[i]:start[i + 1]]]
-        free = np.ones(len(taken) + 1, dtype=bool)
-        free[taken[(taken >= 0) & (taken <= len(taken))]] = False
-        colours[i] = int(np.argmax(free))
-    return colours
 
 
 def chebyshev(rho, iterations):
@@ -109,23 +96,19 @@ class VBD(ForceCache, Integrator):
     solve.
     """
     name = "vbd"
+    batched = True
     checked_steps = True
     defaults = {"iterations": 10, "rho": 0.9, "initial_guess": "adaptive", "bounds": False,
                 "substeps": 1}
+    live_options = frozenset({"iterations", "rho", "initial_guess", "substeps"})
 
     def __init__(self, model, **options):
         super().__init__(model, **options)
         opt = self.options
-        if not (isinstance(opt["iterations"], int) and opt["iterations"] >= 1):
-            raise SceneError(f"vbd's iterations must be an int >= 1 (got {opt['iterations']!r})")
-        if not 0.0 <= float(opt["rho"]) < 1.0:
-            raise SceneError(f"vbd's rho must be in [0, 1) (got {opt['rho']!r})")
-        if opt["initial_guess"] not in GUESSES:
-            raise SceneError(f"vbd's initial_guess must be one of {GUESSES} "
-                             f"(got {opt['initial_guess']!r})")
         n, real = model.particle_count, model.mass.dtype
         self.model = model
-        self.potential = IncrementalPotential(model)
+        self._configure()
+        self.potential = IncrementalPotential(model, jacobi=True)
         self.springs = self.potential.springs
         self.has_springs = self.springs is not None
         self.adj_start, self.adj = (self.springs or Springs(model)).adjacency()
@@ -134,21 +117,17 @@ class VBD(ForceCache, Integrator):
             self.ks, self.kd = self.springs.ks, self.springs.kd
         # pair terms with a per-vertex system (bending, membrane) are Gauss-Seidel like
         # the springs; the others (self-contact, pressure) Jacobi, held through an
-        # iteration, with diagonal blocks that bound their couplings (``jacobi``)
+        # iteration, with diagonal blocks that bound their couplings (the term option
+        # ``jacobi``, given to those that declare it)
         self.local_terms = tuple(t for t in self.potential.pair_terms
-                                 if hasattr(t, "local_system"))
+                                 if t.has("local_system"))
         self.pair_terms = tuple(t for t in self.potential.pair_terms
                                 if t not in self.local_terms)
-        for term in self.pair_terms:
-            if hasattr(term, "jacobi"):
-                term.jacobi = True
         self.mass, self.params = model.mass, model.params
         self.order, self.colour_start = self._colouring(n)
         self.colours = len(self.colour_start) - 1
         self.prev, self.prev2, self.contact_grad, self.v_start = (
             ti.Vector.field(3, real, shape=n) for _ in range(4))
-        self._explicit_limit = check_substeps("vbd", opt["substeps"], model.scene)
-        self.acc = ti.field(real, shape=2)
         stage = model.contact
         self.bounds = (DisplacementBounds(stage.broad, model.inv_mass)
                        if opt["bounds"] and stage is not None and stage.broad is not None
@@ -156,11 +135,24 @@ class VBD(ForceCache, Integrator):
         self.bounded = self.bounds is not None
         self.track_potential = False
         self.stats = {}
+        if self.has_springs:
+            self.springs.implicit_fields()
+
+    def _configure(self):
+        """Check the live options; the guess's index, the Chebyshev weights (a batch's
+        table) and the explicit limit for substeps="auto"."""
+        opt = self.options
+        if not (isinstance(opt["iterations"], int) and opt["iterations"] >= 1):
+            raise SceneError(f"vbd's iterations must be an int >= 1 (got {opt['iterations']!r})")
+        if not 0.0 <= float(opt["rho"]) < 1.0:
+            raise SceneError(f"vbd's rho must be in [0, 1) (got {opt['rho']!r})")
+        if opt["initial_guess"] not in GUESSES:
+            raise SceneError(f"vbd's initial_guess must be one of {GUESSES} "
+                             f"(got {opt['initial_guess']!r})")
+        self._explicit_limit = check_substeps("vbd", opt["substeps"], self.model.scene)
         self.guess_kind = GUESSES.index(opt["initial_guess"])
         self.omegas = ti.field(ti.f64, shape=opt["iterations"] + 1)
         self.omegas.from_numpy(chebyshev(float(opt["rho"]), opt["iterations"]))
-        if self.has_springs:
-            self.springs.implicit_fields()
 
     def _colouring(self, n):
         """(order, colour_start): the particles sorted by colour as an i32 field, and the
@@ -172,16 +164,8 @@ class VBD(ForceCache, Integrator):
         pairs = [np.stack([ends, others], 1)] + [t.coupled_pairs() for t in self.local_terms]
         pairs = np.unique(np.concatenate(pairs), axis=0)
         pairs = np.concatenate([pairs, pairs[:, ::-1]])
-        pairs = pairs[np.argsort(pairs[:, 0], kind="stable")]
-        start = np.zeros(n + 1, dtype=np.int64)
-        np.cumsum(np.bincount(pairs[:, 0], minlength=n), out=start[1:])
-        colours = colour_graph(start, pairs[:, 1], n)
-        order = np.argsort(colours, kind="stable").astype(np.int32)
-        counts = np.bincount(colours, minlength=colours.max() + 1 if n else 0)
-        colour_start = [0] + np.cumsum(counts).tolist()
-        field = ti.field(ti.i32, shape=max(n, 1))
-        field.from_numpy(order if n else np.zeros(1, np.int32))
-        return field, colour_start
+        start, order = csr_layout(pairs[:, 0], n)
+        return colour_order(colour_graph(start, pairs[order, 1], n))
 
     def simulate(self, model, state_in, state_out, dt):
         count = substep_count(self.options["substeps"], dt, self.options["iterations"],
@@ -236,7 +220,7 @@ class VBD(ForceCache, Integrator):
         if self.pair_terms:
             return ("vbd gathers its Jacobi terms (self-contact, pressure) from Python "
                     "every iteration")
-        if any(isinstance(t, Colliders) for t in self.potential.terms):
+        if any(t.has("contact_planes") for t in self.potential.terms):
             return "vbd stores the colliders' contacts at each step's start with a launch"
         for term in self.potential.terms:
             if term.batch_obstacle() is not None:
@@ -278,7 +262,9 @@ class VBD(ForceCache, Integrator):
             return
         self.contact_grad.fill(0)
         for term in self.pair_terms:
-            term.add_incremental(x, self.potential.x0, h, True, self.acc, self.contact_grad)
+            # the energy sums go to the potential's accumulator, which evaluate() zeroes
+            term.add_incremental(x, self.potential.x0, h, True, self.potential.acc,
+                                 self.contact_grad)
             term.prepare_blocks(x, self.potential.x0, h)
 
     @ti.kernel

@@ -36,7 +36,6 @@ With many iterations a step solves alpha lambda = -C(x) and M (x - x_pred) = gra
 lambda (up to the term XPBD drops, Macklin 2016 eq. 11): backward Euler's step of the
 springs with the other forces explicit (tested against the backward Euler step).
 """
-import numpy as np
 import taichi as ti
 
 from .. import runtime
@@ -44,38 +43,8 @@ from .. import terms as term_modules
 from ..errors import SceneError
 from ..forces import Forces
 from ..runtime import serial
-from ..terms.bending import Bending
 from ..terms.colliders import Colliders
-from ..terms.membrane import Membrane
-from ..terms.pressure import Pressure
-from ..terms.springs import Springs
 from .base import Integrator, check_substeps, substep_count
-
-
-def colour_springs(pairs, n):
-    """Greedy colouring of constraints (springs (S,2), or hinges (S,4)): each in order takes
-    the smallest colour that no constraint at any of its particles has yet. Returns (S,)
-    int colours."""
-    used = [set() for _ in range(n)]
-    colours = np.empty(len(pairs), dtype=np.int64)
-    for s, ids in enumerate(pairs):
-        taken = set().union(*(used[i] for i in ids))
-        c = 0
-        while c in taken:
-            c += 1
-        colours[s] = c
-        for i in ids:
-            used[i].add(c)
-    return colours
-
-
-def colour_order(constraints, n):
-    """(order field, colour starts) of constraints sorted by colour (``colour_springs``)."""
-    colours = colour_springs(constraints, n)
-    order = ti.field(ti.i32, shape=max(len(colours), 1))
-    if len(colours):
-        order.from_numpy(np.argsort(colours, kind="stable").astype(np.int32))
-    return order, [0] + np.cumsum(np.bincount(colours)).tolist()
 
 
 @ti.data_oriented
@@ -91,57 +60,41 @@ class XPBD(Integrator):
     ``colours`` is the springs' colour count.
     """
     name = "xpbd"
+    batched = True
     checked_steps = True
     defaults = {"iterations": 10, "substeps": 1}
+    live_options = frozenset({"iterations", "substeps"})
 
     def __init__(self, model, **options):
         super().__init__(model, **options)
-        value = self.options["iterations"]
-        if not (isinstance(value, int) and value >= 1):
-            raise SceneError(f"xpbd's iterations must be an int >= 1 (got {value!r})")
-        self._explicit_limit = check_substeps("xpbd", self.options["substeps"], model.scene)
-        self.auto_substeps = self._explicit_limit is not None
+        self.scene = model.scene
+        self._configure()
         n, real = model.particle_count, runtime.real()
         self.mass = model.mass
-        springs = Springs(model) if Springs.present(model) else None
-        self.has_springs = springs is not None
+        # the terms with constraints (springs, hinges, triangles, pressure chambers), in
+        # TERMS order, and the other forces at each substep's start
+        self.constraints = term_modules.build(model, lambda cls: cls.has("constraints"),
+                                              constraints=True)
+        springs = term_modules.find(self.constraints, term_modules.Springs)
+        self.colours = springs.colours if springs is not None else 0
         self.external = Forces(model, lambda cls: cls.projective in ("force", "lagged")
-                               and cls not in (Springs, Bending, Membrane, Pressure))
+                               and not cls.has("constraints"))
         self.projections = term_modules.build(model, lambda cls: cls.projective == "projection")
         self.colliders = Colliders(model) if Colliders.present(model) else None
         self.has_colliders = self.colliders is not None
         self.x_prev, self.f = (ti.Vector.field(3, real, shape=n) for _ in range(2))
         self.pushed = ti.field(real, shape=n)   # how far the colliders pushed, this substep
-        self.colour_start = [0]
-        if self.has_springs:
-            count = springs.count
-            self.pairs, self.rest = springs.pairs, springs.rest
-            self.ks, self.kd = springs.ks, springs.kd
-            self.lam = ti.field(real, shape=count)
-            self.order, self.colour_start = colour_order(self.pairs.to_numpy()[:count], n)
-        self.colours = len(self.colour_start) - 1
-        self.bending = Bending(model) if Bending.present(model) else None
-        self.hinge_start = [0]
-        if self.bending is not None:
-            self.hinge_lam = ti.Vector.field(3, real, shape=self.bending.hinges.shape[0])
-            self.hinge_order, self.hinge_start = colour_order(
-                self.bending.hinges.to_numpy(), n)
-        self.hinge_colours = len(self.hinge_start) - 1
-        self.has_hinges = self.bending is not None
-        self.membrane = Membrane(model) if Membrane.present(model) else None
-        self.triangle_start = [0]
-        if self.membrane is not None:
-            self.triangle_lam = ti.Vector.field(3, real, shape=self.membrane.tris.shape[0])
-            self.triangle_order, self.triangle_start = colour_order(
-                self.membrane.tris.to_numpy(), n)
-        self.triangle_colours = len(self.triangle_start) - 1
-        self.has_triangles = self.membrane is not None
-        self.pressure = Pressure(model) if Pressure.present(model) else None
-        self.has_pressure = self.pressure is not None
-        self.constrained = (self.has_springs or self.has_hinges or self.has_triangles
-                            or self.has_pressure)
+        self.constrained = bool(self.constraints)
         self.iterated = self.constrained or self.has_colliders
         self.stats = {}
+
+    def _configure(self):
+        """Check the options; the explicit limit for substeps="auto"."""
+        value = self.options["iterations"]
+        if not (isinstance(value, int) and value >= 1):
+            raise SceneError(f"xpbd's iterations must be an int >= 1 (got {value!r})")
+        self._explicit_limit = check_substeps("xpbd", self.options["substeps"], self.scene)
+        self.auto_substeps = self._explicit_limit is not None
 
     def simulate(self, model, state_in, state_out, dt):
         opt = self.options
@@ -173,8 +126,9 @@ class XPBD(Integrator):
             return ("xpbd projects " + " and ".join(t.name or type(t).__name__
                                                     for t in self.projections)
                     + " between its launches")
-        if self.has_pressure and self.pressure.batch_obstacle() is not None:
-            return self.pressure.batch_obstacle()
+        for term in self.constraints:
+            if term.batch_obstacle() is not None:
+                return term.batch_obstacle()
         return self.external.batch_obstacle()
 
     @ti.func
@@ -245,120 +199,29 @@ class XPBD(Integrator):
 
     @ti.func
     def zero_multipliers(self):
-        """lambda = 0 for every spring, hinge, triangle and pressure chamber, and no
-        collider push yet: a step starts without them."""
+        """No multipliers and no collider push yet: a substep starts without them."""
         if ti.static(self.has_colliders):
             ti.loop_config(serialize=ti.static(serial(self.pushed)))
             for p in range(self.pushed.shape[0]):
                 self.pushed[p] = 0
-        if ti.static(self.has_springs):
-            ti.loop_config(serialize=True)
-            for s in range(self.lam.shape[0]):
-                self.lam[s] = 0
-        if ti.static(self.has_hinges):
-            ti.loop_config(serialize=True)
-            for k in range(self.hinge_lam.shape[0]):
-                self.hinge_lam[k] = ti.Vector.zero(float, 3)
-        if ti.static(self.has_triangles):
-            ti.loop_config(serialize=True)
-            for e in range(self.triangle_lam.shape[0]):
-                self.triangle_lam[e] = ti.Vector.zero(float, 3)
-        if ti.static(self.has_pressure):
-            self.pressure.zero_multipliers(self.x_prev)
+        for term in ti.static(self.constraints):
+            term.zero_multipliers(self.x_prev)
 
     @ti.func
     def spring_pass(self, x, h):
-        """One Gauss-Seidel pass over the springs, then the hinges, then the membrane's
-        triangles, colour after colour, the constraints of a colour in parallel, then the
-        pressure's chambers (module docstring; one launch: the colours' loops are
-        unrolled, each a top-level loop)."""
-        for c in ti.static(range(self.colours)):
-            for k in range(ti.static(self.colour_start[c]), ti.static(self.colour_start[c + 1])):
-                self._spring(x, h, self.order[k])
-        for c in ti.static(range(self.hinge_colours)):
-            for k in range(ti.static(self.hinge_start[c]), ti.static(self.hinge_start[c + 1])):
-                self._hinge(x, h, self.hinge_order[k])
-        for c in ti.static(range(self.triangle_colours)):
-            for k in range(ti.static(self.triangle_start[c]),
-                           ti.static(self.triangle_start[c + 1])):
-                self._triangle(x, h, self.triangle_order[k])
-        if ti.static(self.has_pressure):
-            self.pressure.project(x, self.inv_mass, h)
+        """One Gauss-Seidel pass over every term's constraints in turn (springs, hinges,
+        triangles, pressure chambers), each term's colour after colour (module
+        docstring; one launch)."""
+        for term in ti.static(self.constraints):
+            term.constraint_pass(x, self.x_prev, h)
 
     @ti.func
     def pass_in_order(self, x, h):
-        """``spring_pass`` inside a batch, where it runs on one thread: the constraints
-        one after another in colour order, the same projections in the same order, each
-        kind's code inlined once instead of once per colour."""
-        if ti.static(self.has_springs):
-            for k in range(ti.static(self.colour_start[-1])):
-                self._spring(x, h, self.order[k])
-        if ti.static(self.has_hinges):
-            for k in range(ti.static(self.hinge_start[-1])):
-                self._hinge(x, h, self.hinge_order[k])
-        if ti.static(self.has_triangles):
-            for k in range(ti.static(self.triangle_start[-1])):
-                self._triangle(x, h, self.triangle_order[k])
-        if ti.static(self.has_pressure):
-            self.pressure.project(x, self.inv_mass, h)
-
-    @ti.func
-    def _triangle(self, x, h, e):
-        """Triangle e's conditions in turn, c_0 = |f_u| - 1, c_1 = |f_v| - 1 and
-        c_2 = f_u . f_v, each with compliance 1 / (A k_c) and damping beta k_c (grad_i c =
-        b_iu n_u, b_iv n_v and b_iu f_v + b_iv f_u)."""
-        ids, b, coef = self.membrane.tris[e], self.membrane.b[e], self.membrane.c[e]
-        gamma = coef[3] / h
-        for c in ti.static(range(3)):
-            fu, fv = self.membrane.frame(e, x)
-            value, du, dv = fu.dot(fv), fv, fu
-            if ti.static(c == 0):
-                value, du, dv = fu.norm() - 1.0, fu / fu.norm(), ti.Vector.zero(float, 3)
-            elif ti.static(c == 1):
-                value, du, dv = fv.norm() - 1.0, ti.Vector.zero(float, 3), fv / fv.norm()
-            alpha = 1.0 / (coef[c] * h * h)
-            rate, weight = 0.0, 0.0
-            for i in ti.static(range(3)):
-                grad = b[i, 0] * du + b[i, 1] * dv
-                rate += grad.dot(x[ids[i]] - self.x_prev[ids[i]])
-                weight += self.inv_mass[ids[i]] * grad.dot(grad)
-            dlam = (-value - alpha * self.triangle_lam[e][c] - gamma * rate) \
-                / ((1.0 + gamma) * weight + alpha)
-            for i in ti.static(range(3)):
-                x[ids[i]] += self.inv_mass[ids[i]] * dlam * (b[i, 0] * du + b[i, 1] * dv)
-            self.triangle_lam[e][c] += dlam
-
-    @ti.func
-    def _hinge(self, x, h, k):
-        """Hinge k as the vector constraint s = sum_i c_i x_i = 0 with compliance 1
-        (its energy is |s|^2 / 2): alpha = 1 / h^2, grad_i s = c_i I."""
-        ids, c = self.bending.hinges[k], self.bending.weights[k]
-        s = self.bending.hinge_vector(k, x)
-        alpha = 1.0 / (h * h)
-        denominator = alpha
-        for i in ti.static(range(4)):
-            denominator += self.inv_mass[ids[i]] * c[i] * c[i]
-        dlam = (-s - alpha * self.hinge_lam[k]) / denominator
-        for i in ti.static(range(4)):
-            x[ids[i]] += self.inv_mass[ids[i]] * c[i] * dlam
-        self.hinge_lam[k] += dlam
-
-    @ti.func
-    def _spring(self, x, h, s):
-        i, j = self.pairs[s][0], self.pairs[s][1]
-        wi, wj = self.inv_mass[i], self.inv_mass[j]
-        d = x[i] - x[j]
-        length = d.norm()
-        if length > 0.0 and self.ks[s] > 0.0 and wi + wj > 0.0:
-            n = d / length
-            alpha = 1.0 / (self.ks[s] * h * h)
-            gamma = self.kd[s] / (self.ks[s] * h)
-            rate = n.dot((x[i] - self.x_prev[i]) - (x[j] - self.x_prev[j]))
-            dlam = (-(length - self.rest[s]) - alpha * self.lam[s] - gamma * rate) \
-                / ((1.0 + gamma) * (wi + wj) + alpha)
-            x[i] += wi * dlam * n
-            x[j] -= wj * dlam * n
-            self.lam[s] += dlam
+        """``spring_pass`` inside a batch, where it runs on one thread: the same
+        projections in the same order, each kind's code inlined once instead of once per
+        colour."""
+        for term in ti.static(self.constraints):
+            term.constraint_pass_in_order(x, self.x_prev, h)
 
     @ti.kernel
     def _velocities(self, x: ti.template(), v: ti.template(), inv_h: float):

@@ -19,10 +19,11 @@ TERMS = (GravityDrag, Springs, Bending, Membrane, Wind, Attraction, Pressure, Co
          SelfContact, Grab)
 
 
-def build(model, select=None):
-    """The present terms, in ``TERMS`` order; select(term class) -> bool filters them."""
-    return [cls(model) for cls in TERMS
-            if cls.present(model) and (select is None or select(cls))]
+def build(model, select=None, **options):
+    """The present terms, in ``TERMS`` order; select(term class) -> bool filters them.
+    Each term is given the ``options`` it declares (``Term.options``)."""
+    return [cls(model, **{k: v for k, v in options.items() if k in cls.options})
+            for cls in TERMS if cls.present(model) and (select is None or select(cls))]
 
 
 def find(terms, cls):

@@ -5,37 +5,11 @@
 potential -G m_i m_j / sqrt(r^2 + eps^2) per pair (energy()["attraction"]). Backward Euler
 and projective take it at the start of the step.
 """
-import numpy as np
 import taichi as ti
 
+from ..features.attraction import ATTRACTION
 from ..runtime import serial_count
-from ..validate import as_scalar
-from .base import Feature, Term
-
-
-class AttractionFeature(Feature):
-    """``Scene.add_attraction``: (G, softening)."""
-    name, method = "attraction", "add_attraction"
-
-    def set(self, scene, G, softening=0.0):
-        """Inverse-square attraction between all particle pairs (O(n^2)):
-        f_i = sum_j G m_i m_j (x_j - x_i) / (|x_j - x_i|^2 + softening^2)^(3/2), with
-        potential -G m_i m_j / sqrt(r^2 + softening^2) reported as energy()["attraction"].
-
-        Args: G (N m^2/kg^2) >= 0; softening (m) >= 0 (Plummer).
-        """
-        return (as_scalar("G", G, minimum=0.0), as_scalar("softening", softening, minimum=0.0))
-
-    def saved(self, value):
-        return {"G": value[0], "softening": value[1]}
-
-    def floor(self, value, scene):
-        """-G (M^2 - sum m^2) / (2 softening): every pair at distance 0; None unsoftened."""
-        G, softening = value
-        if softening == 0.0:
-            return None
-        m = scene.masses
-        return -G * (m.sum() ** 2 - np.sum(m * m)) / (2.0 * softening)
+from .base import Term
 
 
 @ti.kernel
@@ -53,7 +27,7 @@ def attraction_energy(x: ti.template(), mass: ti.template(), G: float, softening
 @ti.data_oriented
 class Attraction(Term):
     name = "attraction"
-    feature = AttractionFeature()
+    feature = ATTRACTION
 
     @staticmethod
     def present(model):
@@ -61,7 +35,7 @@ class Attraction(Term):
 
     def __init__(self, model):
         self.mass = model.mass
-        self.G, self.softening = model.attraction
+        self.G, self.softening = model.attraction.G, model.attraction.softening
 
     def batch_obstacle(self):
         n = self.mass.shape[0]

@@ -47,50 +47,49 @@ particle's gradient and Hessian block at x) for VBD's Gauss-Seidel sweeps and
 ``constant_matrix()`` for projective dynamics' matrix (an object with ``set_step(h)``,
 a per-particle scalar ``diagonal`` and ``add_product``).
 
-A term whose scene data is optional (wind, attraction, self-collision, pressure) names its
-``Feature`` (below) as ``feature``: the one description of that data from the scene's
-method to the model's fields and the checkpoint.
+What a term gives beyond the above is declared, not guessed: its class lists its
+capabilities in ``provides`` (names of ``CAPABILITIES``, below, each with the methods it
+requires), and the solvers ask ``term.has(name)``. Declaring a capability whose methods
+are missing, or defining all of a capability's methods without declaring it, is an error
+when the class is made. Options that a term compiles into its kernels (``exact``,
+``jacobi``) are declared in ``options`` (name -> default) and given when it is built
+(``terms.build(model, select, **options)`` passes each term the ones it declares).
+
+A term whose scene data is optional (bending, the membrane, wind, attraction, pressure,
+self-collision) names its ``Feature`` (``tcloth.features``) as ``feature``: the one
+description of that data from the scene's method to the model's object (``model.<feature
+name>``, which the term reads) and the checkpoint.
 """
-import numpy as np
 import taichi as ti
 
-from ..errors import SceneError
+from .. import runtime
+from ..graph import colour_order, colour_springs
 from ..runtime import serial
 
 
-class Feature:
-    """Optional scene data that one module owns, described once.
-
-    ``tcloth.features`` gives ``Scene`` a method named ``method`` for each registered
-    feature: it calls ``set`` (validation; its docstring is the method's) and keeps the
-    result as ``scene.<name>`` (None until set). ``Model`` keeps ``build(model, value)`` as
-    ``model.<name>`` (making the feature's Taichi fields; None for nothing to simulate) and
-    ``Model.refresh`` keeps ``refresh(model, value)`` for a ``live`` feature (the
-    simulator's live setters change the scene's value, then refresh). A checkpoint stores
-    ``saved(value)``, keyword arguments of the scene method that rebuild the value (NumPy
-    arrays stored as arrays), and loads it by calling the method with them. ``floor``
-    bounds the feature's potential energy from below for the energy budget (``budget.py``).
-    """
-    name = None
-    method = None
-    live = False
-
-    def set(self, scene, *args, **kwargs):
-        raise NotImplementedError
-
-    def saved(self, value):
-        return dict(value)
-
-    def build(self, model, value):
-        return value
-
-    def refresh(self, model, value):
-        return value
-
-    def floor(self, value, scene):
-        """The least potential energy (J) the feature can have: 0 (none below zero), or
-        None where it has no lower bound."""
-        return 0.0
+# The capabilities a term may declare (``Term.provides``): name -> the methods it needs.
+CAPABILITIES = {
+    # backward Euler's couplings between particles (bending, the membrane, pressure,
+    # self-contact): their part of the incremental potential and its gradient, the
+    # Hessian's diagonal blocks (``prepare_blocks``, then the ti.func ``diagonal_block(p)``)
+    # and the couplings' product with a vector, for CG
+    "couplings": ("add_incremental", "prepare_blocks", "diagonal_block", "add_product"),
+    # VBD's Gauss-Seidel sweeps: particle p's gradient and Hessian block at x (ti.func
+    # ``local_system(p, x, x0, h)``); a coupled term without it is taken Jacobi-style
+    "local_system": ("local_system",),
+    # projective dynamics' matrix: ``constant_matrix()``, a ``ConstantMatrix``
+    "constant_matrix": ("constant_matrix",),
+    # XPBD's compliant constraints (built with the option ``constraints=True`` where the
+    # term declares it): ti.funcs ``zero_multipliers(x_prev)`` (a substep's start, at its
+    # positions x_prev), ``constraint_pass(x, x_prev, h)`` (every constraint once, colour
+    # after colour, each colour's in parallel) and ``constraint_pass_in_order(x, x_prev,
+    # h)`` (the same projections one after another, for a batch's single thread)
+    "constraints": ("zero_multipliers", "constraint_pass", "constraint_pass_in_order"),
+    # a position and velocity projection after a solve (self-contact's)
+    "projection": ("project",),
+    # the colliders' contact planes of an iterative solve (``Colliders.begin_solve``)
+    "contact_planes": ("begin_solve", "set_planes", "push_out", "plane_force"),
+}
 
 
 class Term:
@@ -101,6 +100,30 @@ class Term:
     projective = "lagged"
     per_particle = False
     in_kernel = True
+    provides = frozenset()
+    options = {}
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        for capability, methods in CAPABILITIES.items():
+            defined = [callable(getattr(cls, m, None)) for m in methods]
+            if capability in cls.provides and not all(defined):
+                missing = [m for m, d in zip(methods, defined) if not d]
+                raise TypeError(f"{cls.__name__} provides {capability!r} without "
+                                f"{', '.join(missing)}")
+            if capability not in cls.provides and all(defined):
+                raise TypeError(f"{cls.__name__} defines {', '.join(methods)} but does not "
+                                f"declare {capability!r} in provides")
+        unknown = sorted(set(cls.provides) - set(CAPABILITIES))
+        if unknown:
+            raise TypeError(f"{cls.__name__} provides unknown capabilities {unknown}")
+
+    @classmethod
+    def has(cls, capability):
+        """Whether the term declares ``capability`` (a name of ``CAPABILITIES``)."""
+        if capability not in CAPABILITIES:
+            raise ValueError(f"no capability {capability!r} (known: {sorted(CAPABILITIES)})")
+        return capability in cls.provides
 
     @staticmethod
     def present(model):
@@ -127,6 +150,65 @@ class Term:
         start (the colliders' contact planes)."""
 
 
+class ColouredConstraints:
+    """XPBD's constraints of a term whose elements (springs, hinges, triangles) each give
+    one (vector) constraint (the "constraints" capability): ``constraints_begin`` colours
+    the elements (no two of a colour share a particle: ``graph.colour_springs``) and makes
+    their multipliers; the term gives ``project_constraint(x, x_prev, h, k)``, element
+    k's projection (Gauss-Seidel: x moves, its multiplier grows)."""
+
+    def constraints_begin(self, elements, n, width):
+        """Colour ``elements`` ((E, k) particle ids, NumPy) on n particles and make their
+        multipliers, ``width`` numbers each (1: a scalar field)."""
+        real = runtime.real()
+        self.width = width
+        self.lam = (ti.field(real, shape=max(len(elements), 1)) if width == 1 else
+                    ti.Vector.field(width, real, shape=max(len(elements), 1)))
+        self.constraint_order, self.colour_start = colour_order(colour_springs(elements, n))
+        self.colours = len(self.colour_start) - 1
+
+    @ti.func
+    def zero_multipliers(self, x_prev):
+        """lambda = 0 for every element: a substep starts without them."""
+        ti.loop_config(serialize=True)
+        for k in range(self.lam.shape[0]):
+            if ti.static(self.width == 1):
+                self.lam[k] = 0
+            else:
+                self.lam[k] = ti.Vector.zero(float, self.width)
+
+    @ti.func
+    def constraint_pass(self, x, x_prev, h):
+        """Every element's projection once, colour after colour, a colour's elements in
+        parallel (the colours' loops unrolled, each a top-level loop)."""
+        for c in ti.static(range(self.colours)):
+            for k in range(ti.static(self.colour_start[c]), ti.static(self.colour_start[c + 1])):
+                self.project_constraint(x, x_prev, h, self.constraint_order[k])
+
+    @ti.func
+    def constraint_pass_in_order(self, x, x_prev, h):
+        """``constraint_pass`` on one thread (a batch): the same projections in the same
+        order, the projection's code inlined once instead of once per colour."""
+        for k in range(ti.static(self.colour_start[-1])):
+            self.project_constraint(x, x_prev, h, self.constraint_order[k])
+
+
+class ConstantMatrix:
+    """What a term's ``constant_matrix()`` gives projective dynamics: a symmetric positive
+    semi-definite stand-in for its Hessian, entering the solver's matrix A whole. It has a
+    per-particle scalar ``diagonal`` (a field; its 3 x 3 block is diagonal times I),
+    ``set_step(h)`` (before use and whenever the step changes), ``add_product(v, out,
+    first)`` (out += its couplings times v; out = when ``first``) and, where it changes
+    with each step's start (``varies``), ``update(x0)``."""
+    varies = False
+
+    def set_step(self, h):
+        """Nothing: the matrix does not depend on the step."""
+
+    def update(self, x0):
+        """Nothing: the matrix does not change with the step's start."""
+
+
 @ti.kernel
 def particle_energy(term: ti.template(), x: ti.template(), t: float,
                     out: ti.template()) -> ti.f64:
@@ -139,34 +221,11 @@ def particle_energy(term: ti.template(), x: ti.template(), t: float,
     return ti.cast(out[0], ti.f64)
 
 
-def cloth_selection(scene, cloths, rest_positions):
-    """(ids, rest) for a per-cloth feature's ``set``: the indices ``cloths`` into
-    ``scene.cloths`` (None: every cloth) and the (N,3) rest positions of all particles
-    (None: the scene's positions now), checked."""
-    count = len(scene.cloths)
-    ids = list(range(count)) if cloths is None else [int(c) for c in np.ravel(cloths)]
-    if not ids or len(set(ids)) != len(ids) or min(ids) < 0 or max(ids) >= count:
-        raise SceneError(f"cloths must be distinct indices into the scene's {count} cloths "
-                         f"(got {cloths!r})")
-    rest = scene.positions if rest_positions is None else \
-        np.asarray(rest_positions, dtype=np.float64)
-    if rest.shape != (scene.num_particles, 3) or not np.all(np.isfinite(rest)):
-        raise SceneError(f"rest_positions must be finite ({scene.num_particles}, 3) "
-                         f"positions (got shape {np.shape(rest_positions)})")
-    return ids, rest.copy()
-
-
-def incidence(ids, n):
-    """Each particle's elements, for elements of k particles ids (E,k), as Taichi fields:
-    (start (n+1,), entries): particle p's (element, slot) pairs are entries[start[p]:
-    start[p+1]], in element order (a gather per particle needs no atomics)."""
-    vertex = np.asarray(ids, dtype=np.int64).ravel()
-    k = np.shape(ids)[1] if np.ndim(ids) == 2 else 1
-    start = ti.field(ti.i32, shape=n + 1)
-    start.from_numpy(np.concatenate([[0], np.cumsum(np.bincount(vertex, minlength=n))])
-                     .astype(np.int32))
-    order = np.argsort(vertex, kind="stable")
-    entries = ti.Vector.field(2, ti.i32, shape=max(len(order), 1))
-    if len(order):
-        entries.from_numpy(np.stack([order // k, order % k], 1).astype(np.int32))
-    return start, entries
+@ti.func
+def add_or_set(out: ti.template(), p, value, first: ti.template()):
+    """out[p] = value where ``first``, else out[p] += value (``add_product``'s two
+    modes)."""
+    if ti.static(first):
+        out[p] = value
+    else:
+        out[p] += value

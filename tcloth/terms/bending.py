@@ -1,10 +1,11 @@
 """Bending with linear stiffness: Bergou, Wardetzky, Harmon, Zorin & Grinspun 2006, "A
 quadratic bending model for inextensible surfaces".
 
-The lecture's flexion springs (Provot) span two grid spacings; a fold by phi shortens one
-only to second order, 2h cos(phi/2) = 2h (1 - phi^2/8), so its energy is quartic in the
-angle and a flat cloth has no bending stiffness at small curvature. This term gives the
-cloth a bending rigidity B (N m), energy B/2 kappa^2 per area for a curvature kappa.
+Provot's flexion springs join each grid particle to the next but one along each grid line,
+two spacings h apart; a fold by phi shortens one only to second order, 2h cos(phi/2) =
+2h (1 - phi^2/8), so its energy is quartic in the angle and a flat cloth has no bending
+stiffness at small curvature. This term gives the cloth a bending rigidity B (N m),
+energy B/2 kappa^2 per area for a curvature kappa.
 
 Each interior edge (x0, x1) of a cloth's triangles with the opposite vertices x2, x3 of its
 two triangles is a hinge. With the cotangents c_jk of the rest angles between the hinge's
@@ -44,83 +45,50 @@ import numpy as np
 import taichi as ti
 
 from .. import runtime
-from ..hinges import cloth_hinges
+from ..features.bending import BENDING
 from ..runtime import serial
-from ..validate import as_warp_weft_per
-from .base import Feature, Term, cloth_selection, incidence
-
-class BendingFeature(Feature):
-    """``Scene.set_bending``: the cloths with hinge bending, their rigidities and rest
-    positions; the model's hinges, their weights and each particle's hinges."""
-    name, method = "bending", "set_bending"
-
-    def set(self, scene, rigidity, cloths=None, rest_positions=None):
-        """Give cloths a bending rigidity B (N m): a hinge energy on every interior edge
-        of their triangles, B/2 kappa^2 per area at curvature kappa
-        (``tcloth.terms.bending``; Bergou et al. 2006's quadratic bending). Replaces any
-        earlier call; ``add_cloth(fabric=...)`` adds its cloth to the ones set (``builders``).
-
-        Args:
-            rigidity: N m >= 0: one number, a (warp, weft) pair (grid cloths: warp bends
-                along the grid's i, weft along j), or a (len(cloths), 2) array of pairs,
-                one per cloth.
-            cloths: indices into ``scene.cloths`` (default: every cloth).
-            rest_positions: None (the scene's positions now), or (N,3) positions of all
-                the scene's particles at which the cloths are flat and unbent.
-        Returns:
-            dict of the settings.
-        """
-        ids, rest = cloth_selection(scene, cloths, rest_positions)
-        rigidities = as_warp_weft_per("rigidity", rigidity, len(ids))
-        for k, b in zip(ids, rigidities):
-            cloth_hinges(scene.cloths[k], rest, b)
-        return {"rigidity": rigidities, "cloths": ids, "rest_positions": rest}
-
-    def saved(self, value):
-        return {"rigidity": value["rigidity"], "cloths": value["cloths"],
-                "rest_positions": value["rest_positions"]}
-
-    def build(self, model, settings):
-        """The hinges (H,) vec4 ids and weights, each particle's (hinge, slot) entries in
-        CSR form and its diagonal weight sum(c^2), as fields."""
-        scene, n = model.scene, model.particle_count
-        parts = [cloth_hinges(scene.cloths[k], settings["rest_positions"], b)
-                 for k, b in zip(settings["cloths"], settings["rigidity"])]
-        ids = np.concatenate([p[0] for p in parts]).astype(np.int64)
-        weights = np.concatenate([p[1] for p in parts])
-        real, npr = runtime.real(), runtime.numpy_real()
-        count = max(len(ids), 1)
-        model.bending_hinges = ti.Vector.field(4, ti.i32, shape=count)
-        model.bending_weights = ti.Vector.field(4, real, shape=count)
-        if len(ids):
-            model.bending_hinges.from_numpy(ids.astype(np.int32))
-            model.bending_weights.from_numpy(weights.astype(npr))
-        model.bending_start, model.bending_entries = incidence(ids.reshape(-1, 4), n)
-        vertex = ids.ravel()
-        model.bending_diagonal = ti.field(real, shape=n)
-        model.bending_diagonal.from_numpy(
-            np.bincount(vertex, weights=(weights ** 2).ravel(), minlength=n).astype(npr))
-        model.bending_count = len(ids)
-        return settings
+from .base import ColouredConstraints, ConstantMatrix, Term, add_or_set
 
 
 @ti.data_oriented
-class Bending(Term):
-    """The hinges of the scene's bending cloths (``Scene.set_bending``)."""
+class Bending(Term, ConstantMatrix, ColouredConstraints):
+    """The hinges of the scene's bending cloths (``Scene.set_bending``); for XPBD
+    (``constraints=True``) each a vector constraint (``project_constraint``)."""
     name = "bending"
-    feature = BendingFeature()
+    feature = BENDING
     implicit = "potential"
     projective = "force"
+    provides = frozenset({"couplings", "local_system", "constant_matrix", "constraints"})
+    options = {"constraints": False}
 
     @staticmethod
     def present(model):
-        return model.bending is not None and model.bending_count > 0
+        return model.bending is not None and model.bending.count > 0
 
-    def __init__(self, model):
-        self.hinges, self.weights = model.bending_hinges, model.bending_weights
-        self.start, self.entries = model.bending_start, model.bending_entries
-        self.diagonal = model.bending_diagonal
+    def __init__(self, model, constraints=False):
+        bending = model.bending
+        self.hinges, self.weights = bending.hinges, bending.weights
+        self.start, self.entries = bending.start, bending.entries
+        self.diagonal = bending.diagonal
         self.s = ti.Vector.field(3, runtime.real(), shape=self.hinges.shape[0])
+        if constraints:
+            self.inv_mass = model.inv_mass
+            self.constraints_begin(self.hinges.to_numpy(), model.particle_count, 3)
+
+    @ti.func
+    def project_constraint(self, x, x_prev, h, k):
+        """Hinge k as the vector constraint s = sum_i c_i x_i = 0 with compliance 1
+        (its energy is |s|^2 / 2): alpha = 1 / h^2, grad_i s = c_i I."""
+        ids, c = self.hinges[k], self.weights[k]
+        s = self.hinge_vector(k, x)
+        alpha = 1.0 / (h * h)
+        denominator = alpha
+        for i in ti.static(range(4)):
+            denominator += self.inv_mass[ids[i]] * c[i] * c[i]
+        dlam = (-s - alpha * self.lam[k]) / denominator
+        for i in ti.static(range(4)):
+            x[ids[i]] += self.inv_mass[ids[i]] * c[i] * dlam
+        self.lam[k] += dlam
 
     def batch_obstacle(self):
         if not serial(self.hinges):
@@ -131,9 +99,6 @@ class Bending(Term):
         """Projective dynamics' constant part: the Hessian itself, sum over hinges of
         c c^T (x) I (``diagonal``, ``add_product``)."""
         return self
-
-    def set_step(self, h):
-        """Nothing: the Hessian does not depend on the step."""
 
     def coupled_pairs(self):
         """(M,2) particle pairs that share a hinge (for graph colourings), NumPy."""
@@ -226,11 +191,7 @@ class Bending(Term):
         self.hinge_vectors(v)
         ti.loop_config(serialize=ti.static(serial(out)))
         for p in range(out.shape[0]):
-            coupled = self.gather(p) - self.diagonal[p] * v[p]
-            if ti.static(first):
-                out[p] = coupled
-            else:
-                out[p] += coupled
+            add_or_set(out, p, self.gather(p) - self.diagonal[p] * v[p], first)
 
     def add_product(self, v, out, first):
         """out += (= when ``first``) the Hessian without its diagonal blocks times v."""

@@ -1,5 +1,4 @@
-"""Colliders (every shape of ``shapes.SHAPES``) with penalty contact and Coulomb friction
-(lecture 4).
+"""Colliders (every shape of ``shapes.SHAPES``) with penalty contact and Coulomb friction.
 
 Detection: the signed distance phi(x) to each shape and its outward unit normal n.
 Resolution: a particle closer than the collider's ``thickness`` is pulled by a temporary
@@ -88,6 +87,7 @@ class Colliders(Term):
     implicit = "potential"
     projective = "contact"
     per_particle = True
+    provides = frozenset({"contact_planes"})
 
     @staticmethod
     def present(model):

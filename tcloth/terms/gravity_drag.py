@@ -1,4 +1,4 @@
-"""Gravity and viscous air drag: f = m g - c_p v on every particle (lecture 4).
+"""Gravity and viscous air drag: f = m g - c_p v on every particle.
 
 The drag coefficient of particle p is c_p = c + gamma m_p (``Model.drag``): the scene's
 ``air_drag`` c, the same on every particle, plus its ``air_damping`` gamma times the

@@ -11,7 +11,8 @@ images of the warp and weft directions are
 
     f_a = sum_i b_ia x_i,   (b_1; b_2) = the rows of D^-1,   b_0 = -(b_1 + b_2),
 
-unit length and orthogonal at rest and under every rigid motion. The triangle's energy is
+unit length and orthogonal at rest and under every rigid motion (the weights b and the
+rest areas are the model's, ``features.membrane``). The triangle's energy is
 
     W = A (C_u/2 (|f_u| - 1)^2 + C_v/2 (|f_v| - 1)^2 + G/2 (f_u . f_v)^2),
 
@@ -40,101 +41,9 @@ import numpy as np
 import taichi as ti
 
 from .. import runtime
-from ..errors import SceneError
+from ..features.membrane import MEMBRANE
 from ..runtime import serial
-from ..validate import as_per_item, as_warp_weft_per
-from .base import Feature, Term, cloth_selection, incidence
-
-
-def triangle_frames(triangles, rest):
-    """(b (T,3,2), area (T,)) of triangles (T,3) at rest positions (N,3): the weights of
-    f_u, f_v (module docstring) and the rest areas. SceneError for a degenerate one."""
-    tris = np.asarray(triangles, dtype=np.int64)
-    e1, e2 = rest[tris[:, 1]] - rest[tris[:, 0]], rest[tris[:, 2]] - rest[tris[:, 0]]
-    normal = np.cross(e1, e2)
-    double = np.linalg.norm(normal, axis=1)
-    scale = max(float(np.max(np.linalg.norm(e1, axis=1), initial=0.0)), 1e-300)
-    bad = np.flatnonzero(double <= 1e-12 * scale * scale)
-    if len(bad):
-        raise SceneError(f"the membrane needs triangles of positive area: triangle "
-                         f"{tris[bad[0]].tolist()} is degenerate at its rest positions")
-    n = normal / double[:, None]
-    u = np.array([1.0, 0.0, 0.0]) - n[:, :1] * n
-    faces_x = np.linalg.norm(u, axis=1) < 0.5
-    u[faces_x] = np.array([0.0, 1.0, 0.0]) - n[faces_x, 1:2] * n[faces_x]
-    u /= np.linalg.norm(u, axis=1)[:, None]
-    v = np.cross(n, u)
-    D = np.stack([np.stack([np.sum(e1 * u, 1), np.sum(e2 * u, 1)], 1),
-                  np.stack([np.sum(e1 * v, 1), np.sum(e2 * v, 1)], 1)], 1)
-    inv = np.linalg.inv(D)                    # (T, 2, 2); f = [e1 e2] inv: rows weight e1, e2
-    b = np.stack([-(inv[:, 0] + inv[:, 1]), inv[:, 0], inv[:, 1]], 1)
-    return b, 0.5 * double
-
-
-class MembraneFeature(Feature):
-    """``Scene.set_membrane``: the cloths with a triangle membrane, their stiffnesses and
-    rest positions; the model's triangles, their weights and each particle's triangles."""
-    name, method = "membrane", "set_membrane"
-
-    def set(self, scene, stretch, shear, damping=0.0, cloths=None, rest_positions=None):
-        """Give cloths membrane elasticity on their triangles: stretch stiffness along warp
-        and weft and shear stiffness, independent of each other and of the triangles'
-        shapes (``tcloth.terms.membrane``: Baraff & Witkin's conditions as an energy).
-        Replaces any earlier call; ``add_mesh_cloth(fabric=...)`` adds its cloth to the
-        ones set.
-
-        Args:
-            stretch: N/m > 0 per width: one number, a (warp, weft) pair (warp along the
-                world x axis projected into each triangle), or a (len(cloths), 2) array.
-            shear: N/m > 0 per width: one number or one per cloth.
-            damping: each condition's damping as a ratio of critical of an edge's two
-                masses against the stiffer stretch, >= 0: one number or one per cloth.
-            cloths: indices into ``scene.cloths`` (default: every cloth).
-            rest_positions: None (the scene's positions now), or (N,3) positions of all
-                the scene's particles at which the cloths are unstrained.
-        Returns:
-            dict of the settings.
-        """
-        ids, rest = cloth_selection(scene, cloths, rest_positions)
-        stretches = as_warp_weft_per("stretch", stretch, len(ids), strict=True)
-        shears = as_per_item("shear", shear, len(ids), minimum=0.0, strict=True)
-        dampings = as_per_item("damping", damping, len(ids), minimum=0.0)
-        for k in ids:
-            triangle_frames(scene.cloths[k].triangles, rest)
-        return {"stretch": stretches, "shear": shears, "damping": dampings, "cloths": ids,
-                "rest_positions": rest}
-
-    def build(self, model, settings):
-        """The triangles (T,) vec3 ids, their weights b (T,) 3x2, their coefficients
-        (A C_u, A C_v, A G, beta) and each particle's (triangle, slot) entries in CSR form,
-        as fields."""
-        scene, n = model.scene, model.particle_count
-        rest, masses = settings["rest_positions"], scene.masses
-        ids, weights, coefficients = [], [], []
-        for k, (cu, cv), g, zeta in zip(settings["cloths"], settings["stretch"],
-                                        settings["shear"], settings["damping"]):
-            tris = scene.cloths[k].triangles
-            b, area = triangle_frames(tris, rest)
-            # an edge's two masses (each a third of the triangle's) against the stiffer
-            # stretch: beta = 2 zeta sqrt(m_reduced / k)
-            reduced = masses[tris].mean(axis=1) / 2.0
-            beta = 2.0 * zeta * np.sqrt(reduced / max(cu, cv))
-            ids.append(tris)
-            weights.append(b)
-            coefficients.append(np.stack([area * cu, area * cv, area * g, beta], 1))
-        ids = np.concatenate(ids).astype(np.int64)
-        real, npr = runtime.real(), runtime.numpy_real()
-        count = max(len(ids), 1)
-        model.membrane_triangles = ti.Vector.field(3, ti.i32, shape=count)
-        model.membrane_weights = ti.Matrix.field(3, 2, real, shape=count)
-        model.membrane_coefficients = ti.Vector.field(4, real, shape=count)
-        if len(ids):
-            model.membrane_triangles.from_numpy(ids.astype(np.int32))
-            model.membrane_weights.from_numpy(np.concatenate(weights).astype(npr))
-            model.membrane_coefficients.from_numpy(np.concatenate(coefficients).astype(npr))
-        model.membrane_start, model.membrane_entries = incidence(ids.reshape(-1, 3), n)
-        model.membrane_count = len(ids)
-        return settings
+from .base import ColouredConstraints, ConstantMatrix, Term, add_or_set
 
 
 @ti.func
@@ -179,21 +88,26 @@ def _gauss_newton(fu, fv, c, scale):
 
 
 @ti.data_oriented
-class Membrane(Term):
-    """The triangles of the scene's membrane cloths (``Scene.set_membrane``)."""
+class Membrane(Term, ColouredConstraints):
+    """The triangles of the scene's membrane cloths (``Scene.set_membrane``); for XPBD
+    (``constraints=True``) each three constraints (``project_constraint``)."""
     name = "membrane"
-    feature = MembraneFeature()
+    feature = MEMBRANE
     implicit = "potential"
     projective = "force"
+    provides = frozenset({"couplings", "local_system", "constant_matrix", "constraints"})
+    # exact: ``add_product`` multiplies by the exact Hessian (backward Euler's truncated
+    # Newton-CG on exact_hessian), else by the projected one
+    options = {"exact": False, "constraints": False}
 
     @staticmethod
     def present(model):
-        return model.membrane is not None and model.membrane_count > 0
+        return model.membrane is not None and model.membrane.count > 0
 
-    def __init__(self, model):
-        self.tris, self.b = model.membrane_triangles, model.membrane_weights
-        self.c = model.membrane_coefficients
-        self.start, self.entries = model.membrane_start, model.membrane_entries
+    def __init__(self, model, exact=False, constraints=False):
+        membrane = model.membrane
+        self.tris, self.b, self.c = membrane.triangles, membrane.weights, membrane.coefficients
+        self.start, self.entries = membrane.start, membrane.entries
         count, n, real = self.tris.shape[0], model.particle_count, runtime.real()
         # per triangle: the gradient in (f_u, f_v) of the last pass; f and f0 at the
         # Newton iterate and the step's start (``prepare_blocks``, for ``add_product``)
@@ -201,9 +115,36 @@ class Membrane(Term):
             ti.Vector.field(3, real, shape=count) for _ in range(6))
         self.block = ti.Matrix.field(3, 3, real, shape=n)
         self.step = ti.field(real, shape=())
-        # whether ``add_product`` multiplies by the exact Hessian (backward Euler's
-        # truncated Newton-CG sets it, before its first product) or the projected one
-        self.exact = False
+        self.exact = bool(exact)
+        if constraints:
+            self.inv_mass = model.inv_mass
+            self.constraints_begin(self.tris.to_numpy(), n, 3)
+
+    @ti.func
+    def project_constraint(self, x, x_prev, h, e):
+        """Triangle e's conditions in turn, c_0 = |f_u| - 1, c_1 = |f_v| - 1 and
+        c_2 = f_u . f_v, each with compliance 1 / (A k_c) and damping beta k_c (grad_i c =
+        b_iu n_u, b_iv n_v and b_iu f_v + b_iv f_u)."""
+        ids, b, coef = self.tris[e], self.b[e], self.c[e]
+        gamma = coef[3] / h
+        for c in ti.static(range(3)):
+            fu, fv = self.frame(e, x)
+            value, du, dv = fu.dot(fv), fv, fu
+            if ti.static(c == 0):
+                value, du, dv = fu.norm() - 1.0, fu / fu.norm(), ti.Vector.zero(float, 3)
+            elif ti.static(c == 1):
+                value, du, dv = fv.norm() - 1.0, ti.Vector.zero(float, 3), fv / fv.norm()
+            alpha = 1.0 / (coef[c] * h * h)
+            rate, weight = 0.0, 0.0
+            for i in ti.static(range(3)):
+                grad = b[i, 0] * du + b[i, 1] * dv
+                rate += grad.dot(x[ids[i]] - x_prev[ids[i]])
+                weight += self.inv_mass[ids[i]] * grad.dot(grad)
+            dlam = (-value - alpha * self.lam[e][c] - gamma * rate) \
+                / ((1.0 + gamma) * weight + alpha)
+            for i in ti.static(range(3)):
+                x[ids[i]] += self.inv_mass[ids[i]] * dlam * (b[i, 0] * du + b[i, 1] * dv)
+            self.lam[e][c] += dlam
 
     def batch_obstacle(self):
         if not serial(self.tris):
@@ -377,11 +318,7 @@ class Membrane(Term):
             self.gv[e] = uv.transpose() @ du + vv @ dv
         ti.loop_config(serialize=ti.static(serial(out)))
         for p in range(out.shape[0]):
-            coupled = self.gather(p) - self.block[p] @ v[p]
-            if ti.static(first):
-                out[p] = coupled
-            else:
-                out[p] += coupled
+            add_or_set(out, p, self.gather(p) - self.block[p] @ v[p], first)
 
     def add_product(self, v, out, first):
         """out += (= when ``first``) the Hessian at the prepared x (exact or projected,
@@ -407,7 +344,7 @@ class Membrane(Term):
 
 
 @ti.data_oriented
-class MembraneBound:
+class MembraneBound(ConstantMatrix):
     """Projective dynamics' constant stand-in for the membrane's Hessian:
     A (max(C_u, C_v) + 2 G)(1 + beta / h) sum_a b_ia b_ja (x) I per triangle (``set_step``
     before use), as a scalar ``diagonal`` per particle and its couplings' product."""
@@ -445,10 +382,7 @@ class MembraneBound:
             for k in range(m.start[p], m.start[p + 1]):
                 e, slot = m.entries[k][0], m.entries[k][1]
                 coupled += m.b[e][slot, 0] * self.sum_u[e] + m.b[e][slot, 1] * self.sum_v[e]
-            if ti.static(first):
-                out[p] = coupled
-            else:
-                out[p] += coupled
+            add_or_set(out, p, coupled, first)
 
     def add_product(self, v, out, first):
         """out += (= when ``first``) the stand-in without its diagonal, times v."""

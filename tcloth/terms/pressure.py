@@ -53,125 +53,12 @@ each particle alone); indefinite.
     the iterations alone: a stiff gas then over-inflates the unconverged iterate and gains
     energy.
 """
-import numpy as np
 import taichi as ti
 
 from .. import runtime
-from ..errors import SceneError
+from ..features.pressure import PRESSURE, potential
 from ..runtime import serial
-from ..validate import as_scalar
-from .base import Feature, Term, incidence
-
-
-def enclosed_volume(x, triangles):
-    """The volume (m^3) that triangles (T,3) enclose at positions x (N,3), NumPy, f64."""
-    a, b, c = (np.asarray(x, dtype=np.float64)[triangles[:, k]] for k in range(3))
-    return float(np.einsum("ij,ij->", a, np.cross(b, c)) / 6.0)
-
-
-def gas_table(settings):
-    """(chambers, 3) f64: each chamber's P0 V0 (J), P_a (Pa) and V0 (m^3)."""
-    v0 = np.abs(settings["rest_volume"])
-    return np.stack([(settings["pressure"] + settings["ambient"]) * v0,
-                     np.full(len(v0), settings["ambient"]), v0], 1)
-
-
-def potential(gas, volume):
-    """-P0 V0 ln(V / V0) + P_a (V - V0) summed over chambers at volumes V (J)."""
-    return float(np.sum(-gas[:, 0] * np.log(volume / gas[:, 2])
-                        + gas[:, 1] * (volume - gas[:, 2])))
-
-
-def closed_surface(triangles, name):
-    """Check that triangles (T,3) close a surface: every edge in exactly two triangles,
-    once in each direction (consistently wound)."""
-    directed = np.concatenate([triangles[:, [0, 1]], triangles[:, [1, 2]],
-                               triangles[:, [2, 0]]])
-    forward = {tuple(e) for e in directed.tolist()}
-    if len(forward) != len(directed):
-        raise SceneError(f"{name} is not a consistently wound surface: an edge runs the same "
-                         "way in two of its triangles")
-    open_edges = [e for e in forward if (e[1], e[0]) not in forward]
-    if open_edges:
-        raise SceneError(f"{name} does not enclose a volume: {len(open_edges)} edges have one "
-                         f"triangle only (e.g. particles {open_edges[0]})")
-
-
-class PressureFeature(Feature):
-    """``Scene.set_pressure``: one chamber per closed cloth; the model's triangles (wound
-    outward), their chambers and each chamber's (P0 V0, P_a)."""
-    name, method = "pressure", "set_pressure"
-
-    def set(self, scene, pressure, ambient=101325.0, cloths=None, rest_volume=None):
-        """Fill closed cloths with gas: each is a chamber whose gauge pressure is
-        ``pressure`` at its rest volume and follows Boyle's law (isothermal ideal gas)
-        as its volume changes (``tcloth.terms.pressure``).
-
-        Args:
-            pressure: gauge pressure P0 - P_a at the rest volume, Pa (> -ambient).
-            ambient: the outside air's pressure P_a, Pa >= 0 (default 101325: sea level).
-            cloths: indices into ``scene.cloths`` of the chambers (default: every cloth);
-                each must be closed (every edge in two triangles, wound consistently).
-            rest_volume: None (each chamber's volume at the scene's positions), or one
-                volume per chamber, m^3 > 0.
-        Returns:
-            dict of the settings.
-        """
-        ambient = as_scalar("ambient", ambient, minimum=0.0)
-        pressure = as_scalar("pressure", pressure)
-        if pressure + ambient <= 0.0:
-            raise SceneError(f"pressure must be above -ambient = {-ambient} Pa (the gas's "
-                             f"absolute pressure is positive; got {pressure})")
-        count = len(scene.cloths)
-        ids = list(range(count)) if cloths is None else [int(c) for c in np.ravel(cloths)]
-        if not ids or len(set(ids)) != len(ids) or min(ids) < 0 or max(ids) >= count:
-            raise SceneError(f"cloths must be distinct indices into the scene's {count} cloths "
-                             f"(got {cloths!r})")
-        x, volumes = scene.positions, []
-        for k in ids:
-            closed_surface(scene.cloths[k].triangles, f"cloth {k}")
-            volumes.append(enclosed_volume(x, scene.cloths[k].triangles))
-        if rest_volume is not None:
-            given = np.ravel(np.asarray(rest_volume, dtype=np.float64))
-            if given.shape != (len(ids),) or not np.all(given > 0):
-                raise SceneError(f"rest_volume must be {len(ids)} volume(s) > 0, m^3 "
-                                 f"(got {rest_volume!r})")
-            volumes = [float(v) for v in given]
-        for k, v in zip(ids, volumes):
-            if abs(v) < 1e-12:
-                raise SceneError(f"cloth {k} encloses no volume (|V| = {abs(v):.3g} m^3)")
-        return {"pressure": pressure, "ambient": ambient, "cloths": ids,
-                "rest_volume": np.array(volumes)}
-
-    def build(self, model, settings):
-        """Triangles wound outward (a chamber wound inward is turned over), their chamber
-        ids and each chamber's (P0 V0, P_a, V0) as fields (f64)."""
-        scene, x = model.scene, model.scene.positions
-        tris, chamber = [], []
-        for c, k in enumerate(settings["cloths"]):
-            t = scene.cloths[k].triangles
-            if enclosed_volume(x, t) < 0:
-                t = t[:, ::-1]
-            tris.append(t)
-            chamber.append(np.full(len(t), c))
-        tris, chamber = np.concatenate(tris), np.concatenate(chamber)
-        model.pressure_triangles = ti.Vector.field(3, ti.i32, shape=len(tris))
-        model.pressure_triangles.from_numpy(tris.astype(np.int32))
-        model.pressure_chamber = ti.field(ti.i32, shape=len(tris))
-        model.pressure_chamber.from_numpy(chamber.astype(np.int32))
-        gas = gas_table(settings)
-        model.pressure_gas = ti.Vector.field(3, ti.f64, shape=len(gas))
-        model.pressure_gas.from_numpy(gas)
-        model.pressure_start, model.pressure_entries = incidence(tris, model.particle_count)
-        return settings
-
-    def floor(self, settings, scene):
-        """The potential's least value (J): U is least at V = P0 V0 / P_a; None (no
-        floor) without ambient pressure."""
-        if settings["ambient"] == 0.0:
-            return None
-        gas = gas_table(settings)
-        return potential(gas, gas[:, 0] / gas[:, 1])
+from .base import ConstantMatrix, Term, add_or_set
 
 
 @ti.kernel
@@ -183,18 +70,24 @@ def _volumes(term: ti.template(), x: ti.template()):
 class Pressure(Term):
     """The enclosed gas of the scene's chambers (``Scene.set_pressure``)."""
     name = "pressure"
-    feature = PressureFeature()
+    feature = PRESSURE
     implicit = "potential"
     projective = "force"
+    provides = frozenset({"couplings", "constant_matrix", "constraints"})
+    # exact: ``add_product`` multiplies by the exact Hessian (backward Euler's truncated
+    # Newton-CG on exact_hessian), else by the rank-one part; jacobi: ``diagonal_block`` is
+    # the bound for a Jacobi update (VBD)
+    options = {"exact": False, "jacobi": False}
 
     @staticmethod
     def present(model):
         return model.pressure is not None
 
-    def __init__(self, model):
-        self.tris, self.chamber = model.pressure_triangles, model.pressure_chamber
-        self.gas = model.pressure_gas
-        self.start, self.entries = model.pressure_start, model.pressure_entries
+    def __init__(self, model, exact=False, jacobi=False):
+        pressure = model.pressure
+        self.tris, self.chamber, self.gas = pressure.triangles, pressure.chamber, pressure.gas
+        self.inv_mass = model.inv_mass
+        self.start, self.entries = pressure.start, pressure.entries
         count, n, real = self.gas.shape[0], model.particle_count, runtime.real()
         # per chamber (f64): V; sum |x_a| |x_b x x_c| / 6 (the scale of V's rounding);
         # S = sum |g_i|; g . v (``add_product``); XPBD's applied pressure, dV/dq / h^2 and
@@ -206,11 +99,7 @@ class Pressure(Term):
         # dV/dx_i at the substep's start
         self.grad_v, self.x_at, self.grad_start = (
             ti.Vector.field(3, real, shape=n) for _ in range(3))
-        # whether ``add_product`` multiplies by the exact Hessian (backward Euler's
-        # truncated Newton-CG sets it, before its first product) or by the rank-one part;
-        # whether ``diagonal_block`` is the bound for a Jacobi update (VBD sets it)
-        self.exact = False
-        self.jacobi = False
+        self.exact, self.jacobi = bool(exact), bool(jacobi)
 
     def batch_obstacle(self):
         if not serial(self.tris):
@@ -371,10 +260,7 @@ class Pressure(Term):
                     if ti.static(self.exact):
                         coupled -= ti.cast(self.held[c][1], float) * \
                             self.normal_derivative(p, self.x_at, v)
-            if ti.static(first):
-                out[p] = coupled
-            else:
-                out[p] += coupled
+            add_or_set(out, p, coupled, first)
 
     def add_product(self, v, out, first):
         """out += (= when ``first``) the Hessian at the prepared x (exact, or its rank-one
@@ -388,7 +274,7 @@ class Pressure(Term):
     # -- XPBD ------------------------------------------------------------------------------
     @ti.func
     def zero_multipliers(self, x):
-        """No pressure applied yet, and g_s at the substep's start positions x."""
+        """XPBD: no pressure applied yet, and g_s at the substep's start positions x."""
         ti.loop_config(serialize=ti.static(serial(self.lam)))
         for c in range(self.lam.shape[0]):
             self.lam[c] = 0
@@ -397,11 +283,13 @@ class Pressure(Term):
             self.grad_start[p] = self.volume_gradient(p, x)
 
     @ti.func
-    def project(self, x, inv_mass, h):
-        """One Newton step on each chamber's applied pressure q = p(V(x)) (module docstring),
-        from the current x: with w = sum_i w_i g_i . g_s,i (dV/dq = h^2 w),
-        dq = (p(V) - q) / (1 + h^2 k w), x_i += h^2 w_i g_s,i dq, q += dq."""
+    def constraint_pass(self, x, x_prev, h):
+        """XPBD: one Newton step on each chamber's applied pressure q = p(V(x)) (module
+        docstring), from the current x: with w = sum_i w_i g_i . g_s,i (dV/dq = h^2 w),
+        dq = (p(V) - q) / (1 + h^2 k w), x_i += h^2 w_i g_s,i dq, q += dq. The gradients
+        g_s are those of the substep's start (``zero_multipliers``), not of x_prev."""
         gas, volume, weight = ti.static(self.gas, self.volume, self.weight)
+        inv_mass = ti.static(self.inv_mass)
         self.chamber_volumes(x)
         ti.loop_config(serialize=ti.static(serial(weight)))
         for c in range(weight.shape[0]):
@@ -425,9 +313,14 @@ class Pressure(Term):
             if c >= 0:
                 x[p] += inv_mass[p] * ti.cast(self.dlam[c], float) * self.grad_start[p]
 
+    @ti.func
+    def constraint_pass_in_order(self, x, x_prev, h):
+        """``constraint_pass`` inside a batch (the same loops, on its one thread)."""
+        self.constraint_pass(x, x_prev, h)
+
 
 @ti.data_oriented
-class GasStiffness:
+class GasStiffness(ConstantMatrix):
     """Projective dynamics' stand-in for the gas's Hessian: its rank-one part k0 g0 g0^T at
     the step's start (``update``), positive semi-definite and all of it a coupling of
     CG's products (``diagonal`` 0: projective builds its diagonal once per dt)."""
@@ -436,10 +329,7 @@ class GasStiffness:
         self.pressure = pressure
         self.diagonal = ti.field(runtime.real(), shape=pressure.grad_v.shape[0])
 
-    def set_step(self, h):
-        """The stand-in does not depend on h."""
-
-    varies = True      # projective calls ``update`` at each step's start
+    varies = True
 
     def update(self, x0):
         """k0 and g0 at the step's start positions x0."""

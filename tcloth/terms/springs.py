@@ -1,6 +1,7 @@
-"""Springs: f_ij = -(k_s (|x_ij| - l0) + k_d v_ij . d) d, d = x_ij / |x_ij| (lecture 4),
-on the ends of each spring; potential k_s/2 (|x_ij| - l0)^2 (energy()["spring"]). The
-damping acts along the spring, so linear and angular momentum are conserved.
+"""Springs: f_ij = -(k_s (|x_ij| - l0) + k_d v_ij . d) d, d = x_ij / |x_ij|, on particle i
+and -f_ij on particle j of each spring (i, j), with x_ij = x_i - x_j and v_ij = v_i - v_j;
+potential k_s/2 (|x_ij| - l0)^2 (energy()["spring"]). The damping acts along the spring,
+so linear and angular momentum are conserved.
 
 Two layouts give the same forces: a regular cloth grid (``grid.py``) is evaluated by a
 neighbour stencil, each spring once by the particle that owns it and then gathered (no
@@ -18,9 +19,10 @@ import taichi as ti
 
 from .. import grid as grid_layout
 from .. import runtime
+from ..graph import csr_layout
 from ..grid import OWNED
 from ..runtime import cpu, serial
-from .base import Term
+from .base import ColouredConstraints, Term
 
 
 # -- one spring -------------------------------------------------------------------------------
@@ -250,25 +252,29 @@ def add_incremental(
 
 
 @ti.data_oriented
-class Springs(Term):
-    """The scene's springs: grid stencils for cloth grids, a list for the rest.
+class Springs(Term, ColouredConstraints):
+    """The scene's springs: grid stencils for cloth grids, a list for the rest; for XPBD
+    (``constraints=True``) compliant distance constraints (``project_constraint``).
 
     Attributes (besides the model's spring fields it reads):
         grids: the model's GridBlocks; spring_grids: indices of those with springs.
         sets_forces: the first grid with springs holds every particle, so its gather can
             set the force accumulator with the first term's force (``grid_springs``).
         first: None, or (where ``sets_forces``) the per-particle term whose force the
-            first grid's gather sets; ``Forces`` chooses it.
+            first grid's gather sets: the ``lead`` it was built with (``Forces`` builds
+            the springs with the gravity-and-drag term as their lead where they can).
     """
     name = "spring"
     implicit = "potential"
     projective = "force"
+    provides = frozenset({"constraints"})
+    options = {"constraints": False}
 
     @staticmethod
     def present(model):
         return model.spring_count > 0
 
-    def __init__(self, model):
+    def __init__(self, model, lead=None, constraints=False):
         self.model = model
         self.count, self.list_count = model.spring_count, model.list_spring_count
         self.pairs, self.rest = model.spring_pairs, model.spring_rest
@@ -277,10 +283,35 @@ class Springs(Term):
         self.spring_grids = [k for k, g in enumerate(self.grids) if any(g.families)]
         first = self.grids[self.spring_grids[0]] if self.spring_grids else None
         self.sets_forces = first is not None and first.covers(model.particle_count)
-        self.first = None
+        if lead is not None and not self.sets_forces:
+            raise ValueError("the springs' gather sets no forces here: it cannot lead with "
+                             f"{type(lead).__name__}")
+        self.first = lead
         self._grid_forces = None
         self._adjacency = None
         self._implicit = None
+        if constraints:
+            self.inv_mass = model.inv_mass
+            self.constraints_begin(self.pairs.to_numpy()[:self.count], model.particle_count, 1)
+
+    @ti.func
+    def project_constraint(self, x, x_prev, h, s):
+        """Spring s as the constraint C = |x_ij| - l0 with compliance 1 / k_s and damping
+        k_d (``integrators/xpbd.py``)."""
+        i, j = self.pairs[s][0], self.pairs[s][1]
+        wi, wj = self.inv_mass[i], self.inv_mass[j]
+        d = x[i] - x[j]
+        length = d.norm()
+        if length > 0.0 and self.ks[s] > 0.0 and wi + wj > 0.0:
+            n = d / length
+            alpha = 1.0 / (self.ks[s] * h * h)
+            gamma = self.kd[s] / (self.ks[s] * h)
+            rate = n.dot((x[i] - x_prev[i]) - (x[j] - x_prev[j]))
+            dlam = (-(length - self.rest[s]) - alpha * self.lam[s] - gamma * rate) \
+                / ((1.0 + gamma) * (wi + wj) + alpha)
+            x[i] += wi * dlam * n
+            x[j] -= wj * dlam * n
+            self.lam[s] += dlam
 
     def grid_forces(self):
         """The stencil's scratch: the forces of the 6 springs each particle owns."""
@@ -329,17 +360,14 @@ class Springs(Term):
         if self._adjacency is None:
             n = self.model.particle_count
             pairs = self.pairs.to_numpy()[:self.count].astype(np.int64)
-            ends = np.concatenate([pairs[:, 0], pairs[:, 1]])
+            start, order = csr_layout(np.concatenate([pairs[:, 0], pairs[:, 1]]), n)
             rows = np.tile(np.arange(self.count), 2)
             others = np.concatenate([pairs[:, 1], pairs[:, 0]])
-            order = np.argsort(ends, kind="stable")
-            start = np.zeros(n + 1, dtype=np.int32)
-            np.cumsum(np.bincount(ends, minlength=n), out=start[1:])
-            adj = ti.Vector.field(2, ti.i32, shape=max(len(ends), 1))
-            if len(ends):
+            adj = ti.Vector.field(2, ti.i32, shape=max(len(order), 1))
+            if len(order):
                 adj.from_numpy(np.stack([rows[order], others[order]], axis=1).astype(np.int32))
             first = ti.field(ti.i32, shape=n + 1)
-            first.from_numpy(start)
+            first.from_numpy(start.astype(np.int32))
             self._adjacency = (first, adj)
         return self._adjacency
 

@@ -1,0 +1,109 @@
+"""``Scene.set_membrane`` and the model's membrane triangles (``tcloth.terms.membrane`` has
+the energy: Baraff & Witkin's stretch and shear conditions)."""
+import numpy as np
+
+from ..errors import SceneError
+from ..graph import element_fields
+from ..validate import as_per_item, as_warp_weft_per
+from .base import Feature, cloth_selection
+
+
+def triangle_frames(triangles, rest):
+    """(b (T,3,2), area (T,)) of triangles (T,3) at rest positions (N,3): the weights of
+    f_u, f_v (``tcloth.terms.membrane``) and the rest areas. SceneError for a degenerate
+    one."""
+    tris = np.asarray(triangles, dtype=np.int64)
+    e1, e2 = rest[tris[:, 1]] - rest[tris[:, 0]], rest[tris[:, 2]] - rest[tris[:, 0]]
+    normal = np.cross(e1, e2)
+    double = np.linalg.norm(normal, axis=1)
+    scale = max(float(np.max(np.linalg.norm(e1, axis=1), initial=0.0)), 1e-300)
+    bad = np.flatnonzero(double <= 1e-12 * scale * scale)
+    if len(bad):
+        raise SceneError(f"the membrane needs triangles of positive area: triangle "
+                         f"{tris[bad[0]].tolist()} is degenerate at its rest positions")
+    n = normal / double[:, None]
+    u = np.array([1.0, 0.0, 0.0]) - n[:, :1] * n
+    faces_x = np.linalg.norm(u, axis=1) < 0.5
+    u[faces_x] = np.array([0.0, 1.0, 0.0]) - n[faces_x, 1:2] * n[faces_x]
+    u /= np.linalg.norm(u, axis=1)[:, None]
+    v = np.cross(n, u)
+    D = np.stack([np.stack([np.sum(e1 * u, 1), np.sum(e2 * u, 1)], 1),
+                  np.stack([np.sum(e1 * v, 1), np.sum(e2 * v, 1)], 1)], 1)
+    inv = np.linalg.inv(D)                    # (T, 2, 2); f = [e1 e2] inv: rows weight e1, e2
+    b = np.stack([-(inv[:, 0] + inv[:, 1]), inv[:, 0], inv[:, 1]], 1)
+    return b, 0.5 * double
+
+
+class MembraneData:
+    """The model's membrane (``model.membrane``): its triangles as fields.
+
+    Attributes:
+        count: the number of triangles T.
+        triangles: (T,) vec3 i32 particle ids.
+        weights: (T,) 3 x 2: each corner's weights b of f_u, f_v (``triangle_frames``).
+        coefficients: (T,) vec4: (A C_u, A C_v, A G, beta), A the rest area.
+        start, entries: each particle's (triangle, slot) pairs in CSR form
+            (``graph.incidence``).
+    """
+
+    def __init__(self, ids, weights, coefficients, n):
+        (self.triangles, self.weights, self.coefficients, self.start,
+         self.entries) = element_fields(ids, n, weights, coefficients)
+        self.count = len(ids)
+
+
+class MembraneFeature(Feature):
+    """``Scene.set_membrane``: the cloths with a triangle membrane, their stiffnesses and
+    rest positions; the model's ``MembraneData``."""
+    name, method = "membrane", "set_membrane"
+
+    def set(self, scene, stretch, shear, damping=0.0, cloths=None, rest_positions=None):
+        """Give cloths membrane elasticity on their triangles: stretch stiffness along warp
+        and weft and shear stiffness, independent of each other and of the triangles'
+        shapes (``tcloth.terms.membrane``: Baraff & Witkin's conditions as an energy).
+        Replaces any earlier call; ``add_mesh_cloth(fabric=...)`` adds its cloth to the
+        ones set.
+
+        Args:
+            stretch: N/m > 0 per width: one number, a (warp, weft) pair (warp along the
+                world x axis projected into each triangle), or a (len(cloths), 2) array.
+            shear: N/m > 0 per width: one number or one per cloth.
+            damping: each condition's damping as a ratio of critical of an edge's two
+                masses against the stiffer stretch, >= 0: one number or one per cloth.
+            cloths: indices into ``scene.cloths`` (default: every cloth).
+            rest_positions: None (the scene's positions now), or (N,3) positions of all
+                the scene's particles at which the cloths are unstrained.
+        Returns:
+            dict of the settings.
+        """
+        ids, rest = cloth_selection(scene, cloths, rest_positions)
+        stretches = as_warp_weft_per("stretch", stretch, len(ids), strict=True)
+        shears = as_per_item("shear", shear, len(ids), minimum=0.0, strict=True)
+        dampings = as_per_item("damping", damping, len(ids), minimum=0.0)
+        for k in ids:
+            triangle_frames(scene.cloths[k].triangles, rest)
+        return {"stretch": stretches, "shear": shears, "damping": dampings, "cloths": ids,
+                "rest_positions": rest}
+
+    def build(self, model, settings):
+        """The chosen cloths' triangles, their weights and coefficients at their rest
+        positions (``MembraneData``)."""
+        scene = model.scene
+        rest, masses = settings["rest_positions"], scene.masses
+        ids, weights, coefficients = [], [], []
+        for k, (cu, cv), g, zeta in zip(settings["cloths"], settings["stretch"],
+                                        settings["shear"], settings["damping"]):
+            tris = scene.cloths[k].triangles
+            b, area = triangle_frames(tris, rest)
+            # an edge's two masses (each a third of the triangle's) against the stiffer
+            # stretch: beta = 2 zeta sqrt(m_reduced / k)
+            reduced = masses[tris].mean(axis=1) / 2.0
+            beta = 2.0 * zeta * np.sqrt(reduced / max(cu, cv))
+            ids.append(tris)
+            weights.append(b)
+            coefficients.append(np.stack([area * cu, area * cv, area * g, beta], 1))
+        return MembraneData(np.concatenate(ids), np.concatenate(weights),
+                            np.concatenate(coefficients), model.particle_count)
+
+
+MEMBRANE = MembraneFeature()
