@@ -5,24 +5,26 @@ import os
 # unless the user asks for it.
 os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "False")
 
-from . import cli, features  # noqa: E402,F401  (after the environment default above)
-from .errors import (ConvergenceWarning, DeviceWarning, InstabilityError, SceneError,
-                     StaleSimulatorError)
-from .mesh import export_mesh, write_obj, write_ply
-from .camera import Camera
-from .render import Renderer, render
-from .runtime import device, init
-from .builders import Cloth, MeshCloth, Rope
-from .fabric import Fabric
-from .objfile import load_obj
-from .scene import Scene
-from .simulator import Simulator
-from .video import record, write_png
-from .version import __version__
-from .viewer import view
+from . import features, moved  # noqa: E402  (after the environment default above)
+from .app import cli  # noqa: E402
+from .errors import (ConvergenceWarning, DeviceWarning, InstabilityError,  # noqa: E402
+                     SceneError, StaleSimulatorError)
+from .render.camera import Camera  # noqa: E402
+from .render.mesh import export_mesh, write_obj, write_ply  # noqa: E402
+from .render.render import Renderer, render  # noqa: E402
+from .render.video import record, write_png  # noqa: E402
+from .runtime import device, init  # noqa: E402
+from .scene.builders import Cloth, MeshCloth, Rope  # noqa: E402
+from .scene.fabric import Fabric  # noqa: E402
+from .scene.objfile import load_obj  # noqa: E402
+from .scene.scene import Scene  # noqa: E402
+from .sim.simulator import Simulator  # noqa: E402
+from .version import __version__  # noqa: E402
+from .viewer import view  # noqa: E402
 
+moved.install()
 
-__all__ = ["cli", "init", "device", "Scene", "Cloth", "MeshCloth", "Rope", "Fabric", "load_obj", "Simulator", "SceneError", "InstabilityError", "ConvergenceWarning", "DeviceWarning",
+__all__ = ["cli", "init", "device", "Scene", "Cloth", "MeshCloth", "Rope", "Fabric", "load_obj",
+           "Simulator", "SceneError", "InstabilityError", "ConvergenceWarning", "DeviceWarning",
            "StaleSimulatorError", "Camera", "Renderer", "render", "record", "write_png",
-           "export_mesh", "write_obj", "write_ply", "view",
-           "__version__"]
+           "export_mesh", "write_obj", "write_ply", "view", "__version__"]

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import tcloth
-from tcloth.script import load_script
+from tcloth.app.script import load_script
 
 SCENES = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "scenes")
 

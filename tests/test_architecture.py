@@ -98,6 +98,68 @@ def test_model_and_scene_stay_upstream():
     assert reaches({"a": {"b"}, "b": {"c"}, "c": set()}, "a") == {"b", "c"}
 
 
+# The rooms of tcloth/ by layer, lowest first (docs/architecture.md): a module reaches,
+# directly or through others, only modules of its own layer and the layers before it.
+LAYERS = [
+    {"errors", "runtime", "validate", "version", "graph", "vulkan_probe", "moved"},
+    {"geometry"},
+    {"scene"},
+    {"contact"},
+    {"features"},
+    {"model"},
+    {"terms"},
+    {"integrators"},
+    {"sim"},
+    {"render"},
+    {"viewer", "app", "__main__", "tcloth"},
+]
+
+
+def layer(module):
+    """The index in LAYERS of a tcloth module's room (its first name below tcloth)."""
+    parts = module.split(".")
+    room = parts[1] if len(parts) > 1 else "tcloth"
+    return next(k for k, rooms in enumerate(LAYERS) if room in rooms)
+
+
+def test_every_module_reaches_only_its_layer_and_those_below():
+    graph = import_graph()
+    upward = {m: sorted(d for d in reaches(graph, m) if layer(d) > layer(m)) for m in graph}
+    assert not {m: d for m, d in upward.items() if d}
+    # transitive: the model reaching a term through a feature module counts
+    toy = {"tcloth.model.model": {"tcloth.features.x"}, "tcloth.features.x": {"tcloth.terms.y"},
+           "tcloth.terms.y": set()}
+    assert [d for d in reaches(toy, "tcloth.model.model") if layer(d) > layer("tcloth.model")] \
+        == ["tcloth.terms.y"]
+
+
+def test_every_top_level_module_sits_in_a_room():
+    """Only the base layer's modules, the package's entry points and the rooms (packages)
+    sit at the top of tcloth/."""
+    top = {name.split(".")[1] for name in modules() if name.count(".") >= 1}
+    rooms = set().union(*LAYERS)
+    assert top <= rooms, sorted(top - rooms)
+
+
+def test_old_module_paths_give_the_moved_modules():
+    """The first layout's module names still import (issue 45's rooms), as the very module
+    at its new place, saying where it went."""
+    import importlib
+    import sys
+    import warnings
+    from tcloth import moved
+    for old, new in moved.MOVED.items():
+        sys.modules.pop(old, None)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            module = importlib.import_module(old)
+        assert module is importlib.import_module(new), old
+        assert [str(w.message) for w in caught if w.category is DeprecationWarning] == \
+            [f"{old} has moved to {new}"], old
+    assert moved.new_name("tcloth.sweep.engine") == "tcloth.app.sweep.engine"
+    assert moved.new_name("tcloth.terms") is None
+
+
 def test_no_file_is_over_500_lines():
     long = {path: n for path in modules().values()
             if (n := sum(1 for _ in open(path))) > 500}
@@ -120,7 +182,7 @@ def test_the_model_keeps_each_feature_on_its_own_object(f32):
     Model's docstring names; the model has no loose ``<feature>_*`` attributes."""
     import tcloth
     from tcloth.features import FEATURES
-    from tcloth.model import Model
+    from tcloth.model.model import Model
     scene = tcloth.Scene()
     scene.add_cloth(resolution=(4, 4), size=(0.3, 0.3), structural=(100.0, 0.0),
                     shear=(10.0, 0.0), flexion=None)

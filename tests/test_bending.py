@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import tcloth
-from tcloth.builders import Cloth
-from tcloth.hinges import cloth_hinges, hinge_table
+from tcloth.scene.builders import Cloth
+from tcloth.scene.hinges import cloth_hinges, hinge_table
 
 TOOLS = Path(__file__).resolve().parents[1] / "tools"
 _spec = importlib.util.spec_from_file_location("cantilever", TOOLS / "cantilever.py")

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 import tcloth
-from tcloth import cli
+from tcloth.app import cli
 from tcloth.contact.stage import STATS
-from tcloth.script import build_scene, describe, load_script
+from tcloth.app.script import build_scene, describe, load_script
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 G = 9.81
@@ -202,7 +202,7 @@ def test_a_bad_build_parameter_is_named(tmp_path):
     script = tmp_path / "picky.py"
     script.write_text("def build(n=3):\n    return [0, 1, 2][n]\n")
     module, _ = load_script(str(script))
-    with pytest.raises(tcloth.script.ScriptError, match=r"build\(n=7\) raised IndexError"):
+    with pytest.raises(tcloth.app.script.ScriptError, match=r"build\(n=7\) raised IndexError"):
         build_scene(module, str(script), {"n": 7})
 
 

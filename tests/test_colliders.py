@@ -4,8 +4,8 @@ import pytest
 import taichi as ti
 
 import tcloth
-from tcloth.collider_table import ColliderTable
-from tcloth.shapes import SHAPES
+from tcloth.model.collider_table import ColliderTable
+from tcloth.geometry.shapes import SHAPES
 from tcloth.terms.colliders import Colliders
 from tcloth import SceneError
 

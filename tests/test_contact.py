@@ -193,7 +193,7 @@ def test_displacement_bounds_keep_any_moves_inside_them_crossing_free(f64):
     import bench_self_collision as bsc
     from tcloth.contact.bounds import GAMMA, DisplacementBounds
     from tcloth.contact.topology import contact_topology
-    from tcloth.script import load_script
+    from tcloth.app.script import load_script
     module = load_script(os.path.join(HERE, "..", "scenes", "fold.py"))[0]
     x40, v40 = bsc.folded_state(module, os.path.join(HERE, "..", "tools", "data",
                                                      "fold_40x40.npz"))

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import tcloth
-from tcloth.fabric import PRESETS
+from tcloth.scene.fabric import PRESETS
 
 TOOLS = Path(__file__).resolve().parents[1] / "tools"
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import tcloth
-from tcloth.camera import Camera
+from tcloth.render.camera import Camera
 from tcloth.viewer import Controls, OrbitCamera, pick
 
 

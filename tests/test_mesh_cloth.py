@@ -4,8 +4,10 @@ import numpy as np
 import pytest
 
 import tcloth
-from tcloth import SceneError, primitives
-from tcloth.builders import fan, mesh_springs
+from tcloth import SceneError
+from tcloth.geometry import primitives
+from tcloth.render.mesh import cloth_mesh
+from tcloth.scene.builders import fan, mesh_springs
 
 
 FORMS = """# every accepted line form
@@ -64,7 +66,7 @@ def test_export_then_load_round_trips_the_deformed_cloth(f32, tmp_path):
     scene.add_cloth(resolution=(6, 5), pinned=[(0, 0)])
     sim = tcloth.Simulator(scene, dt=1e-3)
     sim.step(50)
-    vertices, faces = tcloth.mesh.cloth_mesh(sim)
+    vertices, faces = cloth_mesh(sim)
     path = str(tmp_path / "cloth.obj")
     tcloth.export_mesh(sim, path)
     v2, f2 = tcloth.load_obj(path)

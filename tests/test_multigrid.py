@@ -3,7 +3,7 @@ coarse operators, V-cycle convergence to the exact solution, pinned nodes."""
 import numpy as np
 import pytest
 
-from tcloth.grid import stencil as grid_stencil
+from tcloth.model.grid import stencil as grid_stencil
 from tcloth.integrators import block_multigrid, galerkin, multigrid
 
 PROVOT = grid_stencil((True, True, True))

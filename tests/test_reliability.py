@@ -177,7 +177,7 @@ def test_render_keeps_good_frames_when_the_run_blows_up(tmp_path):
 
 
 def hanging_cloth():
-    return tcloth.script.load_script(os.path.join(ROOT, "scenes", "hanging_cloth.py"))[0].build()
+    return tcloth.app.script.load_script(os.path.join(ROOT, "scenes", "hanging_cloth.py"))[0].build()
 
 
 @pytest.mark.parametrize("integrator,dt_over_limit", [
@@ -189,7 +189,7 @@ def test_a_blow_up_keeps_a_state_that_looks_like_the_cloth(integrator, dt_over_l
     forward Euler at the scene's own dt (0.39 of symplectic Euler's limit) blows up too,
     and its hint speaks of damped springs, which it has."""
     tcloth.init(precision="f32")
-    dt = dt_over_limit * tcloth.stability.explicit_dt_limit(hanging_cloth())
+    dt = dt_over_limit * tcloth.scene.stability.explicit_dt_limit(hanging_cloth())
     kept = []
     for batch in (True, False):
         sim = tcloth.Simulator(hanging_cloth(), integrator, dt=dt, batch=batch)

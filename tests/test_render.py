@@ -10,8 +10,8 @@ import pytest
 
 import tcloth
 from tcloth import Camera
-from tcloth.framing import ground_and_checker
-from tcloth.render import COLLIDER_ID, LIGHT_DIR
+from tcloth.render.framing import ground_and_checker
+from tcloth.render.render import COLLIDER_ID, LIGHT_DIR
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RED, GREEN, BLUE = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)
@@ -228,14 +228,14 @@ def test_a_script_without_config_gets_a_stable_real_time_step(f32, tmp_path):
     keeps real time too."""
     script = tmp_path / "bare.py"
     script.write_text(CONFIGLESS)
-    module, cfg = tcloth.script.load_script(str(script))
+    module, cfg = tcloth.app.script.load_script(str(script))
     scene = module.build()
-    dt, steps = tcloth.script.timing(cfg, scene)
-    assert dt < tcloth.stability.explicit_dt_limit(scene)
+    dt, steps = tcloth.app.script.timing(cfg, scene)
+    assert dt < tcloth.scene.stability.explicit_dt_limit(scene)
     assert steps * dt == pytest.approx(1 / 30, rel=1e-12)
     tcloth.Simulator(scene, cfg["integrator"], dt=dt).step(30 * steps)
-    assert tcloth.script.timing({**cfg, "dt": 1e-4}, scene) == (1e-4, 333)
-    assert tcloth.script.timing({**cfg, "integrator": "backward_euler"}, scene)[1] == 4
+    assert tcloth.app.script.timing({**cfg, "dt": 1e-4}, scene) == (1e-4, 333)
+    assert tcloth.app.script.timing({**cfg, "integrator": "backward_euler"}, scene)[1] == 4
     with pytest.raises(tcloth.InstabilityError):
         tcloth.Simulator(scene, "symplectic_euler", dt=1e-3).step(400)
 

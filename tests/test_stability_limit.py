@@ -1,10 +1,10 @@
-"""tcloth.stability: omega_max against closed forms, and the power iteration against the
+"""tcloth.scene.stability: omega_max against closed forms, and the power iteration against the
 dense eigenvalues."""
 import numpy as np
 import pytest
 
 import tcloth
-from tcloth import stability
+from tcloth.scene import stability
 
 
 def test_two_masses_one_spring():

@@ -10,7 +10,7 @@ import sys
 import numpy as np
 import pytest
 
-from tcloth.sweep import SpecError, load_spec
+from tcloth.app.sweep import SpecError, load_spec
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SCENE = os.path.join(ROOT, "tests", "data", "sweep_scene.py")
@@ -212,7 +212,7 @@ def test_plots_keep_markers_and_labels_readable(tmp_path, monkeypatch):
     off the axes' edges, and a series with one stable point saying so, not 'order nan'."""
     import json
     import matplotlib.figure
-    from tcloth.sweep import plots
+    from tcloth.app.sweep import plots
     spec = load_spec(os.path.join(ROOT, "docs", "sweeps", "hanging_cloth.toml"))
     rows = []
     for c in spec.cases():

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import tcloth
-from tcloth.render import Renderer
+from tcloth.render.render import Renderer
 from tcloth.viewer import PANEL_WIDTH, DisplayError, check_vulkan
 
 from conftest import SCENES, scene_module
@@ -71,7 +71,7 @@ def test_the_window_draws_resting_cloth_out_of_its_collider(kind):
     45 points a triangle), so no face of the collider's mesh can show through it."""
     from test_colliders import numpy_sdf
     from test_render import wrapped_cloth
-    from tcloth.drawables import DrawnCloth
+    from tcloth.render.drawables import DrawnCloth
     from tcloth.viewer.meshes import collider_mesh
     tcloth.init(arch="cpu")
     sim = tcloth.Simulator(wrapped_cloth(kind, 0.005))
@@ -97,7 +97,7 @@ def test_the_window_draws_resting_cloth_out_of_its_collider(kind):
 def test_drawn_cloth_on_a_flat_face_and_on_cloth_is_where_its_particles_are():
     """A cloth lying flat on a box's top face at the thickness and a second one 1.2 cm
     above it are drawn at their particles: flat triangles do not cut into a flat face."""
-    from tcloth.drawables import DrawnCloth
+    from tcloth.render.drawables import DrawnCloth
     tcloth.init(arch="cpu")
     scene = tcloth.Scene(gravity=(0, 0, 0))
     for side, height in ((0.6, 0.055), (0.4, 0.067)):

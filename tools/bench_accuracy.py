@@ -22,8 +22,8 @@ import argparse
 import os
 
 from benchcsv import write_csv
-from tcloth.sweep import Runner, load_spec
-from tcloth.sweep.plots import order, scene_size, work_precision
+from tcloth.app.sweep import Runner, load_spec
+from tcloth.app.sweep.plots import order, scene_size, work_precision
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 # label -> (integrator, options); backward Euler also with its Newton and CG tolerances

@@ -35,7 +35,7 @@ import numpy as np
 
 import tcloth
 from crossings import count_crossings, triangle_edges
-from tcloth.script import load_script
+from tcloth.app.script import load_script
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 SCENES = os.path.join(HERE, "..", "scenes")

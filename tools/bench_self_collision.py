@@ -43,7 +43,7 @@ import time
 import numpy as np
 
 import tcloth
-from tcloth.script import load_script
+from tcloth.app.script import load_script
 from benchcsv import write_csv
 
 HERE = os.path.dirname(os.path.abspath(__file__))

@@ -30,10 +30,10 @@ import os
 import numpy as np
 
 from benchcsv import write_csv
-from tcloth.script import load_script
-from tcloth.stability import omega_max
-from tcloth.sweep import Runner, load_spec
-from tcloth.sweep.plots import stability_map
+from tcloth.app.script import load_script
+from tcloth.scene.stability import omega_max
+from tcloth.app.sweep import Runner, load_spec
+from tcloth.app.sweep.plots import stability_map
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 SCENE = os.path.join(HERE, "sweeps", "stability_cloth.py")

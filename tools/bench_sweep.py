@@ -18,7 +18,7 @@ import time
 import numpy as np
 
 from bench_stability import stability_map_spec
-from tcloth.sweep import run_sweep
+from tcloth.app.sweep import run_sweep
 
 
 def timed(map_spec, workers):

@@ -21,7 +21,7 @@ import time
 import numpy as np
 
 import tcloth
-from tcloth.script import load_script
+from tcloth.app.script import load_script
 from tcloth.viewer import Viewer
 
 HERE = os.path.dirname(os.path.abspath(__file__))

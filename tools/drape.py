@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 import tcloth
-from tcloth.fabric import PRESETS
+from tcloth.scene.fabric import PRESETS
 
 SCENE = Path(__file__).resolve().parents[1] / "scenes" / "drape.py"
 

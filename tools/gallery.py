@@ -9,7 +9,7 @@ import os
 import sys
 
 import tcloth
-from tcloth.script import load_script
+from tcloth.app.script import load_script
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 # scene -> simulated seconds of its still

@@ -25,7 +25,8 @@ import os
 import numpy as np
 
 import tcloth
-from tcloth.script import load_script
+from tcloth.app.script import load_script
+from tcloth.scene.scene import KIND_CODE
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 SCENES = os.path.join(HERE, "..", "scenes")
@@ -42,7 +43,7 @@ def scale_structural(scene, factor):
     """Multiply the structural springs' constant k_s by ``factor`` (a real change, for the
     tolerance test); the scene's structural springs must share one k_s."""
     springs = scene.springs
-    ks = np.unique(springs["stiffness"][springs["kind"] == tcloth.scene.KIND_CODE["structural"]])
+    ks = np.unique(springs["stiffness"][springs["kind"] == KIND_CODE["structural"]])
     if len(ks) != 1:
         raise ValueError(f"the structural springs have {len(ks)} constants, not one")
     scene.set_spring_parameters("structural", stiffness=float(ks[0]) * factor)

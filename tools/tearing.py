@@ -25,7 +25,7 @@ import numpy as np
 
 import tcloth
 from tcloth.integrators.base import substep_count
-from tcloth.stability import gershgorin_dt
+from tcloth.scene.stability import gershgorin_dt
 
 SOLVERS = {
     "backward_euler": ("backward_euler", {"newton_iterations": 50}),

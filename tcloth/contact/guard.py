@@ -41,7 +41,7 @@ are left as they are.
 import taichi as ti
 
 from ..runtime import serial
-from ..shapes import SHAPES
+from ..geometry.shapes import SHAPES
 from .broad import gap
 from .search import POINT_TRIANGLE
 

@@ -19,7 +19,7 @@ result as ``scene.<feature name>`` (None until it is called).
 """
 import functools
 
-from ..scene import Scene
+from ..scene.scene import Scene
 from .attraction import ATTRACTION
 from .bending import BENDING
 from .membrane import MEMBRANE

@@ -5,7 +5,7 @@ import taichi as ti
 
 from .. import runtime
 from ..graph import element_fields
-from ..hinges import cloth_hinges
+from ..scene.hinges import cloth_hinges
 from ..validate import as_warp_weft_per
 from .base import Feature, cloth_selection
 

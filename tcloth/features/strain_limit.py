@@ -4,7 +4,7 @@ import numpy as np
 import taichi as ti
 
 from ..errors import SceneError
-from ..scene import KIND_CODE, SPRING_KINDS
+from ..scene.scene import KIND_CODE, SPRING_KINDS
 from ..validate import as_int, as_scalar, fmt
 from .base import Feature
 

@@ -3,9 +3,9 @@ substep count."""
 import math
 from types import MappingProxyType
 
-from .. import stability
+from ..scene import stability
 from ..errors import SceneError
-from ..forces import Forces
+from ..terms.forces import Forces
 
 
 def check_substeps(name, substeps, scene):

@@ -16,7 +16,7 @@ Pinned particles' rows and columns are filtered out (Baraff & Witkin's filtered 
 """
 import taichi as ti
 
-from .. import grid as grid_layout
+from ..model import grid as grid_layout
 from .. import runtime
 from ..runtime import serial
 from ..terms import springs as spring_term

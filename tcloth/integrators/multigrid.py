@@ -37,8 +37,8 @@ import taichi as ti
 from .. import runtime
 from ..errors import SceneError
 from . import linalg
-from .galerkin import (COARSEST_NODES, PAD, coarse_size, coarse_stencil, dense_matrix,
-                       galerkin, smoothing_weight)
+from .galerkin import (COARSEST_NODES, PAD, coarse_size, coarse_stencil, dense_matrix, galerkin,
+                       smoothing_weight)
 
 
 @ti.data_oriented

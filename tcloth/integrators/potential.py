@@ -14,7 +14,7 @@ import taichi as ti
 
 from .. import runtime
 from .. import terms as term_modules
-from ..forces import Forces
+from ..terms.forces import Forces
 from ..runtime import serial
 
 

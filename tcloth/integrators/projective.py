@@ -48,10 +48,10 @@ Pinned particles follow x0 + h v0.
 import numpy as np
 import taichi as ti
 
-from .. import grid as grid_layout
+from ..model import grid as grid_layout
 from .. import runtime
 from .. import terms as term_modules
-from ..forces import Forces
+from ..terms.forces import Forces
 from ..runtime import serial
 from ..terms.colliders import Colliders
 from ..terms.springs import grid_spring_sum, owned_grid_springs

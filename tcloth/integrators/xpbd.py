@@ -41,7 +41,7 @@ import taichi as ti
 from .. import runtime
 from .. import terms as term_modules
 from ..errors import SceneError
-from ..forces import Forces
+from ..terms.forces import Forces
 from ..runtime import serial
 from ..terms.colliders import Colliders
 from .base import Integrator, check_substeps, substep_count

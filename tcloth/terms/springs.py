@@ -17,10 +17,10 @@ constant matrix.
 import numpy as np
 import taichi as ti
 
-from .. import grid as grid_layout
+from ..model import grid as grid_layout
 from .. import runtime
 from ..graph import csr_layout
-from ..grid import OWNED
+from ..model.grid import OWNED
 from ..runtime import cpu, serial
 from .base import ColouredConstraints, Term
 

@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 
-from ..camera import Camera
+from ..render.camera import Camera
 
 PICK_ANGLE = 0.05           # rad: the farthest a picked particle may be from the cursor ray
 

@@ -8,7 +8,7 @@ import time
 import numpy as np
 
 from ..errors import InstabilityError
-from ..scene import KIND_CODE, SPRING_KINDS
+from ..scene.scene import KIND_CODE, SPRING_KINDS
 from ..validate import as_int
 from .camera import pick
 

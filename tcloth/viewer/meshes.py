@@ -2,8 +2,8 @@
 time (the shape's own ``mesh`` in ``shapes.SHAPES``, moved with the collider)."""
 import numpy as np
 
-from ..primitives import tiles
-from ..shapes import shape_of
+from ..geometry.primitives import tiles
+from ..geometry.shapes import shape_of
 
 
 def vertex_normals(x, triangles):

@@ -11,12 +11,12 @@ import time
 
 import numpy as np
 
-from ..camera import Camera
-from ..drawables import DrawnCloth, cloth_palette, particle_spheres
+from ..render.camera import Camera
+from ..render.drawables import DrawnCloth, cloth_palette, particle_spheres
 from ..errors import SceneError
 from ..integrators import INTEGRATORS
-from ..framing import ground_and_checker
-from ..render import COLLIDER_COLOUR, PARTICLE_COLOUR
+from ..render.framing import ground_and_checker
+from ..render.render import COLLIDER_COLOUR, PARTICLE_COLOUR
 from .camera import OrbitCamera
 from .controls import Controls, contact_lines
 from .display import DisplayError, check_display

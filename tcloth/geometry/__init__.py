@@ -1,0 +1,3 @@
+"""Shapes in space: the collider shapes (``shapes.py``: signed distance, ray hit, normal,
+mesh; one ``Shape`` entry each), triangle meshes of primitives (``primitives.py``) and
+ray casting against triangles (``raycast.py``)."""

@@ -1,0 +1,483 @@
+"""Simulator: a Scene turned into a Model, two States and an integrator."""
+import numpy as np
+
+from . import batch, checkpoint
+from .. import runtime
+from .budget import EnergyBudget
+from .constraints import StrainLimiter
+from .diagnostics import Diagnostics
+from ..errors import SceneError
+from ..features.wind import wind_velocity
+from .instability import StepCheck
+from ..integrators import INTEGRATORS
+from ..model.model import Model
+from ..runtime import serial_count
+from ..scene.scene import Scene
+from ..terms.grab import GrabSpring
+from ..validate import as_int, as_points, as_scalar, as_vec3
+
+def _integrator_class(name):
+    if name not in INTEGRATORS:
+        raise SceneError(f"integrator must be one of {sorted(INTEGRATORS)} (got {name!r})")
+    return INTEGRATORS[name]
+
+
+def _index(name, value, n):
+    """value as an int in [0, n), or SceneError naming ``name``."""
+    i = as_int(name, value, 0)
+    if i >= n:
+        raise SceneError(f"{name} must be in [0, {n}) (got {value!r})")
+    return i
+
+
+def _default_grab_stiffness(scene):
+    for k in (scene.mean_stiffness("structural"), scene.mean_stiffness()):
+        if k is not None:
+            return k
+    return 100.0
+
+
+class Simulator:
+    """Advance a scene in time.
+
+    Args:
+        scene: a tcloth.Scene.
+        integrator: a name in ``tcloth.integrators.INTEGRATORS``: "forward_euler",
+            "symplectic_euler" (default), "verlet", "rk4" (explicit); "backward_euler",
+            "projective" (implicit); "vbd", "xpbd" (real-time solvers).
+        dt: time step, s, > 0.
+        grid_stencil: evaluate cloth springs with the per-particle grid stencil (default)
+            rather than the spring list; both give the same forces.
+        position_bound, velocity_bound: a step that leaves |x_k| <= position_bound (m,
+            default 1e6) or |v_k| <= velocity_bound (m/s, default 1e8) in any coordinate
+            raises InstabilityError, as does any non-finite value, and a step that leaves
+            the scene with more energy (kinetic, gravitational and stored: springs,
+            hinges, membrane, pressure, contacts) than it can supply (``budget.py``: the
+            energy at the last baseline plus what wind, moving colliders and moving pins
+            can add, plus a margin of the scene's energy scale).
+        strain_bound: a step that stretches a spring or a membrane triangle beyond this
+            strain (default 1.0: twice its rest length, beyond any woven or knitted
+            fabric's breaking strain) raises InstabilityError; None switches it off
+            (rubber bands, soft ropes).
+        energy_bound: apply that energy budget (default True); False leaves only the
+            non-finite values and the two bounds (to study how an integrator's energy
+            grows, as forward Euler's does on undamped springs).
+        strain_limiting: apply the scene's strain limit (default True; see
+            ``set_strain_limiting``).
+        colliders_off: indices into ``scene.colliders`` of colliders switched off
+            (see ``set_collider_enabled``).
+        grab: build the grab spring (``grab``/``release``: the viewer's mouse drag);
+            without it nothing of it is compiled or launched.
+        batch: let ``step(n)`` run its n substeps in one kernel launch where the scene
+            allows (default True; ``fusion()`` says whether it does, and why not). The
+            results are the same numbers either way.
+        **options: the integrator's own options.
+
+    Live changes (the viewer's controls) keep the state and recompile nothing, except a
+    new integrator: ``set_integrator``, ``set_dt``, ``set_gravity``, ``set_air_drag``,
+    ``set_air_damping``, ``set_springs``, ``set_wind``, ``set_collider_enabled``,
+    ``set_strain_limiting``, ``grab``/``release``. Scene values they change are changed
+    in ``scene`` too, and the switches are settings, so a checkpoint saved afterwards
+    continues the changed run.
+    """
+
+    def __init__(self, scene, integrator="symplectic_euler", dt=1e-3, grid_stencil=True,
+                 position_bound=1e6, velocity_bound=1e8, strain_bound=1.0, energy_bound=True,
+                 strain_limiting=True, colliders_off=(), grab=False, batch=True, **options):
+        if not isinstance(scene, Scene):
+            raise SceneError(f"scene must be a tcloth.Scene (got {type(scene).__name__})")
+        integrator_class = _integrator_class(integrator)
+        self.dt = as_scalar("dt", dt, minimum=0.0, strict=True)
+        self.position_bound = as_scalar("position_bound", position_bound, 0.0, strict=True)
+        self.velocity_bound = as_scalar("velocity_bound", velocity_bound, 0.0, strict=True)
+        self.strain_bound = (None if strain_bound is None else
+                             as_scalar("strain_bound", strain_bound, 0.0, strict=True))
+        self.integrator_name = integrator
+        off = sorted({_index("collider index", i, len(scene.colliders)) for i in colliders_off})
+        self.settings = {"grid_stencil": bool(grid_stencil),
+                         "position_bound": self.position_bound,
+                         "velocity_bound": self.velocity_bound,
+                         "strain_bound": self.strain_bound,
+                         "energy_bound": bool(energy_bound),
+                         "strain_limiting": bool(strain_limiting), "colliders_off": off,
+                         "grab": bool(grab), "batch": bool(batch)}
+        self.model = Model(scene, grid_stencil=bool(grid_stencil), colliders_off=off,
+                           grab=GrabSpring() if grab else None)
+        self.precision = runtime.precision()
+        self.integrator = integrator_class(self.model, **options)
+        self._generation = self.model.generation
+        self._states = [self.model.state(), self.model.state()]
+        limit = self.model.strain_limit
+        self._limiter = (StrainLimiter(self.model) if limit is not None and limit.count
+                         else None)
+        self.diagnostics = Diagnostics(self.model)
+        self.budget = EnergyBudget(self.model, bool(energy_bound))
+        self._checker = StepCheck(self)
+        self.num_steps = 0
+        self._time_base, self._step_base = 0.0, 0      # the time at step _step_base
+        self._batch_start = None                        # a batch's start state (batch.py)
+        self._batch_kernels = {}     # (integrator, limiter, State) -> its batch kernel
+        self._fusion = None          # (fusion(),) once computed; reset by the live changes
+        self._contact = self.model.contact
+        if self._contact is not None:
+            self._contact.refresh(self.state.x)
+        self._rebase()
+
+    @property
+    def scene(self):
+        return self.model.scene
+
+    @property
+    def state(self):
+        """The current State (Taichi fields)."""
+        return self._states[0]
+
+    @property
+    def time(self):
+        """Simulated time, s (dt may have changed along the way: ``set_dt``)."""
+        return self._time_base + (self.num_steps - self._step_base) * self.dt
+
+    def _check(self):
+        runtime.check_generation(self._generation)
+
+    def step(self, n=1):
+        """Advance n steps of dt. Raises InstabilityError on a bad step, keeping the last
+        good state. Where ``fusion()`` is None the n steps run in one kernel launch."""
+        self._check()
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
+            raise SceneError(f"n must be an integer >= 0 (got {n!r})")
+        limiter = self._limiter if self.settings["strain_limiting"] else None
+        if n and self.fusion() is None:
+            self._step_batch(int(n), limiter)
+            return
+        for _ in range(int(n)):
+            s_in, s_out = self._states
+            self.integrator.simulate(self.model, s_in, s_out, self.dt)
+            if limiter is not None:
+                limiter.apply(s_out, self.dt)
+                self.integrator.invalidate()
+            if self._contact is not None and self._contact.end_step(
+                    s_in.x, s_out.x, s_out.v, s_in.t, self.dt):
+                self.integrator.invalidate()
+            t_end = self.time + self.dt
+            self._see_gust(t_end)
+            error = self._checker.verify(s_out, self.num_steps)
+            if error is not None:
+                raise error
+            self._states.reverse()
+            self.num_steps += 1
+            self.state.t = self.time
+
+    def fusion(self):
+        """None where ``step(n)`` runs its n substeps in one kernel launch (``batch.py``),
+        else the reason why it launches kernels for every substep (one line)."""
+        self._check()
+        if self._fusion is None:
+            self._fusion = (self._why_not_batched(),)
+        return self._fusion[0]
+
+    def _why_not_batched(self):
+        if not self.settings["batch"]:
+            return "batches are switched off (Simulator(..., batch=False))"
+        if not runtime.cpu():
+            return (f"on {runtime.arch_name()} the loops of a step run in parallel, which a "
+                    "batch's one thread would not")
+        if not self.integrator.batched:
+            return (f"integrator '{self.integrator_name}' steps from Python (its solver "
+                    "decides between launches)")
+        n = self.model.particle_count
+        if not serial_count(n):
+            return f"the {n} particles' loops run on several threads"
+        why = self.integrator.batch_obstacle()
+        if why is None and self._limiter is not None and self.settings["strain_limiting"]:
+            why = self._limiter.batch_obstacle()
+        return why
+
+    def _step_batch(self, n, limiter):
+        """n steps in one launch (``batch.py``), whose kernel checks every substep's
+        particles and kinetic and gravitational energy; the stored energy and the strain
+        are checked at the end, and where they fail the steps run again one at a time
+        from the batch's start to find the first bad one. An integrator whose step costs
+        many force passes (``Integrator.checked_steps``: VBD, XPBD) runs one step a launch,
+        each checked whole."""
+        a, b = self._states
+        if self._batch_start is None:
+            self._batch_start = self.model.state()
+        key = (self.integrator, limiter, a)
+        if key not in self._batch_kernels:
+            self._batch_kernels[key] = batch.kernel(
+                self.integrator, limiter, self._contact, self.budget, a, b,
+                self._batch_start, self.position_bound, self.velocity_bound)
+        run = self._batch_kernels[key]
+        fresh = 0 if self.integrator.holds_forces(a) else 1
+        args = (fresh, self._time_base, self.num_steps - self._step_base, self.dt)
+        done, error = n, None
+        if self.integrator.checked_steps:
+            done, error = self._checked_steps(run, a, n, args)
+            code = -1
+        else:
+            code = run(n, *args)
+        if code >= 0:
+            done, bad = divmod(code, 2 * self.model.particle_count)
+            # a holds the bad state: checked whole, its stored energy in the message; the
+            # steps before it again, each checked whole (the kernel checked S only)
+            error = (self._checker.verify(a, self.num_steps + done)
+                     or self._checker.error(self.num_steps + done, bad))
+            self._restore_batch_start(a)
+            done, earlier = self._checked_steps(run, a, done, args)
+            error = earlier or error
+        elif error is None and self._checker.verify(a, self.num_steps + n - 1) is not None:
+            self._restore_batch_start(a)
+            done, error = self._checked_steps(run, a, n, args)
+        self.num_steps += done
+        self.state.t = self.time
+        swept = self._contact is not None and self._contact.batch_cuts[1] > 0
+        if limiter is None and error is None and not swept:
+            self.integrator.adopt_forces(self.state)
+        else:
+            self.integrator.invalidate()
+        if error is not None:
+            raise error
+
+    def _restore_batch_start(self, a):
+        for name in ("x", "v", "f"):
+            getattr(a, name).copy_from(getattr(self._batch_start, name))
+
+    def time_at(self, steps):
+        """The time after ``steps`` steps in all (at the current dt since its last change)."""
+        return self._time_base + (steps - self._step_base) * self.dt
+
+    def _checked_steps(self, run, a, n, args):
+        """n steps of the batch kernel ``run`` one at a time, each state checked with its
+        stored energy and strain. Returns (good steps, the InstabilityError of the first
+        bad one or None), State a at the last good state."""
+        fresh, time_base, before, dt = args
+        for k in range(n):
+            run(1, fresh, time_base, before + k, dt)       # keeps a's state as the start
+            error = self._checker.verify(a, self.num_steps + k)
+            if error is not None:
+                self._restore_batch_start(a)
+                return k, error
+            fresh = 1 if self._contact is not None and self._contact.batch_cuts[1] > 0 else 0
+        return n, None
+
+    def _see_gust(self, t):
+        """A callable gust's speed at t into the energy budget (its fastest so far)."""
+        wind = self.model.wind
+        if wind is not None and wind.settings["callable"] is not None:
+            if self.budget.see_wind(float(np.linalg.norm(wind_velocity(wind.settings, t)))):
+                self._rebase()
+
+    def _rebase(self):
+        """A new energy baseline at the current state (``budget.py``): after a change
+        that adds or removes energy from outside the equations of motion."""
+        state = self.state
+        self.budget.rebase(self.diagnostics.energy(state), runtime.to_numpy(state.x),
+                            runtime.to_numpy(state.v), self.time,
+                            self.settings["colliders_off"])
+
+    def positions(self):
+        """(N,3) NumPy copy of the positions, m."""
+        self._check()
+        return runtime.to_numpy(self.state.x)
+
+    def velocities(self):
+        """(N,3) NumPy copy of the velocities, m/s."""
+        self._check()
+        return runtime.to_numpy(self.state.v)
+
+    def forces(self):
+        """(N,3) total force on each particle at the current state, N."""
+        self._check()
+        self.integrator.forces_at(self.state)
+        return runtime.to_numpy(self.state.f)
+
+    def set_state(self, positions=None, velocities=None):
+        """Overwrite positions and/or velocities ((N,3) each)."""
+        self._check()
+        n = self.model.particle_count
+        npr = runtime.numpy_real()
+        for name, value, field in (("positions", positions, self.state.x),
+                                   ("velocities", velocities, self.state.v)):
+            if value is None:
+                continue
+            arr = as_points(name, value)
+            if arr.shape != (n, 3):
+                raise SceneError(f"{name} must have shape ({n}, 3) (got {arr.shape})")
+            field.from_numpy(arr.astype(npr))
+        self.integrator.invalidate()
+        if self._contact is not None:
+            self._contact.refresh(self.state.x)
+        self._rebase()
+
+    def reset(self, dt=None):
+        """Back to the scene's initial positions and velocities at t = 0, optionally with a
+        new time step dt (s, > 0): the same compiled simulator runs again (studies over dt
+        need no recompilation)."""
+        self._check()
+        if dt is not None:
+            self.dt = as_scalar("dt", dt, minimum=0.0, strict=True)
+        self.num_steps = 0
+        self._time_base, self._step_base = 0.0, 0
+        self.state.t = 0.0
+        if self._contact is not None:
+            self._contact.reset_stats()          # a new run counts from zero
+        self.set_state(self.scene.positions, self.scene.velocities)
+
+    # -- live changes ------------------------------------------------------------------------
+    def set_integrator(self, integrator, **options):
+        """Continue with another integrator (and options) from the current state, on the
+        same model (its kernels compile on first use)."""
+        self._check()
+        self.integrator = _integrator_class(integrator)(self.model, **options)
+        self.integrator_name = integrator
+        self._batch_kernels.clear()
+        self._fusion = None
+
+    def set_integrator_options(self, **changes):
+        """Change the integrator's live options (``Integrator.set_options``: e.g. VBD's,
+        XPBD's and projective's iterations) from the next step on, keeping its compiled
+        kernels; the batches, which compile options in, compile again."""
+        self._check()
+        self.integrator.set_options(**changes)
+        self._batch_kernels.clear()
+        self._fusion = None
+
+    def set_dt(self, dt):
+        """Continue with time step dt (s, > 0); the time so far is kept."""
+        self._check()
+        dt = as_scalar("dt", dt, minimum=0.0, strict=True)
+        self._time_base, self._step_base = self.time, self.num_steps
+        self.dt = dt
+
+    def set_gravity(self, gravity):
+        """Gravity (3,), m/s^2, from now on."""
+        self.scene.gravity = as_vec3("gravity", gravity)
+        self._parameters_changed()
+
+    def set_air_drag(self, air_drag):
+        """The viscous air drag c >= 0 (N s/m): force -c v on every particle, from now on."""
+        self.scene.air_drag = as_scalar("air_drag", air_drag, minimum=0.0)
+        self._parameters_changed()
+
+    def set_air_damping(self, air_damping):
+        """The mass-proportional air damping gamma >= 0 (1/s): force -gamma m_p v on
+        particle p, the same at every resolution, from now on."""
+        self.scene.air_damping = as_scalar("air_damping", air_damping, minimum=0.0)
+        self._parameters_changed()
+
+    def set_springs(self, kind, stiffness=None, damping=None):
+        """Stiffness k_s (N/m) and/or damping k_d (N s/m) of every spring of one kind
+        ("structural", "shear", "flexion", "custom") from now on."""
+        self.scene.set_spring_parameters(kind, stiffness, damping)
+        self._parameters_changed()
+
+    def set_wind(self, velocity):
+        """The mean wind velocity (3,), m/s, of a scene with wind, from now on."""
+        if self.model.wind is None:
+            raise SceneError("the scene has no wind (Scene.set_wind before the Simulator is "
+                             "made: tcloth view --wind adds a still one)")
+        self.scene.wind["velocity"] = as_vec3("velocity", velocity)
+        self._parameters_changed()
+
+    def set_collider_enabled(self, index, enabled):
+        """Switch collider ``scene.colliders[index]`` on or off (off: no force, energy or
+        friction; the viewer hides it)."""
+        index = _index("collider index", index, len(self.scene.colliders))
+        off = set(self.settings["colliders_off"]) - {index}
+        if not enabled:
+            off.add(index)
+        self.settings["colliders_off"] = sorted(off)
+        self._parameters_changed()
+
+    def set_strain_limiting(self, enabled):
+        """Apply the scene's strain limit after each step (True) or not."""
+        self.settings["strain_limiting"] = bool(enabled)
+        self._fusion = None
+
+    def _parameters_changed(self):
+        self._check()
+        self._fusion = None
+        self.model.refresh(self.settings["colliders_off"])
+        self.integrator.parameters_changed()
+        self._rebase()
+
+    def grab(self, particle, target, stiffness=None, damping=None):
+        """Pull particle ``particle`` towards ``target`` (3,) m with a zero-rest-length
+        spring (``terms/grab.py``) until ``release``; the simulator must be made with
+        grab=True. stiffness (N/m) defaults to the mean structural spring stiffness (the
+        mean of all springs without structural ones, 100 N/m without springs); damping
+        (N s/m) to critical for the particle, 2 sqrt(k m)."""
+        self._check()
+        if self.model.grab is None:
+            raise SceneError("this simulator has no grab spring: make it with "
+                             "Simulator(..., grab=True)")
+        particle = _index("particle", particle, self.model.particle_count)
+        if self.scene.pinned[particle]:
+            raise SceneError(f"particle {particle} is pinned and cannot be grabbed")
+        target = as_vec3("target", target)
+        k = _default_grab_stiffness(self.scene) if stiffness is None else \
+            as_scalar("stiffness", stiffness, minimum=0.0)
+        c = 2.0 * np.sqrt(k * self.scene.masses[particle]) if damping is None else \
+            as_scalar("damping", damping, minimum=0.0)
+        self.model.grab.hold(particle, target, k, c)
+        self.integrator.invalidate()
+        self._rebase()
+
+    def release(self):
+        """Let go of the grabbed particle (nothing happens when none is held)."""
+        self._check()
+        if self.model.grab is not None:
+            self.model.grab.release()
+            self.integrator.invalidate()
+            self._rebase()
+
+    @property
+    def grabbed(self):
+        """None, or dict(particle, target, stiffness, damping) of the grab spring."""
+        self._check()
+        return None if self.model.grab is None else self.model.grab.held()
+
+    def save(self, path):
+        """Write scene, settings and state to ``path`` (.npz), atomically."""
+        self._check()
+        checkpoint.save(self, path)
+
+    @classmethod
+    def load(cls, path):
+        """A Simulator continuing exactly where the saved one stopped (bit for bit on the
+        CPU where the kernels are deterministic: grid stencils and scenes below
+        SERIAL_BELOW particles). The current precision must match the checkpoint's."""
+        return checkpoint.load(cls, path)
+
+    def energy(self):
+        """dict of energies, J: kinetic, spring, gravity, contact, total."""
+        self._check()
+        return self.diagnostics.energy(self.state)
+
+    def momentum(self):
+        """(linear (3,), angular about the origin (3,))."""
+        self._check()
+        return self.diagnostics.momentum(self.state)
+
+    def contact_stats(self):
+        """dict of the contact stage's statistics (``contact.stage.STATS`` says what each
+        key counts; {} in a scene without self-collision or colliders) and the active
+        self-contacts ("point_triangle", "edge_edge") and collider contacts ("collider":
+        free particles within a collider's thickness)."""
+        self._check()
+        if self._contact is None:
+            return {}
+        return {**self._contact.contact_stats(), **self.self_contacts(),
+                "collider": self.diagnostics.collider_contacts(self.state)}
+
+    def self_contacts(self):
+        """{"point_triangle": n, "edge_edge": m}: the self-contacts closer than the
+        thickness at the current state (both 0 without ``Scene.set_self_collision``)."""
+        self._check()
+        return self.diagnostics.self_contacts(self.state)
+
+    def max_strain(self):
+        """Max over springs of (length - rest) / rest."""
+        self._check()
+        return self.diagnostics.max_strain(self.state)
