@@ -10,8 +10,8 @@ Its drape coefficient is the shadow's share of the ring outside the support
 import numpy as np
 
 import tcloth
-from tcloth.fabric import preset
-from tcloth.primitives import disc
+from tcloth.scene.fabric import preset
+from tcloth.geometry.primitives import disc
 from tcloth.validate import as_int, as_scalar
 
 CONFIG = {

@@ -4,7 +4,7 @@ The mesh, scenes/assets/round_tablecloth.obj, has rings of vertices, finer towar
 import os
 
 import tcloth
-from tcloth.primitives import disc
+from tcloth.geometry.primitives import disc
 
 CONFIG = {
     "integrator": "symplectic_euler",
