@@ -1,9 +1,10 @@
 """What docs/architecture.md promises about the code's shape: the imports of tcloth's
-modules form no cycle (read from the source, function-level imports included), nothing the
-model reaches (directly or through the modules it imports) is a term or an integrator,
-nothing the scene reaches is those or the model, and no file is over 500 lines; and that
-every term's feature is registered and the model keeps each feature's data on its own
-object."""
+modules form no cycle (read from the source, function-level imports included), every
+module reaches (directly or through the modules it imports) only its own layer and those
+below (LAYERS: nothing the model reaches is a term or an integrator, nothing the scene
+reaches is those or the model), the first layout's module names still import, no file is
+over 500 lines and no function over 80; and that every term's feature is registered and
+the model keeps each feature's data on its own object."""
 import ast
 import os
 
@@ -163,6 +164,13 @@ def test_old_module_paths_give_the_moved_modules():
 def test_no_file_is_over_500_lines():
     long = {path: n for path in modules().values()
             if (n := sum(1 for _ in open(path))) > 500}
+    assert not long, long
+
+
+def test_no_function_is_over_80_lines():
+    long = {f"{path}:{node.name}": node.end_lineno - node.lineno + 1
+            for path in modules().values() for node in ast.walk(ast.parse(open(path).read()))
+            if isinstance(node, ast.FunctionDef) and node.end_lineno - node.lineno >= 80}
     assert not long, long
 
 

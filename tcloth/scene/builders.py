@@ -148,19 +148,10 @@ def mesh_springs(faces, triangles):
     return {"structural": structural, "shear": shear, "flexion": flexion}
 
 
-def add_mesh_cloth(scene, vertices, faces, mass, structural, shear, flexion, pinned,
-                   fabric=None):
-    """``Scene.add_mesh_cloth``: particles at the vertices, springs from the faces (a
-    fabric's: the triangle membrane and hinge bending, ``fabric.py``)."""
-    fabric = None if fabric is None else fabrics.preset(fabric)
-    given = classic(fabric, mass=mass, structural=structural, shear=shear, flexion=flexion)
-    if isinstance(vertices, (str, os.PathLike)):
-        if faces is not None:
-            raise SceneError("give either a path or vertices and faces (got a path and faces)")
-        vertices, faces = load_obj(vertices)
-    x = as_points("vertices", vertices)
-    if faces is None or len(faces) == 0:
-        raise SceneError("faces must list at least one face (got none)")
+def _mesh_faces(x, faces):
+    """(the faces as tuples of vertex ids, their fan triangles (T,3), each vertex's share
+    of the faces' area) of a mesh with vertices x, every face checked: ids in range, no
+    repeat, no zero area, no vertex outside every face."""
     n = len(x)
     checked = []
     for k, face in enumerate(faces):
@@ -187,6 +178,24 @@ def add_mesh_cloth(scene, vertices, faces, mass, structural, shear, flexion, pin
     lonely = np.flatnonzero(vertex_area == 0.0)
     if len(lonely):
         raise SceneError(f"vertex {lonely[0]} is in no face (every vertex must be)")
+    return checked, triangles, vertex_area
+
+
+def add_mesh_cloth(scene, vertices, faces, mass, structural, shear, flexion, pinned,
+                   fabric=None):
+    """``Scene.add_mesh_cloth``: particles at the vertices, springs from the faces (a
+    fabric's: the triangle membrane and hinge bending, ``fabric.py``)."""
+    fabric = None if fabric is None else fabrics.preset(fabric)
+    given = classic(fabric, mass=mass, structural=structural, shear=shear, flexion=flexion)
+    if isinstance(vertices, (str, os.PathLike)):
+        if faces is not None:
+            raise SceneError("give either a path or vertices and faces (got a path and faces)")
+        vertices, faces = load_obj(vertices)
+    x = as_points("vertices", vertices)
+    if faces is None or len(faces) == 0:
+        raise SceneError("faces must list at least one face (got none)")
+    n = len(x)
+    checked, triangles, vertex_area = _mesh_faces(x, faces)
     springs = mesh_springs(checked, triangles)      # refuses a mesh that is not manifold
     if fabric is not None:
         masses = fabric.density * vertex_area
