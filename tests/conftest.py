@@ -108,26 +108,34 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(pytest.mark.slow)
 
 
-def use_runtime(precision):
-    """Taichi on the CPU in PRECISION with the default loop settings, initialised again only
-    where this worker runs otherwise now (a test may call tcloth.init itself): tests in a
-    row share their compiled kernels and the simulators their modules keep."""
+# (generation, module) of the last runtime use_runtime made
+_MADE = {}
+
+
+def use_runtime(precision, module):
+    """Taichi on the CPU in PRECISION with the default loop settings for the tests of
+    MODULE (a module name): initialised again where this worker runs otherwise now, where
+    a test called tcloth.init itself, or where the runtime was made for another module.
+    A module's tests share their compiled kernels and the simulators their fixtures keep;
+    a new module starts a new program (a long-lived one would gather every earlier
+    module's fields: Taichi's CPU runtime holds a bounded number of field trees)."""
     rt = tcloth.runtime
-    if (rt.generation() == 0 or rt.precision() != precision or not rt.cpu()
-            or rt.serial_below() != rt.SERIAL_BELOW):
+    if (_MADE.get("made") != (rt.generation(), module) or rt.precision() != precision
+            or not rt.cpu() or rt.serial_below() != rt.SERIAL_BELOW):
         tcloth.init(arch="cpu", precision=precision, serial_below=rt.SERIAL_BELOW)
+        _MADE["made"] = (rt.generation(), module)
 
 
 @pytest.fixture
-def f64():
+def f64(request):
     """float64, for accuracy tests."""
-    use_runtime("f64")
+    use_runtime("f64", request.module.__name__)
 
 
 @pytest.fixture
-def f32():
+def f32(request):
     """float32, the default, where a changed rounding would show soonest."""
-    use_runtime("f32")
+    use_runtime("f32", request.module.__name__)
 
 
 def scene_module(name):

@@ -80,7 +80,7 @@ def run(scene, integrator, dt, steps, quantity):
 @pytest.fixture(scope="module")
 def references():
     """name -> (reference, its change from the start), NumPy."""
-    use_runtime("f64")
+    use_runtime("f64", __name__)
     out = {}
     for name, (make, quantity) in CASES.items():
         scene = make()

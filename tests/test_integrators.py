@@ -123,7 +123,7 @@ T_END = 0.4
 @pytest.fixture(scope="module")
 def converged():
     """An undamped nonlinear network and its end state by RK4 at a tiny dt (reference)."""
-    use_runtime("f64")
+    use_runtime("f64", __name__)
     scene = random_network(n=5, seed=11, k=(20.0, 60.0))
     ref = tcloth.Simulator(scene, "rk4", dt=T_END / 3200)
     ref.step(3200)
