@@ -138,13 +138,21 @@ def one_second(module, x40, v40, n, integrator, dt, seconds, options):
         if mode == "off":
             scene.self_collision = None
         sim = tcloth.Simulator(scene, integrator, dt=dt, **options)
-        sim.set_state(positions=x, velocities=v)
-        sim.step(4)                     # compiles the kernels of both states' alternation
-        sim.set_state(positions=x, velocities=v)
         wall, worst = 0.0, 0
-        for _ in range(int(round(seconds / dt))):
+        try:
+            sim.set_state(positions=x, velocities=v)
+            sim.step(4)                 # compiles the kernels of both states' alternation
+        except tcloth.InstabilityError:          # the cloth tore: say where, time nothing
+            out[f"{mode}_raised_at_step"] = sim.num_steps + 1
+            continue
+        sim.set_state(positions=x, velocities=v)
+        for step in range(int(round(seconds / dt))):
             t = time.perf_counter()
-            sim.step()
+            try:
+                sim.step()
+            except tcloth.InstabilityError:      # the cloth tore: say where, time no more
+                out[f"{mode}_raised_at_step"] = step + 1
+                break
             sim.positions()
             wall += time.perf_counter() - t
             if mode == "on":
@@ -158,7 +166,8 @@ def one_second(module, x40, v40, n, integrator, dt, seconds, options):
             for key in ("seconds", "failsafe_steps", "swept_searches", "rebuilds",
                         "guard_corrections", "collider_paths_cut"):
                 out[f"stage_{key}"] = stats[key]
-    out["ratio"] = out["on_wall_s"] / out["off_wall_s"]
+    if not any(key.endswith("raised_at_step") for key in out):
+        out["ratio"] = out["on_wall_s"] / out["off_wall_s"]
     return out
 
 
