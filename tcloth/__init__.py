@@ -5,7 +5,8 @@ import os
 # unless the user asks for it.
 os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "False")
 
-from . import features, moved  # noqa: E402  (after the environment default above)
+# after the environment default above; importing features gives Scene its methods
+from . import features, moved  # noqa: E402,F401
 from .app import cli  # noqa: E402
 from .errors import (ConvergenceWarning, DeviceWarning, InstabilityError,  # noqa: E402
                      SceneError, StaleSimulatorError)

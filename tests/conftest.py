@@ -109,7 +109,7 @@ def pytest_collection_modifyitems(config, items):
 
 
 # (generation, module) of the last runtime use_runtime made
-_MADE = {}
+_made = None
 
 
 def use_runtime(precision, module):
@@ -119,11 +119,12 @@ def use_runtime(precision, module):
     A module's tests share their compiled kernels and the simulators their fixtures keep;
     a new module starts a new program (a long-lived one would gather every earlier
     module's fields: Taichi's CPU runtime holds a bounded number of field trees)."""
+    global _made
     rt = tcloth.runtime
-    if (_MADE.get("made") != (rt.generation(), module) or rt.precision() != precision
+    if (_made != (rt.generation(), module) or rt.precision() != precision
             or not rt.cpu() or rt.serial_below() != rt.SERIAL_BELOW):
         tcloth.init(arch="cpu", precision=precision, serial_below=rt.SERIAL_BELOW)
-        _MADE["made"] = (rt.generation(), module)
+        _made = (rt.generation(), module)
 
 
 @pytest.fixture
