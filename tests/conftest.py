@@ -15,6 +15,11 @@ SCENES = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "scenes"
 # and .ci/run run them too. The same physics keeps a quick representative in the short set
 # (a stress case per family, the cheapest resolution or parameter).
 LONG = {
+    "test_contact::test_self_collision_does_not_hold_a_falling_cloth_back[xpbd]",
+    "test_contact::test_self_collision_does_not_hold_a_falling_cloth_back[vbd]",
+    "test_contact::test_self_collision_does_not_hold_a_falling_cloth_back[projective]",
+    "test_contact::test_the_frame_rate_solvers_keep_the_planes_inside_their_iterations[xpbd]",
+    "test_contact::test_the_frame_rate_solvers_keep_the_planes_inside_their_iterations[vbd]",
     "test_batch::test_a_batch_equals_single_steps_bit_for_bit[forward_euler]",
     "test_batch::test_a_batch_equals_single_steps_bit_for_bit[rk4]",
     "test_batch::test_a_batch_equals_single_steps_bit_for_bit[verlet]",

@@ -175,14 +175,15 @@ def passes_through_boxes(scene, x0, x1, t0, dt):
 
 
 def side(x, point, cloth):
-    """+1 or -1: the side of ``cloth`` particle ``point`` lies on, by the normal of the
-    cloth's triangle nearest to it (its centroid nearest; the winding is the cloth's
-    own, so the sign is comparable from one state to the next)."""
+    """+1 or -1: the side of ``cloth`` particle ``point`` lies on: of the plane through
+    the cloth's particles' mean whose normal is the sum of its triangles' area normals
+    (the winding is the cloth's own, so the sign is comparable from one state to the
+    next). The nearest triangle's normal, used before, flips where a cloth that bounced
+    off the other crumples, with the two cloths far apart."""
     tri = cloth.triangles
-    centroids = x[tri].mean(axis=1)
-    k = int(np.argmin(np.linalg.norm(centroids - x[point], axis=1)))
-    a, b, c = x[tri[k]]
-    return 1 if np.dot(x[point] - a, np.cross(b - a, c - a)) >= 0 else -1
+    a, b, c = x[tri[:, 0]], x[tri[:, 1]], x[tri[:, 2]]
+    normal = np.cross(b - a, c - a).sum(axis=0)
+    return 1 if np.dot(x[point] - x[cloth.particles.ravel()].mean(axis=0), normal) >= 0 else -1
 
 
 def centre(cloth):

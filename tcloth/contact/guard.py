@@ -14,7 +14,10 @@ x1. Kernels here change x1 (and v1 by the same change over dt) until that motion
     one closer than a quarter of the thickness ends the step that far apart (float32
     resolves no gap of a few ulps of the coordinates). Violated vertex pairs are
     moved apart along n in proportion to their inverse masses (Gauss-Seidel sweeps over
-    the candidates): each correction moves equal and opposite momenta, except where a
+    the candidates), and their approaching normal velocity is removed by an impulse
+    along the same directions (inelastic: a move is not turned into a velocity, which
+    at a small dt would add |move| / dt, so the guard adds no energy at any dt): each
+    correction moves equal and opposite momenta, except where a
     collider stopped one of the two this step and the correction would move it into the
     collider: then that one moves only along the collider's surface (not at all where
     that would take it far for little), and the collider takes the rest of the
@@ -32,9 +35,10 @@ x1. Kernels here change x1 (and v1 by the same change over dt) until that motion
     candidate pair is kept on its side of a plane normal to n between the pair's two
     sides at x0, placed by how fast each side approaches (planar Divide and Truncate,
     SIGGRAPH 2026), by cutting its displacement short: x1 = x0 + t (x1 - x0), t the
-    smallest over its planes of 0.9 of the fraction that reaches the plane. A vertex on
-    its side of a plane at both ends of its path is on it all along, so every pair stays
-    separated whatever the others' cuts. It conserves no momentum; the stage counts it.
+    smallest over its planes of 0.9 of the fraction that reaches the plane, and its
+    velocity scaled by the same t (no energy added). A vertex on its side of a plane at
+    both ends of its path is on it all along, so every pair stays separated whatever the
+    others' cuts. It conserves no momentum; the stage counts it.
 Pairs with no gap at x0 (touching, or a scene that started crossed) have no normal: they
 are left as they are.
 """
@@ -78,14 +82,16 @@ def _allowed(m, d):
 
 
 @ti.func
-def _correct(ids, a: ti.template(), b: ti.template(), n, delta, x1, v1, inv_mass, held,
-             inv_dt):
+def _correct(ids, a: ti.template(), b: ti.template(), n, delta, x1, v1, inv_mass, held):
     """Move vertices a and b of a candidate apart along n until n . (x_a - x_b) = delta,
-    in proportion to their inverse masses (equal and opposite momenta), their velocities
-    by the same over dt; a vertex a collider holds this step (``held``: the collider's
-    outward normal m where it stopped, else 0) moves only along the part of its
-    direction (+n for a, -n for b) that does not point into the collider (the collider
-    takes the rest). 1 if they were closer, else 0."""
+    in proportion to their inverse masses (equal and opposite momenta), and remove their
+    approaching normal velocity n . (v_a - v_b) < 0 by an impulse along the same
+    directions (an inelastic contact: a correction adds no energy at any dt, where
+    turning the move into a velocity change over dt would add |move| / dt); a vertex a
+    collider holds this step (``held``: the collider's outward normal m where it
+    stopped, else 0) moves only along the part of its direction (+n for a, -n for b)
+    that does not point into the collider (the collider takes the rest). 1 if they
+    were closer, else 0."""
     pa, pb = ids[a], ids[b]
     violation = delta - n.dot(x1[pa] - x1[pb])
     da, db = _allowed(held[pa], n), _allowed(held[pb], -n)
@@ -95,8 +101,11 @@ def _correct(ids, a: ti.template(), b: ti.template(), n, delta, x1, v1, inv_mass
         lam = violation / (wa + wb)
         x1[pa] += inv_mass[pa] * lam * da
         x1[pb] += inv_mass[pb] * lam * db
-        v1[pa] += inv_mass[pa] * lam * inv_dt * da
-        v1[pb] += inv_mass[pb] * lam * inv_dt * db
+        approach = n.dot(v1[pa] - v1[pb])
+        if approach < 0.0:
+            stop = -approach / (wa + wb)
+            v1[pa] += inv_mass[pa] * stop * da
+            v1[pb] += inv_mass[pb] * stop * db
         corrected = 1
     return corrected
 
@@ -144,7 +153,7 @@ def planes(cl: ti.template(), count: ti.i32, x0: ti.template(), x1: ti.template(
 
 
 @ti.func
-def _project_row(cl, c, x1, v1, inv_mass, held, inv_dt):
+def _project_row(cl, c, x1, v1, inv_mass, held):
     """Correct the violated vertex pairs of candidate c in place; the number corrected."""
     ids, kind = cl.ids[c], cl.kind[c]
     n, delta = cl.plane_n[c], cl.plane_delta[c]
@@ -152,17 +161,17 @@ def _project_row(cl, c, x1, v1, inv_mass, held, inv_dt):
     if delta > 0.0:
         if kind == POINT_TRIANGLE:
             for a, b in ti.static(POINT_TRIANGLE_PAIRS):
-                corrected += _correct(ids, a, b, n, delta, x1, v1, inv_mass, held, inv_dt)
+                corrected += _correct(ids, a, b, n, delta, x1, v1, inv_mass, held)
         else:
             for a, b in ti.static(EDGE_EDGE_PAIRS):
-                corrected += _correct(ids, a, b, n, delta, x1, v1, inv_mass, held, inv_dt)
+                corrected += _correct(ids, a, b, n, delta, x1, v1, inv_mass, held)
     return corrected
 
 
 @ti.kernel
 def project(cl: ti.template(), count: ti.i32, x1: ti.template(), v1: ti.template(),
-            inv_mass: ti.template(), held: ti.template(), sweeps: ti.i32,
-            inv_dt: float) -> ti.types.vector(2, ti.i32):
+            inv_mass: ti.template(), held: ti.template(),
+            sweeps: ti.i32) -> ti.types.vector(2, ti.i32):
     """Gauss-Seidel sweeps over the candidates (their ``planes``) until one corrects
     nothing, at most ``sweeps``. Returns (corrections, the sweeps run); the last sweep
     corrected nothing when fewer than ``sweeps`` ran."""
@@ -172,12 +181,60 @@ def project(cl: ti.template(), count: ti.i32, x1: ti.template(), v1: ti.template
     for _ in range(sweeps):
         corrected = 0
         for c in range(count):
-            corrected += _project_row(cl, c, x1, v1, inv_mass, held, inv_dt)
+            corrected += _project_row(cl, c, x1, v1, inv_mass, held)
         total += corrected
         ran += 1
         if corrected == 0:
             break
     return ti.Vector([total, ran])
+
+
+@ti.func
+def _separate(ids, a: ti.template(), b: ti.template(), n, delta, x, inv_mass, dx, hits):
+    """``_correct``'s move of vertices a and b, summed into dx and counted in hits
+    instead of applied (a Jacobi pass); 1 if they were closer than delta, else 0."""
+    pa, pb = ids[a], ids[b]
+    violation = delta - n.dot(x[pa] - x[pb])
+    w = inv_mass[pa] + inv_mass[pb]
+    closer = 0
+    if violation > SLACK * delta and w > 0.0:
+        lam = violation / w
+        dx[pa] += inv_mass[pa] * lam * n
+        dx[pb] -= inv_mass[pb] * lam * n
+        hits[pa] += 1
+        hits[pb] += 1
+        closer = 1
+    return closer
+
+
+@ti.kernel
+def keep_apart(cl: ti.template(), count: ti.i32, x: ti.template(), inv_mass: ti.template(),
+               dx: ti.template(), hits: ti.template()) -> ti.i32:
+    """One pass of the candidates' planes (``planes``) inside a solver's iterations: every
+    vertex pair closer along its normal than delta is moved apart as ``project`` does,
+    all pairs at once (Jacobi, in parallel), each vertex by the mean of its moves.
+    Returns how many vertex pairs were closer."""
+    ti.loop_config(serialize=ti.static(serial(x)))
+    for p in range(x.shape[0]):
+        dx[p] = ti.Vector.zero(float, 3)
+        hits[p] = 0
+    closer = 0
+    ti.loop_config(serialize=ti.static(serial(cl.ids)))
+    for c in range(count):
+        ids, kind = cl.ids[c], cl.kind[c]
+        n, delta = cl.plane_n[c], cl.plane_delta[c]
+        if delta > 0.0:
+            if kind == POINT_TRIANGLE:
+                for a, b in ti.static(POINT_TRIANGLE_PAIRS):
+                    closer += _separate(ids, a, b, n, delta, x, inv_mass, dx, hits)
+            else:
+                for a, b in ti.static(EDGE_EDGE_PAIRS):
+                    closer += _separate(ids, a, b, n, delta, x, inv_mass, dx, hits)
+    ti.loop_config(serialize=ti.static(serial(x)))
+    for p in range(x.shape[0]):
+        if hits[p] > 0:
+            x[p] += dx[p] / hits[p]
+    return closer
 
 
 @ti.kernel
@@ -214,8 +271,7 @@ def _cut(x0, x1, n, plane, side, inv_mass, t_out, p):
 
 @ti.kernel
 def truncate(cl: ti.template(), count: ti.i32, x0: ti.template(), x1: ti.template(),
-             v1: ti.template(), inv_mass: ti.template(), t_out: ti.template(),
-             inv_dt: float) -> ti.i32:
+             v1: ti.template(), inv_mass: ti.template(), t_out: ti.template()) -> ti.i32:
     """The fail-safe (module docstring): every vertex kept on its side of the dividing
     plane of every candidate with a normal (``planes``). Returns how many vertices were
     cut short."""
@@ -252,7 +308,7 @@ def truncate(cl: ti.template(), count: ti.i32, x0: ti.template(), x1: ti.templat
     for p in range(x1.shape[0]):
         if t_out[p] < 1.0:
             moved = x0[p] + t_out[p] * (x1[p] - x0[p])
-            v1[p] += (moved - x1[p]) * inv_dt
+            v1[p] *= t_out[p]
             x1[p] = moved
             cut += 1
     return cut

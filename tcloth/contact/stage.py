@@ -12,6 +12,11 @@ colliders, and updated only at named points, all called by the ``Simulator``:
     (``swept.py``); then the colliders; then, where pairs are still too close, the
     fail-safe. Afterwards the proximity list covers x1 (rebuilt at x1 if not, with
     the default skin).
+  - ``begin_solve(x0, x_pred)`` and ``follow_solve(x0, x)``: called by a solver (XPBD,
+    VBD) at a step's start and after each iteration: the candidates its iterations keep
+    on their separating planes, searched once for the predicted motion and again only
+    where an iterate leaves what was searched (``stats["solve_searches"]``); the guard
+    takes them at the step's end where they still hold its motion.
 So the proximity list always covers the current state (a rebuild at most once a step),
 and the self-contact term (explicit forces, backward Euler's potential and Hessian,
 projective's projection) and the diagnostics read it; nothing rebuilds it inside a solve
@@ -32,6 +37,7 @@ from .swept import SweptSearch, search_step
 SWEEPS = 20          # Gauss-Seidel sweeps of the pairs' projection a round
 ROUNDS = 4           # rounds of the projection and the colliders' sweep before the fail-safe
 MARGIN = 0.5         # the swept boxes' margin for the guard's moves, in thicknesses
+SOLVE_MARGIN = 2.0   # the swept boxes' margin for a solve's iterates, in thicknesses
 FAR = 1e30           # m: a reach that keeps every candidate of the proximity list
 STATS = {
     "candidates": "rows of the proximity list (pairs within thickness + skin)",
@@ -42,6 +48,9 @@ STATS = {
     "failsafe_steps": "steps that needed the fail-safe (cuts conserve no momentum)",
     "failsafe_vertices": "vertex paths the fail-safe cut short so far",
     "collider_paths_cut": "particle paths that entered a collider and were stopped",
+    "solve_searches": ("candidate searches for solvers' iterations (one at a step's start "
+                       "where the proximity list does not cover its predicted motion, and "
+                       "again where an iterate left what was searched)"),
     "seconds": ("wall time spent in the stage so far (outside batch kernels, which run "
                 "the colliders' sweep inside)"),
 }
@@ -82,6 +91,7 @@ class ContactStage:
         self.batch_cuts = ti.field(ti.i32, shape=2)
         self.stats = {key: 0 for key in STATS}
         self.stats["seconds"] = 0.0
+        self.solve_list = None      # the list a solve reads (``begin_solve``), or None
 
     # -- the proximity list ------------------------------------------------------------------
     @property
@@ -101,6 +111,35 @@ class ContactStage:
     def _cover(self, x):
         if not self.broad.covers(x):
             self.broad.build(x, self.skin)
+
+    # -- contact inside a solve ---------------------------------------------------------------
+    def begin_solve(self, x0, x_pred):
+        """The candidates a solver's iterations keep apart on a step from x0 whose
+        iterates are predicted to end near x_pred: every pair that can come within the
+        thickness on a motion from x0 whose ends lie within SOLVE_MARGIN thicknesses of
+        the boxes of x0 and x_pred (the proximity list where it covers that, else a
+        swept search), with their separating planes at x0 (``guard.planes``: a pair
+        keeps n . (x_a - x_b) >= delta). Returns (list, rows); ``follow_solve`` keeps
+        them covering the iterates, and ``end_step`` checks the step with them where
+        they still hold it."""
+        margin = SOLVE_MARGIN * self.thickness
+        if self.broad.covers(x0, x_pred):
+            cl, count = self.broad.candidates, self.broad.count
+        else:
+            self.stats["solve_searches"] += 1
+            count = search_step(self.swept, x0, x_pred, self.thickness, margin)
+            cl = self.swept.candidates
+        guard.planes(cl, count, x0, x_pred, self.thickness, FAR)
+        self.solve_list = (cl, count)
+        return cl, count
+
+    def follow_solve(self, x0, x):
+        """(list, rows) of ``begin_solve`` for the iterate x: the same while they hold the
+        motion x0 -> x, else searched again for it."""
+        cl, count = self.solve_list
+        held = (self.broad.covers(x0, x) if cl is self.broad.candidates
+                else self.swept.holds(x0, x))
+        return (cl, count) if held else self.begin_solve(x0, x)
 
     # -- the guard ---------------------------------------------------------------------------
     def end_step(self, x0, x1, v1, t0, dt):
@@ -131,6 +170,7 @@ class ContactStage:
                 changed = cut + self._resolve(cl, count, x0, x1, v1, t0, dt)
             if changed or not covered:
                 self._cover(x1)
+            self.solve_list = None
         self.stats["seconds"] += time.perf_counter() - start
         return changed > 0
 
@@ -139,7 +179,6 @@ class ContactStage:
         they changed. The projection and the sweep move particles off their paths, where
         they can meet pairs the candidates do not hold: a round whose motion the list no
         longer covers takes the candidates of the motion as it now is."""
-        inv_dt = 1.0 / dt
         changed = 0
         for round_ in range(ROUNDS):
             if round_:
@@ -149,7 +188,7 @@ class ContactStage:
                 if not cut and not guard.violations(cl, count, x1):
                     break
             corrected, sweeps = (int(v) for v in guard.project(
-                cl, count, x1, v1, self.inv_mass, self.held, SWEEPS, inv_dt))
+                cl, count, x1, v1, self.inv_mass, self.held, SWEEPS))
             self.stats["guard_corrections"] += corrected
             self.stats["guard_sweeps"] += sweeps
             changed += corrected
@@ -159,8 +198,7 @@ class ContactStage:
             cl, count = self._still_covering(cl, count, x0, x1)
             if guard.violations(cl, count, x1):
                 self.stats["failsafe_steps"] += 1
-                cut = int(guard.truncate(cl, count, x0, x1, v1, self.inv_mass, self.cut,
-                                         inv_dt))
+                cut = int(guard.truncate(cl, count, x0, x1, v1, self.inv_mass, self.cut))
                 self.stats["failsafe_vertices"] += cut
                 changed += cut + self._sweep(x0, x1, v1, t0, dt, False)
         return changed
@@ -207,9 +245,16 @@ class ContactStage:
             cl, count, covered = self.broad.candidates, self.broad.count, True
             reach = FAR
         else:
-            self.stats["swept_searches"] += 1
-            count = search_step(self.swept, x0, x1, self.thickness, MARGIN * self.thickness)
-            cl, covered, reach = self.swept.candidates, False, self.thickness
+            covered, reach = False, self.thickness
+            solved = (self.solve_list is not None
+                      and self.solve_list[0] is self.swept.candidates)
+            if solved and self.swept.holds(x0, x1):      # a solve's search holds the step
+                count = self.solve_list[1]
+            else:
+                self.stats["swept_searches"] += 1
+                count = search_step(self.swept, x0, x1, self.thickness,
+                                    MARGIN * self.thickness)
+            cl = self.swept.candidates        # after the search, which may grow the list
         guard.planes(cl, count, x0, x1, self.thickness, reach)
         return cl, count, covered
 

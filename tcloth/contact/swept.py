@@ -39,11 +39,12 @@ def _box_grids(table, capacity):
 
 class SweptSearch(CandidateSearch):
     """The swept-box candidates of one step (module docstring): ``candidates`` (a
-    ``ContactList``) and ``count``; ``anchor`` the end positions and ``margin`` the
-    margin it was searched with."""
+    ``ContactList``) and ``count``; ``origin`` and ``anchor`` the start and end positions
+    and ``margin`` the margin it was searched with."""
 
     def __init__(self, table, inv_mass):
-        self.anchor = ti.Vector.field(3, inv_mass.dtype, shape=inv_mass.shape[0])
+        self.origin, self.anchor = (ti.Vector.field(3, inv_mass.dtype, shape=inv_mass.shape[0])
+                                    for _ in range(2))
         self.margin = 0.0
         super().__init__(table, inv_mass,
                          _box_grids(table, 16 * (table.point_count + table.edge_count)))
@@ -56,10 +57,11 @@ class SweptSearch(CandidateSearch):
 
     def holds(self, x0, x1):
         """Whether the candidates still hold every pair that can come within the thickness
-        on the motion x0 -> x1 (x0: the searched start): each point's x1 within the
-        margin of the box of its searched path."""
-        return float(excess(self.table.points, x0, self.anchor, x1)) <= self.margin
-
+        on the motion x0 -> x1: both ends within the margin of the box of each point's
+        searched path (``origin`` -> ``anchor``). The boxes are convex, so the straight
+        path between the ends stays within it too."""
+        return max(float(excess(self.table.points, self.origin, self.anchor, x))
+                   for x in (x0, x1)) <= self.margin
 
 @ti.func
 def _box(x0, x1, ids: ti.template(), grow):
@@ -147,6 +149,7 @@ def search_step(swept, x0, x1, thickness, margin):
     table = swept.table
     path = float(longest_path(table.points, x0, x1))
     cell = max(float(longest_edge(table, x0)), thickness + 2.0 * margin, path / 3.0, 1e-9)
+    swept.origin.copy_from(x0)
     swept.anchor.copy_from(x1)
     swept.margin = margin
     return swept.fit(lambda: sweep_search(swept.search, swept.candidates, x0, x1, thickness,

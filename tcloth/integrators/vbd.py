@@ -21,9 +21,13 @@ are Gauss-Seidel like the springs: a vertex's gradient and block are summed over
 hinges and triangles at the current positions, and vertices sharing a hinge or a
 triangle get different colours. Self-contact couples vertices through
 the contact list, which changes every step: its gradient and diagonal blocks are evaluated
-once per iteration, before the colour passes, and held through them (a Jacobi update); the
-contact stage's guard (``contact/guard.py``) keeps the step free of crossings as for
-every integrator. Pressure couples every vertex of a chamber (``terms/pressure.py``): it
+once per iteration, before the colour passes, and held through them (a Jacobi update);
+each iteration ends keeping the contact stage's pairs on their sides of their separating
+planes (``ContactStage.begin_solve`` at the step's start with the initial guess as the
+predicted motion, searched again where an iterate leaves it; ``guard.keep_apart``), and
+Chebyshev's mix is skipped in an iteration after one whose planes moved a vertex
+(extrapolating a plane's move tore the fold at its first step); the contact stage's
+guard (``contact/guard.py``) keeps the step free of crossings as for every integrator. Pressure couples every vertex of a chamber (``terms/pressure.py``): it
 is a Jacobi term too, with diagonal blocks that bound its rank-one part so that the
 vertices' simultaneous moves do not overshoot the chamber's volume. With
 ``bounds=True`` every move is kept inside its vertex's conservative displacement bound
@@ -44,6 +48,7 @@ import numpy as np
 import taichi as ti
 
 from ..contact.bounds import DisplacementBounds
+from ..contact.guard import keep_apart
 from ..errors import SceneError
 from ..graph import colour_graph, colour_order, csr_layout
 from ..runtime import serial
@@ -84,8 +89,8 @@ class VBD(ForceCache, Integrator):
         cloth through cloth and the contact guard has almost nothing to do, but the
         bounds, set by the proximity list's reach, cap how far a particle moves a step,
         which holds falling cloth back (docs/realtime.md, "Why the bounds are off by
-        default"). Off, the guard keeps the step free of crossings as for every other
-        integrator.
+        default"). Off (the default), the iterations keep the stage's pairs on their
+        separating planes instead, which caps only motion toward a neighbour.
 
     A step leaves its net force m (v - v0) / h in the state's force accumulator, for the
     adaptive guess of the next (like Verlet's cached forces, dropped when the state is
@@ -126,13 +131,17 @@ class VBD(ForceCache, Integrator):
         self.mass, self.params = model.mass, model.params
         self.order, self.colour_start = self._colouring(n)
         self.colours = len(self.colour_start) - 1
-        self.prev, self.prev2, self.contact_grad, self.v_start = (
-            ti.Vector.field(3, real, shape=n) for _ in range(4))
+        self.prev, self.prev2, self.contact_grad, self.v_start, self.dx = (
+            ti.Vector.field(3, real, shape=n) for _ in range(5))
+        self.hits = ti.field(ti.i32, shape=n)
         stage = model.contact
         self.bounds = (DisplacementBounds(stage.broad, model.inv_mass)
                        if opt["bounds"] and stage is not None and stage.broad is not None
                        else None)
         self.bounded = self.bounds is not None
+        # with self-collision and no bounds, the stage's pairs kept on their planes
+        self.stage = (stage if not self.bounded and stage is not None
+                      and stage.broad is not None else None)
         self.track_potential = False
         self.stats = {}
         if self.has_springs:
@@ -190,6 +199,8 @@ class VBD(ForceCache, Integrator):
         if self.bounds is not None:
             self.bounds.detect(state_in.x)
             self._clamp(x)
+        planes = self.stage.begin_solve(state_in.x, x) if self.stage else None
+        pushed = False
         energies = [e.evaluate(x, h, t1, False)[0]] if self.track_potential else []
         rho = float(opt["rho"])
         omegas = chebyshev(rho, opt["iterations"])
@@ -198,8 +209,11 @@ class VBD(ForceCache, Integrator):
                 self._remember(x)
             self._contacts(x, h)
             self._sweep(x, h, t1)
-            if rho > 0.0 and it > 1:
+            if rho > 0.0 and it > 1 and not pushed:
                 self._accelerate(x, omegas[it])
+            if planes is not None:
+                planes = self.stage.follow_solve(state_in.x, x)
+                pushed = keep_apart(*planes, x, self.potential.inv_mass, self.dx, self.hits) > 0
             if self.bounds is not None and self.bounds.any_clamped() and it < opt["iterations"]:
                 if self.bounds.detect(x):
                     for term in self.pair_terms:        # the list's rows changed

@@ -26,7 +26,12 @@ moving the particles along dV/dx at the substep's start. A step of h (dt / subst
      substep's start, ``terms.Colliders.begin_solve``) is put back on it (a hard
      contact constraint, ``push_out``): the iterations see the colliders, so a cloth that
      lands on one is held by it through its springs within the step, not only where its
-     particles touch;
+     particles touch. With self-collision every pass then keeps the contact stage's
+     pairs on their sides of their separating planes (``ContactStage.begin_solve``: the
+     candidates of the substep's predicted motion, searched again where an iterate
+     leaves it; ``guard.keep_apart``, a parallel Jacobi pass): the planes are inequality
+     constraints of the Gauss-Seidel iterations, and the guard after the step finds
+     little left to correct;
   3. v = (x - x_prev) / h; against the colliders it touches, a particle's approaching
      normal velocity is removed and its tangential velocity cut by mu times the normal
      velocity its pushes gave it (Coulomb, ``terms.Colliders.coulomb``); then the
@@ -40,6 +45,7 @@ import taichi as ti
 
 from .. import runtime
 from .. import terms as term_modules
+from ..contact import guard
 from ..errors import SceneError
 from ..terms.forces import Forces
 from ..runtime import serial
@@ -82,7 +88,9 @@ class XPBD(Integrator):
         self.projections = term_modules.build(model, lambda cls: cls.projective == "projection")
         self.colliders = Colliders(model) if Colliders.present(model) else None
         self.has_colliders = self.colliders is not None
-        self.x_prev, self.f = (ti.Vector.field(3, real, shape=n) for _ in range(2))
+        self.x_prev, self.f, self.dx = (ti.Vector.field(3, real, shape=n) for _ in range(3))
+        self.hits = ti.field(ti.i32, shape=n)
+        self.stage = model.contact if model.self_collision is not None else None
         self.pushed = ti.field(real, shape=n)   # how far the colliders pushed, this substep
         self.constrained = bool(self.constraints)
         self.iterated = self.constrained or self.has_colliders
@@ -110,14 +118,24 @@ class XPBD(Integrator):
                 self.colliders.begin_solve(x, v, h, t)
             self._predict(x, v, h)
             if self.iterated:
-                self._zero_multipliers()
-                for _ in range(opt["iterations"]):
-                    self._iterate(x, h)
+                self._solve(x, h, opt["iterations"])
             self._velocities(x, v, 1.0 / h)
             t += h
             for term in self.projections:
                 term.project(x, v, t)
         state_out.t = state_in.t + dt
+
+    def _solve(self, x, h, iterations):
+        """The substep's iterations from the prediction x; with self-collision each pass
+        ends keeping the contact stage's pairs on their sides of their planes
+        (``ContactStage.begin_solve``, ``guard.keep_apart``)."""
+        self._zero_multipliers()
+        contacts = self.stage.begin_solve(self.x_prev, x) if self.stage else None
+        for _ in range(iterations):
+            self._iterate(x, h)
+            if contacts is not None:
+                contacts = self.stage.follow_solve(self.x_prev, x)
+                guard.keep_apart(*contacts, x, self.inv_mass, self.dx, self.hits)
 
     def batch_obstacle(self):
         """None where a step can run inside a batch of substeps (``batch.py``): not with
