@@ -446,7 +446,8 @@ BPY_PYTHON = "/work/bpyvenv/bin/python"
 def test_blender_imports_the_stage_with_the_simulated_positions(tmp_path):
     """tools/check_usd_blender.py: Blender's own USD importer (bpy), headless; each cloth
     has the simulator's vertex count and, at frames 0 and N, its positions within 1e-5 m
-    after Blender's axis conversion."""
+    after Blender's axis conversion; Blender's own export of it (z up) reads back into
+    tcloth at those positions."""
     if importlib.util.find_spec("pxr") is None:
         pytest.skip("usd-core (pxr) is not installed: pip install -e \".[usd]\"")
     python = os.environ.get("TCLOTH_BPY_PYTHON") or (BPY_PYTHON if os.path.exists(BPY_PYTHON)
@@ -462,4 +463,7 @@ def test_blender_imports_the_stage_with_the_simulated_positions(tmp_path):
     assert res.returncode == 0, res.stdout + res.stderr
     lines = res.stdout.splitlines()
     assert "usd_blender.cloth_0.vertices: 64 (simulator: 64)" in lines
+    assert [line.split(":")[0] for line in lines if "max_error_m" in line] == [
+        "usd_blender.cloth_0.frame_0.max_error_m", "usd_blender.cloth_0.frame_7.max_error_m",
+        "usd_blender.back_in.cloth_0.max_error_m"]
     assert lines[-1] == "usd_blender.result: ok"

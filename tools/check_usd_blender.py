@@ -2,14 +2,17 @@
 ``tcloth.record_usd``, import it headless with Blender's own importer (``bpy``, Blender as a
 Python module: ``bpy.ops.wm.usd_import``) and compare each cloth's vertices, at frames 0
 and N, with the simulator's positions after Blender's axis conversion (USD y up ->
-Blender z up: (x, y, z) -> (x, -z, y)). Prints greppable lines:
+Blender z up: (x, y, z) -> (x, -z, y)). Then the other way: Blender exports the imported
+scene at frame 0 (``bpy.ops.wm.usd_export``: z up, its own transforms) and
+``tcloth.load_usd`` reads each cloth back. Prints greppable lines:
 
     usd_blender.<cloth>.vertices: <Blender's> (simulator: <n>)
     usd_blender.<cloth>.frame_<k>.max_error_m: <value>
+    usd_blender.back_in.<cloth>.max_error_m: <value>     (Blender's export, read by tcloth)
     usd_blender.result: ok | failed: <why>
 
-and exits 1 where it failed (more vertices off than 1e-5 m, a cloth missing, a count that
-differs). ``--render PNG`` also renders frame N with Blender's Workbench engine, the
+and exits 1 where it failed (a vertex off by more than 1e-5 m, a cloth missing, a count
+that differs). ``--render PNG`` also renders frame N with Blender's Workbench engine, the
 colours USD's ``displayColor`` (docs/img/usd_blender.png).
 
 bpy needs Python 3.11 (bpy 5.0 on PyPI); where the project runs another Python, put it in a
@@ -110,6 +113,35 @@ def compare(usd, expected):
             failures.append(f"{name} at frame {frame} is {error:.3g} m off (> {TOLERANCE})")
     if not any(k.startswith("cloth_") for k in data.files):
         failures.append("the scene has no cloth")
+    bpy.context.scene.frame_set(0)
+    bpy.ops.wm.usd_export(filepath=exported(usd), export_animation=False)
+    return failures
+
+
+def exported(usd):
+    """Where Blender's export of the imported stage goes."""
+    return os.path.join(os.path.dirname(os.path.abspath(usd)), "from_blender.usdc")
+
+
+def back_in(usd, expected):
+    """Each cloth of Blender's export read by tcloth against frame 0; returns failures."""
+    import tcloth
+    from pxr import Usd, UsdGeom
+    data, path = np.load(expected), exported(usd)
+    stage = Usd.Stage.Open(path)
+    failures = []
+    for key in sorted(k for k in data.files if k.endswith(".frame_0")):
+        name = key.split(".")[0]
+        prim = next((p.GetPath() for p in stage.Traverse()
+                     if p.IsA(UsdGeom.Mesh) and p.GetName() == name), None)
+        if prim is None:
+            failures.append(f"Blender's export has no Mesh {name!r}")
+            continue
+        vertices, _ = tcloth.load_usd(path, str(prim))
+        error = float(np.abs(vertices - data[key]).max())
+        print(f"usd_blender.back_in.{name}.max_error_m: {error:.3g}")
+        if not error <= TOLERANCE:
+            failures.append(f"{name} read back from Blender's export is {error:.3g} m off")
     return failures
 
 
@@ -150,7 +182,7 @@ def check(args):
         last = max(int(k.split("frame_")[1]) for k in np.load(args.check[1]).files
                    if ".frame_" in k)
         render(args.render, args.check[1], last)
-    print("usd_blender.result: " + ("ok" if not failures else "failed: " + "; ".join(failures)))
+    print("usd_blender.blender: " + ("ok" if not failures else "failed: " + "; ".join(failures)))
     sys.exit(1 if failures else 0)
 
 
@@ -179,12 +211,16 @@ def main(argv=None):
         command += ["--render", args.render]
     done = subprocess.run(command, capture_output=True, text=True)
     lines = [line for line in done.stdout.splitlines() if line.startswith("usd_blender.")]
-    print("\n".join(lines))
-    if not lines or not lines[-1].startswith("usd_blender.result:"):
-        print(f"usd_blender.result: failed: Blender's Python exited {done.returncode}: "
-              f"{done.stderr.strip().splitlines()[-1:] or ''}")
-        return 1
-    return done.returncode
+    print("\n".join(line for line in lines if not line.startswith("usd_blender.blender:")))
+    said = lines[-1] if lines else ""
+    if not said.startswith("usd_blender.blender:"):
+        failures = [f"Blender's Python exited {done.returncode}: "
+                    f"{done.stderr.strip().splitlines()[-1:] or ''}"]
+    else:
+        failures = [] if said.endswith(": ok") else [said.split(": ", 1)[1]]
+        failures += back_in(usd, expected)
+    print("usd_blender.result: " + ("ok" if not failures else "failed: " + "; ".join(failures)))
+    return 1 if failures else 0
 
 
 if __name__ == "__main__":
