@@ -204,9 +204,9 @@ def record(sim, path, frames=240, steps_per_frame=10, fps=30, width=640, height=
     if not outputs:
         raise SceneError("record needs a path, mesh_dir or writers (got none of them)")
     paths = " and ".join(str(o.path) for o in outputs)
-    times = _run(sim, outputs, frames, steps_per_frame, paths,
-                 Progress(frames, os.path.basename(str(outputs[0].path)), progress))
     images = outputs[0] if path is not None else None
+    times = _run(sim, outputs, images, frames, steps_per_frame, paths,
+                 Progress(frames, os.path.basename(str(outputs[0].path)), progress))
     stats = _stats(frames, path, steps_per_frame, times, images)
     if progress:
         done = [f"simulation {stats['sim_ms_per_step']:.3f} ms/step ({steps_per_frame} "
@@ -222,10 +222,10 @@ def record(sim, path, frames=240, steps_per_frame=10, fps=30, width=640, height=
     return stats
 
 
-def _run(sim, outputs, frames, steps_per_frame, paths, bar):
+def _run(sim, outputs, images, frames, steps_per_frame, paths, bar):
     """Step and hand every frame to each output; (total s, per-frame step s, per-frame
-    output s without the images'). The outputs are closed (kept) on InstabilityError,
-    aborted on any other."""
+    output s but the images' (``images``: their output or None)). The outputs are closed
+    (kept) on InstabilityError, aborted on any other."""
     t_sim, t_write = [], []
     start = time.perf_counter()
     try:
@@ -238,7 +238,7 @@ def _run(sim, outputs, frames, steps_per_frame, paths, bar):
             for out in outputs:
                 t0 = time.perf_counter()
                 out.write()
-                if not isinstance(out, _ImageSink):
+                if out is not images:
                     t_frame += time.perf_counter() - t0
             t_write.append(t_frame)
             bar.update(k + 1)

@@ -52,7 +52,7 @@ class Cloth:
         stencil: its springs are one (k_s, k_d) per family, evaluated by the grid stencil;
             False for a fabric cloth (border springs differ), whose springs are a list.
         uv: (T, 3, 2) texture coordinates at the triangles' corners: u = i / (nx - 1)
-            along the grid's columns, v = 1 - j / (ny - 1) (row 0 at v = 1, the top).
+            along the grid's columns, v = 1 - j / (ny - 1) (row 0, an xy grid's top, at v = 1).
     """
 
     is_grid = True
