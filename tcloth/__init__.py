@@ -9,16 +9,18 @@ os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "False")
 from . import features, moved  # noqa: E402,F401
 from .app import cli  # noqa: E402
 from .errors import (ConvergenceWarning, DeviceWarning, InstabilityError,  # noqa: E402
-                     SceneError, StaleSimulatorError)
+                     MissingExtraError, SceneError, StaleSimulatorError)
 from .render.camera import Camera  # noqa: E402
 from .render.mesh import export_mesh, write_obj, write_ply  # noqa: E402
 from .render.render import Renderer, render  # noqa: E402
+from .render.usd import UsdWriter, record_usd  # noqa: E402
 from .render.video import record, write_png  # noqa: E402
 from .runtime import device, init  # noqa: E402
 from .scene.builders import Cloth, MeshCloth, Rope  # noqa: E402
 from .scene.fabric import Fabric  # noqa: E402
 from .scene.objfile import load_obj  # noqa: E402
 from .scene.scene import Scene  # noqa: E402
+from .scene.usdfile import load_usd  # noqa: E402
 from .sim.simulator import Simulator  # noqa: E402
 from .version import __version__  # noqa: E402
 from .viewer import view  # noqa: E402
@@ -26,6 +28,7 @@ from .viewer import view  # noqa: E402
 moved.install()
 
 __all__ = ["cli", "init", "device", "Scene", "Cloth", "MeshCloth", "Rope", "Fabric", "load_obj",
-           "Simulator", "SceneError", "InstabilityError", "ConvergenceWarning", "DeviceWarning",
-           "StaleSimulatorError", "Camera", "Renderer", "render", "record", "write_png",
-           "export_mesh", "write_obj", "write_ply", "view", "__version__"]
+           "load_usd", "Simulator", "SceneError", "InstabilityError", "ConvergenceWarning",
+           "DeviceWarning", "MissingExtraError", "StaleSimulatorError", "Camera", "Renderer",
+           "render", "record", "record_usd", "UsdWriter", "write_png", "export_mesh",
+           "write_obj", "write_ply", "view", "__version__"]

@@ -30,3 +30,8 @@ class ConvergenceWarning(UserWarning):
 
 class DeviceWarning(UserWarning):
     """A GPU was asked for and the CPU or a software (CPU) Vulkan driver was given."""
+
+
+class MissingExtraError(ImportError):
+    """An optional dependency is not installed; the message names tcloth's extra that
+    brings it (e.g. usd-core: ``pip install -e ".[usd]"``)."""

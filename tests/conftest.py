@@ -97,6 +97,7 @@ LONG = {
     "test_self_collision::test_top_cloth_rests_a_thickness_above_the_lower_one",
     "test_simulator::test_a_batch_is_one_launch_for_every_substep",
     "test_sweep::test_pool_gives_the_serial_table",
+    "test_usd::test_blender_imports_the_stage_with_the_simulated_positions",
     "test_vbd::test_each_vertex_gradient_and_block_match_finite_differences[0.0]",
     "test_vbd::test_each_vertex_gradient_and_block_match_finite_differences[0.3]",
     "test_vbd::test_vbd_converges_to_the_backward_euler_step",

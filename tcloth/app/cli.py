@@ -1,5 +1,6 @@
 """The ``tcloth`` command line: ``tcloth render SCRIPT --out PATH``, ``tcloth view SCRIPT``,
-``tcloth list``, ``tcloth sweep SPEC.toml --out DIR``.
+``tcloth list``, ``tcloth sweep SPEC.toml --out DIR``. ``render --usd PATH`` writes the
+animation as one OpenUSD stage beside the video (alone without ``--out``: docs/usd.md).
 
 A scene script defines ``build(**params) -> tcloth.Scene`` and a dict ``CONFIG`` with any
 of: description, integrator, dt, steps_per_frame, frames, fps, camera, width, height,
@@ -13,7 +14,7 @@ import sys
 import traceback
 import warnings
 
-from ..errors import DeviceWarning, InstabilityError, SceneError
+from ..errors import DeviceWarning, InstabilityError, MissingExtraError, SceneError
 from .script import (ScriptError, build_scene, describe, load_script, parse_settings, timing,
                      with_options)
 
@@ -60,6 +61,9 @@ def _render_parser(parser):
     parser.add_argument("--height", type=int, help="image height, pixels")
     parser.add_argument("--supersample", type=int, help="s x s samples per pixel")
     parser.add_argument("--meshes", help="also write each frame's cloth mesh (OBJ) here")
+    parser.add_argument("--usd", help="also write the animation as one OpenUSD stage "
+                                      "(.usda, .usdc, .usd, .usdz; without --out, only "
+                                      "that: no video); needs the extra usd")
     _set_argument(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.add_argument("--verbose", action="store_true", help="tracebacks on errors")
@@ -68,6 +72,7 @@ def _render_parser(parser):
 def render_script(path, args):
     """Run one scene script as the command line asks. Returns the record() stats."""
     from ..sim.simulator import Simulator
+    from ..render.usd import UsdWriter, check_usd_path
     from ..render.video import check_writable, record
 
     module, cfg = load_script(path)
@@ -76,8 +81,11 @@ def render_script(path, args):
                                    for key in ("frames", "integrator", "dt", "steps_per_frame",
                                                "precision", "width", "height", "supersample")})
     name = os.path.splitext(os.path.basename(path))[0]
-    out = args.out or os.path.join("out", name + ".mp4")
-    check_writable(out)
+    out = args.out or (None if args.usd else os.path.join("out", name + ".mp4"))
+    if out is not None:
+        check_writable(out)
+    if args.usd is not None:
+        check_usd_path(args.usd)
     init(args.arch, cfg["precision"])
     scene = build_scene(module, path, params)
     dt, steps = timing(cfg, scene)
@@ -86,10 +94,13 @@ def render_script(path, args):
           f"dt = {dt:.6g} s: {(frames - 1) * steps * dt:.4g} s simulated, {frames / fps:.4g} s "
           f"of video at {fps:g} fps", file=sys.stderr)
     sim = Simulator(scene, cfg["integrator"], dt=dt, **cfg["options"])
+    render = cfg["render"]
+    writers = [] if args.usd is None else [
+        UsdWriter(sim, args.usd, fps, render.get("cloth_colours"), render.get("particle_radius"))]
     return record(sim, out, frames=cfg["frames"], steps_per_frame=steps, fps=cfg["fps"],
                   width=cfg["width"], height=cfg["height"], camera=cfg["camera"],
                   supersample=cfg["supersample"], progress=not args.quiet,
-                  mesh_dir=args.meshes, **cfg["render"])
+                  mesh_dir=args.meshes, writers=writers, **render)
 
 
 def view_script(path, args):
@@ -178,7 +189,7 @@ def _guarded(fn, verbose):
     except ViewerUnavailable as e:
         print(f"tcloth: cannot open the viewer: {e}", file=sys.stderr)
         return 2
-    except (ScriptError, SceneError, InstabilityError) as e:
+    except (ScriptError, SceneError, MissingExtraError, InstabilityError) as e:
         if verbose:
             traceback.print_exc()
         kind = "unstable" if isinstance(e, InstabilityError) else "error"

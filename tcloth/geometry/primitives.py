@@ -1,5 +1,6 @@
 """Triangle meshes of the collider shapes and checkered tiles, in NumPy, for the viewer
-(each shape's ``mesh`` in ``shapes.SHAPES`` builds on these), and a disc for round cloths.
+(each shape's ``mesh`` in ``shapes.SHAPES`` builds on these), a disc for round cloths,
+and the vertex normals of a triangle mesh (the viewer's and the USD export's).
 Triangles are wound so that the outside (a tile's normal side, a disc's top) is the
 front."""
 import numpy as np
@@ -109,3 +110,14 @@ def disc(rings, radius, grading=1.0):
     up = np.cross(x[tri[:, 1]] - x[tri[:, 0]], x[tri[:, 2]] - x[tri[:, 0]])[:, 1]
     tri[up < 0] = tri[up < 0][:, ::-1]
     return x, tri
+
+
+def vertex_normals(x, triangles):
+    """(N,3) unit area-weighted vertex normals of the triangles (0 where a vertex has
+    none)."""
+    a, b, c = (x[triangles[:, k]] for k in range(3))
+    face = np.cross(b - a, c - a)
+    ids = triangles.T.ravel()
+    n = np.stack([np.bincount(ids, np.tile(face[:, d], 3), len(x)) for d in range(3)], 1)
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    return np.divide(n, length, out=np.zeros_like(n), where=length > 0)

@@ -126,34 +126,107 @@ def check_writable(path):
         raise SceneError(f"output folder {folder!r} is not writable")
 
 
+class _ImageSink:
+    """Frames rendered and written to a video or a PNG folder (``write()`` renders the
+    simulator's current state), the render and encode times apart."""
+
+    def __init__(self, sim, path, fps, quality, width, height, camera, supersample, options):
+        self.renderer = renderer_for(sim, width, height, camera, supersample, **options)
+        self.sink = _Mp4Sink(path, width, height, fps, quality) \
+            if path.lower().endswith(".mp4") else _PngSink(path)
+        self.path, self.t_render, self.t_encode = path, [], []
+
+    def write(self):
+        t0 = time.perf_counter()
+        image = self.renderer.render()
+        t1 = time.perf_counter()
+        self.sink.write(image)
+        self.t_render.append(t1 - t0)
+        self.t_encode.append(time.perf_counter() - t1)
+
+    def close(self):
+        self.sink.close()
+
+    def abort(self):
+        self.sink.abort()
+
+
+class _MeshSink:
+    """Each frame's cloth mesh as ``frame_<k>.obj`` in a folder."""
+    label = "meshes"
+
+    def __init__(self, sim, folder):
+        check_writable(os.path.join(folder, "frame.obj"))
+        self.sim, self.path, self.count = sim, folder, 0
+
+    def write(self):
+        export_mesh(self.sim, os.path.join(self.path, f"frame_{self.count:05d}.obj"))
+        self.count += 1
+
+    def close(self):
+        pass
+
+    def abort(self):
+        pass
+
+
 def record(sim, path, frames=240, steps_per_frame=10, fps=30, width=640, height=480,
-           camera=None, supersample=2, quality=7, progress=True, mesh_dir=None,
+           camera=None, supersample=2, quality=7, progress=True, mesh_dir=None, writers=(),
            **render_options):
     """Simulate and render ``frames`` frames to ``path``.
 
     Args:
-        path: "*.mp4" for H.264 video; anything else is a folder of PNG frames.
+        path: "*.mp4" for H.264 video; anything else is a folder of PNG frames; None: no
+            images (the writers and mesh_dir alone).
         frames: number of frames (the first shows the current state).
         steps_per_frame: simulator steps between frames. fps: video frame rate.
         quality: H.264 quality 0-10 (imageio-ffmpeg's scale).
         mesh_dir: also write each frame's cloth mesh there (frame_00000.obj, ...).
+        writers: more outputs, each written a frame at a time (``write()`` after the
+            frame's steps, ``close()`` at the end, ``abort()`` on an error; ``path`` and
+            ``label`` name it in messages), e.g. ``tcloth.UsdWriter``: a USD stage.
     Returns:
-        dict: frames, path, sim_ms_per_step, render_ms_per_frame, encode_ms_per_frame, fps
-        (means), and median_sim_ms, median_render_ms, median_encode_ms (per frame).
+        dict: frames, path, sim_ms_per_step, render_ms_per_frame, encode_ms_per_frame,
+        write_ms_per_frame (the writers and meshes), fps (means), and median_sim_ms,
+        median_render_ms, median_encode_ms, median_write_ms (per frame).
     On InstabilityError the frames up to the last good one are kept, completed under
-    ``path``, and the error is raised again with the frame count added to its message.
+    ``path`` and each writer's, and the error is raised again with the frame count added
+    to its message.
     """
     for name, value in (("frames", frames), ("steps_per_frame", steps_per_frame)):
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
             raise SceneError(f"{name} must be a positive integer (got {value!r})")
-    check_writable(path)
-    if mesh_dir is not None:
-        check_writable(os.path.join(mesh_dir, "frame.obj"))
-    renderer = renderer_for(sim, width, height, camera, supersample, **render_options)
-    sink = _Mp4Sink(path, width, height, fps, quality) if path.lower().endswith(".mp4") \
-        else _PngSink(path)
-    bar = Progress(frames, os.path.basename(path), progress)
-    t_sim, t_render, t_encode = [], [], []
+    outputs = list(writers) + ([_MeshSink(sim, mesh_dir)] if mesh_dir is not None else [])
+    if path is not None:
+        check_writable(path)
+        outputs.insert(0, _ImageSink(sim, path, fps, quality, width, height, camera,
+                                     supersample, render_options))
+    if not outputs:
+        raise SceneError("record needs a path, mesh_dir or writers (got none of them)")
+    paths = " and ".join(str(o.path) for o in outputs)
+    images = outputs[0] if path is not None else None
+    times = _run(sim, outputs, images, frames, steps_per_frame, paths,
+                 Progress(frames, os.path.basename(str(outputs[0].path)), progress))
+    stats = _stats(frames, path, steps_per_frame, times, images)
+    if progress:
+        done = [f"simulation {stats['sim_ms_per_step']:.3f} ms/step ({steps_per_frame} "
+                f"steps/frame)"]
+        if images:
+            done += [f"render {stats['render_ms_per_frame']:.1f} ms/frame",
+                     f"encode {stats['encode_ms_per_frame']:.1f} ms/frame"]
+        if len(outputs) > bool(images):
+            done.append(f"{' and '.join(o.label for o in outputs if o is not images)} "
+                        f"{stats['write_ms_per_frame']:.1f} ms/frame")
+        sys.stderr.write(f"wrote {paths}: {frames} frames; {', '.join(done)}, "
+                         f"{stats['fps']:.1f} frames/s end to end\n")
+    return stats
+
+
+def _run(sim, outputs, images, frames, steps_per_frame, paths, bar):
+    """Step and hand every frame to each output; (total s, per-frame step s, per-frame
+    output s but the images' (``images``: their output or None)). The outputs are closed
+    (kept) on InstabilityError, aborted on any other."""
+    t_sim, t_write = [], []
     start = time.perf_counter()
     try:
         for k in range(frames):
@@ -161,37 +234,42 @@ def record(sim, path, frames=240, steps_per_frame=10, fps=30, width=640, height=
                 t0 = time.perf_counter()
                 sim.step(steps_per_frame)
                 t_sim.append(time.perf_counter() - t0)
-            t0 = time.perf_counter()
-            image = renderer.render()
-            t1 = time.perf_counter()
-            sink.write(image)
-            t_render.append(t1 - t0)
-            t_encode.append(time.perf_counter() - t1)
-            if mesh_dir is not None:
-                export_mesh(sim, os.path.join(mesh_dir, f"frame_{k:05d}.obj"))
+            t_frame = 0.0
+            for out in outputs:
+                t0 = time.perf_counter()
+                out.write()
+                if out is not images:
+                    t_frame += time.perf_counter() - t0
+            t_write.append(t_frame)
             bar.update(k + 1)
     except InstabilityError as err:
-        sink.close()
-        kept = f"{sink.count} good frame{'' if sink.count == 1 else 's'}"
-        err.args = (f"{err.args[0]} Kept {kept} in {path}.",)
+        for out in outputs:
+            out.close()
+        kept = f"{len(t_write)} good frame{'' if len(t_write) == 1 else 's'}"
+        err.args = (f"{err.args[0]} Kept {kept} in {paths}.",)
         raise
     except BaseException:
-        sink.abort()
+        for out in outputs:
+            out.abort()
         raise
-    sink.close()
-    total = time.perf_counter() - start
+    for out in outputs:
+        out.close()
+    return time.perf_counter() - start, t_sim, t_write
+
+
+def _stats(frames, path, steps_per_frame, times, images):
+    """``record``'s stats dict."""
+    total, t_sim, t_write = times
+    t_render = images.t_render if images else [0.0]
+    t_encode = images.t_encode if images else [0.0]
     stats = {"frames": frames, "path": path,
              "sim_ms_per_step": 1e3 * sum(t_sim) / max((frames - 1) * steps_per_frame, 1),
              "render_ms_per_frame": 1e3 * sum(t_render) / frames,
              "encode_ms_per_frame": 1e3 * sum(t_encode) / frames,
+             "write_ms_per_frame": 1e3 * sum(t_write) / frames,
              "fps": frames / total,
              "median_sim_ms": 1e3 * float(np.median(t_sim)) if t_sim else 0.0,
              "median_render_ms": 1e3 * float(np.median(t_render)),
-             "median_encode_ms": 1e3 * float(np.median(t_encode))}
-    if progress:
-        sys.stderr.write(
-            f"wrote {path}: {frames} frames; simulation {stats['sim_ms_per_step']:.3f} ms/step "
-            f"({steps_per_frame} steps/frame), render {stats['render_ms_per_frame']:.1f} ms/frame, "
-            f"encode {stats['encode_ms_per_frame']:.1f} ms/frame, {stats['fps']:.1f} frames/s "
-            "end to end\n")
+             "median_encode_ms": 1e3 * float(np.median(t_encode)),
+             "median_write_ms": 1e3 * float(np.median(t_write))}
     return stats

@@ -7,7 +7,8 @@ import numpy as np
 from . import fabric as fabrics
 from . import hinges
 from ..errors import SceneError
-from .objfile import load_obj
+from .objfile import read_obj
+from .usdfile import is_usd, read_usd
 from ..validate import (as_int, as_per_item, as_points, as_rotation, as_scalar, as_spring_params,
                         as_vec3, fmt)
 
@@ -50,6 +51,8 @@ class Cloth:
         params: dict family -> (k_s, k_d) or None (a fabric cloth: its interior springs').
         stencil: its springs are one (k_s, k_d) per family, evaluated by the grid stencil;
             False for a fabric cloth (border springs differ), whose springs are a list.
+        uv: (T, 3, 2) texture coordinates at the triangles' corners: u = i / (nx - 1)
+            along the grid's columns, v = 1 - j / (ny - 1) (row 0, an xy grid's top, at v = 1).
     """
 
     is_grid = True
@@ -83,6 +86,12 @@ class Cloth:
             raise SceneError(f"family must be structural, shear or flexion (got {family!r})")
         return np.concatenate([np.stack([u.ravel(), v.ravel()], 1) for u, v in parts])
 
+    @property
+    def uv(self):
+        nx, ny = self.resolution
+        u, v = np.meshgrid(np.linspace(0.0, 1.0, nx), np.linspace(1.0, 0.0, ny))
+        return np.stack([u.ravel(), v.ravel()], 1)[self.triangles - self.offset]
+
 
 class MeshCloth:
     """A cloth made from a triangle or polygon mesh, as added by ``Scene.add_mesh_cloth``.
@@ -92,15 +101,18 @@ class MeshCloth:
         triangles: (T, 3) particle ids, the faces fanned into triangles (v0, vi, vi+1),
             counter-clockwise seen from the front as in the file.
         springs: dict family -> (M_family,) spring ids. params: family -> (k_s, k_d) or None.
+        uv: (T, 3, 2) texture coordinates at the triangles' corners, or None (the mesh
+            had none).
     """
     is_grid = False
 
-    def __init__(self, offset, count, triangles, params):
+    def __init__(self, offset, count, triangles, params, uv=None):
         self.offset = offset
         self.particles = offset + np.arange(count)
         self.triangles = offset + np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
         self.params = params
         self.springs = {}
+        self.uv = None if uv is None else np.asarray(uv, dtype=np.float64).reshape(-1, 3, 2)
 
 
 def fan(faces):
@@ -181,21 +193,69 @@ def _mesh_faces(x, faces):
     return checked, triangles, vertex_area
 
 
+def read_mesh(path, prim=None):
+    """(vertices, faces, texture coordinates a face or None) of an OBJ or USD file."""
+    if is_usd(path):
+        return read_usd(path, prim)
+    if prim is not None:
+        raise SceneError(f"prim names a mesh in a USD file (.usd, .usda, .usdc, .usdz); "
+                         f"{str(path)!r} is not one (got prim={prim!r})")
+    return read_obj(path)
+
+
+def triangle_uvs(uvs, faces, n):
+    """(T, 3, 2) texture coordinates at the corners of the faces' fan triangles, of
+    ``uvs``: (n, 2), one a vertex, or one (len(face), 2) array a face; None: None."""
+    if uvs is None:
+        return None
+    try:
+        per_vertex = np.asarray(uvs, dtype=np.float64)
+    except (TypeError, ValueError):
+        per_vertex = None
+    if per_vertex is not None and per_vertex.shape == (n, 2):
+        corners = per_vertex[np.concatenate(faces)]
+    else:
+        try:
+            corners = [np.asarray(u, dtype=np.float64) for u in uvs]
+        except (TypeError, ValueError):
+            corners = None
+        if corners is None or len(corners) != len(faces):
+            bad = f"got {fmt(uvs)}" if corners is None else \
+                f"got {len(corners)} arrays for {len(faces)} faces"
+        else:
+            bad = next((f"face {k} has {len(f)} corners, its array shape {c.shape}"
+                        for k, (c, f) in enumerate(zip(corners, faces))
+                        if c.shape != (len(f), 2)), None)
+        if bad:
+            raise SceneError(f"uvs must be ({n}, 2), a (u, v) a vertex, or one (n, 2) array "
+                             f"a face for its n corners ({bad})")
+        corners = np.concatenate(corners)
+    if not np.all(np.isfinite(corners)):
+        raise SceneError(f"uvs must be finite (got {fmt(uvs)})")
+    starts = np.cumsum([0] + [len(f) for f in faces[:-1]])
+    return corners[fan([range(s, s + len(f)) for s, f in zip(starts, faces)])[0]]
+
+
 def add_mesh_cloth(scene, vertices, faces, mass, structural, shear, flexion, pinned,
-                   fabric=None):
+                   fabric=None, uvs=None, prim=None):
     """``Scene.add_mesh_cloth``: particles at the vertices, springs from the faces (a
     fabric's: the triangle membrane and hinge bending, ``fabric.py``)."""
     fabric = None if fabric is None else fabrics.preset(fabric)
     given = classic(fabric, mass=mass, structural=structural, shear=shear, flexion=flexion)
     if isinstance(vertices, (str, os.PathLike)):
-        if faces is not None:
-            raise SceneError("give either a path or vertices and faces (got a path and faces)")
-        vertices, faces = load_obj(vertices)
+        if faces is not None or uvs is not None:
+            raise SceneError("give either a path or vertices and faces (got a path and "
+                             f"{'faces' if faces is not None else 'uvs'})")
+        vertices, faces, uvs = read_mesh(vertices, prim)
+    elif prim is not None:
+        raise SceneError(f"prim names a mesh in a USD file: give it with the file's path "
+                         f"(got prim={prim!r} with vertices and faces)")
     x = as_points("vertices", vertices)
     if faces is None or len(faces) == 0:
         raise SceneError("faces must list at least one face (got none)")
     n = len(x)
     checked, triangles, vertex_area = _mesh_faces(x, faces)
+    uv = triangle_uvs(uvs, checked, n)
     springs = mesh_springs(checked, triangles)      # refuses a mesh that is not manifold
     if fabric is not None:
         masses = fabric.density * vertex_area
@@ -213,7 +273,7 @@ def add_mesh_cloth(scene, vertices, faces, mass, structural, shear, flexion, pin
     if ids.ndim != 1 or (len(ids) and (ids.min() < 0 or ids.max() >= n)):
         raise SceneError(f"pinned must be vertex ids in [0, {n}) (got {fmt(pinned)})")
     pin[ids] = True
-    cloth = MeshCloth(scene.num_particles, n, triangles, params)
+    cloth = MeshCloth(scene.num_particles, n, triangles, params, uv)
     if fabric is not None and max(fabric.bending) > 0:     # checked before anything is added
         rest = np.concatenate([scene.positions, x])
         try:

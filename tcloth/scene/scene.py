@@ -200,7 +200,8 @@ class Scene:
 
     def add_mesh_cloth(self, vertices, faces=None, mass=unset(0.2),
                        structural=unset((1000.0, 0.05)), shear=unset(None),
-                       flexion=unset((50.0, 0.01)), pinned=(), fabric=None):
+                       flexion=unset((50.0, 0.01)), pinned=(), fabric=None, uvs=None,
+                       prim=None):
         """Add a cloth made from a mesh: a particle at each vertex, springs from the faces.
 
         Springs: structural on every face edge; shear across both diagonals of each quad
@@ -212,8 +213,10 @@ class Scene:
         adjacent face's area (a third of a triangle's, a quarter of a quad's).
 
         Args:
-            vertices: (V,3) metres, or the path of an OBJ file (``tcloth.load_obj``) with
-                faces None. faces: a list of faces, each 3 or more vertex ids (0-based).
+            vertices: (V,3) metres, or the path of an OBJ file (``tcloth.load_obj``) or a
+                USD file (.usd, .usda, .usdc, .usdz: ``tcloth.load_usd``; needs the extra
+                ``usd``) with faces None; a file's texture coordinates come with it.
+                faces: a list of faces, each 3 or more vertex ids (0-based).
             mass: total kg, spread by vertex area; or (V,) kg per vertex.
             structural, shear, flexion: (k_s, k_d) or None (absent).
             pinned: vertex ids to pin.
@@ -223,6 +226,11 @@ class Scene:
                 shear, hinge bending from its rigidity (one number on a mesh),
                 docs/fabric.md. Giving it with mass, structural, shear or flexion is a
                 SceneError.
+            uvs: texture coordinates of vertices and faces given as arrays (the cloth's
+                ``uv``, exported as USD's ``primvars:st``): (V,2), one (u, v) a vertex, or
+                one (n,2) array a face, a (u, v) for each of its n corners; None: none.
+            prim: with a USD path, the Mesh prim's path in the stage (e.g.
+                "/World/cloth"); None: the only Mesh, or the first in the stage's order.
         A face repeating a vertex or of zero area, an edge shared by more than two faces
         (not manifold), or a vertex in no face raises SceneError; duplicate vertices are
         separate particles (a seam); a face joining two coincident ones has zero area.
@@ -230,7 +238,7 @@ class Scene:
             MeshCloth (particles (V,) in vertex order, triangles (T,3)).
         """
         return builders.add_mesh_cloth(self, vertices, faces, mass, structural, shear,
-                                       flexion, pinned, fabric)
+                                       flexion, pinned, fabric, uvs, prim)
 
     def add_rope(self, start, end, segments, mass, stiffness, damping=0.0, pinned=("start",)):
         """Add a straight rope of ``segments`` springs from ``start`` to ``end``.

@@ -112,6 +112,8 @@ def scene_to_arrays(scene):
             desc["cloths"].append({"mesh": True, "offset": int(c.offset),
                                    "count": len(c.particles), "params": c.params})
             arrays[f"cloth{k}_triangles"] = c.triangles - c.offset
+            if c.uv is not None:
+                arrays[f"cloth{k}_uv"] = c.uv
         for family, ids in c.springs.items():
             arrays[f"cloth{k}_{family}"] = ids
     for k, r in enumerate(scene.ropes):
@@ -151,7 +153,8 @@ def scene_from_arrays(desc, arrays):
     for k, c in enumerate(desc["cloths"]):
         params = {f: (tuple(p) if p is not None else None) for f, p in c["params"].items()}
         if c.get("mesh"):
-            cloth = MeshCloth(c["offset"], c["count"], arrays[f"cloth{k}_triangles"], params)
+            cloth = MeshCloth(c["offset"], c["count"], arrays[f"cloth{k}_triangles"], params,
+                              arrays.get(f"cloth{k}_uv"))     # absent: no texture coordinates
         else:
             cloth = Cloth(c["offset"], tuple(c["resolution"]), tuple(c["spacing"]), params,
                           c["plane"], c.get("stencil", True))

@@ -1,20 +1,10 @@
-"""The window's meshes, in NumPy: the cloth's vertex normals and each collider's mesh at a
-time (the shape's own ``mesh`` in ``shapes.SHAPES``, moved with the collider)."""
+"""The window's meshes, in NumPy: each collider's mesh at a time (the shape's own ``mesh``
+in ``shapes.SHAPES``, moved with the collider), and the cloth's vertex normals
+(``primitives.vertex_normals``, which the USD export shares)."""
 import numpy as np
 
-from ..geometry.primitives import tiles
+from ..geometry.primitives import tiles, vertex_normals
 from ..geometry.shapes import shape_of
-
-
-def vertex_normals(x, triangles):
-    """(N,3) unit area-weighted vertex normals of the triangles (0 where a vertex has
-    none)."""
-    a, b, c = (x[triangles[:, k]] for k in range(3))
-    face = np.cross(b - a, c - a)
-    ids = triangles.T.ravel()
-    n = np.stack([np.bincount(ids, np.tile(face[:, d], 3), len(x)) for d in range(3)], 1)
-    length = np.linalg.norm(n, axis=1, keepdims=True)
-    return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
 
 
 def collider_mesh(collider, t, half, tile):

@@ -1,0 +1,322 @@
+"""OpenUSD out: a simulation as one animated stage, for Blender, Houdini, Omniverse, Maya
+(docs/usd.md). usd-core is the optional extra ``usd``; without it ``MissingExtraError``
+says how to install it (``scene/usdfile.py``, which reads USD meshes in).
+
+The stage: ``/World`` (the default prim) holds
+  - ``Cloths/cloth_<k>``: a ``Mesh`` per cloth, its triangles (counter-clockwise seen
+    from the front, written once, no subdivision, double-sided), its ``points``,
+    ``normals`` (area-weighted, per vertex) and ``extent`` at every frame, ``primvars:st``
+    where the cloth has texture coordinates (grid cloths; meshes whose file or arrays
+    gave them), ``primvars:displayColor`` the renderer's front colour for it and
+    ``primvars:pinned`` (bool, per vertex);
+  - ``Ropes/rope_<k>``: a linear ``BasisCurves`` per rope, ``Particles``: a ``Points``
+    of the particles in no cloth and no rope, both as wide as the renderer draws them;
+  - ``Colliders/<shape>_<k>`` (k: the collider's index in ``scene.colliders``): a
+    ``Sphere``, a ``Cube`` scaled to the box, a ``Cylinder`` or a ``Capsule`` along its
+    local y axis, and a plane as a large thin ``Mesh`` (checkered as the ground is drawn,
+    of side six times the scene's extent); translated, turned and scaled by xformOps,
+    the translation sampled at every frame where the collider moves, and its visibility
+    where ``sim.set_collider_enabled`` switches it.
+Frame k (the first: the state when writing began) is at time code k; the stage says y up,
+1 metre per unit, ``timeCodesPerSecond`` and ``framesPerSecond`` = fps, start 0 and end
+the last frame written. Points are float32.
+
+Nothing partial is left looking complete: the stage is kept in memory and written to
+``NAME.partial.EXT`` when it is closed, then renamed.
+"""
+import os
+import shutil
+import tempfile
+
+import numpy as np
+
+from ..errors import SceneError
+from ..geometry.primitives import vertex_normals
+from ..geometry.shapes import shape_of
+from ..scene.usdfile import USD_EXTENSIONS, pxr_modules, pxr_reason
+from ..validate import as_scalar
+from ..version import __version__
+from .drawables import cloth_palette, particle_spheres
+from .framing import ground_and_checker
+from .render import COLLIDER_COLOUR, PARTICLE_COLOUR
+from .video import check_writable, record
+
+PLANE_HALF = 3.0    # a plane collider is a square of side 2 PLANE_HALF times the extent
+
+
+def check_usd_path(path):
+    """The path, once its extension is a USD one and its folder can be written (made if
+    missing); else SceneError naming it. Also MissingExtraError without usd-core."""
+    if not isinstance(path, (str, os.PathLike)) or \
+            os.path.splitext(str(path))[1].lower() not in USD_EXTENSIONS:
+        raise SceneError(f"a USD path must end in {', '.join(USD_EXTENSIONS)} (got {path!r})")
+    pxr_modules("Usd")
+    try:
+        check_writable(str(path))
+    except SceneError as e:
+        raise SceneError(f"cannot write USD file {str(path)!r}: {e}") from None
+    if os.path.isdir(path):
+        raise SceneError(f"cannot write USD file {str(path)!r}: it is a folder")
+    return str(path)
+
+
+class UsdWriter:
+    """One OpenUSD stage of a simulator's frames (this module's docstring says what is in
+    it), written a frame at a time: ``write()`` after each frame's steps, ``close()`` at
+    the end; ``abort()`` leaves nothing. ``tcloth.record(..., writers=[writer])`` drives
+    one beside the video, ``record_usd`` alone; a loop of one's own (the viewer's, say)
+    may too.
+
+    Args:
+        sim: the Simulator. path: .usda (text), .usdc or .usd (binary) or .usdz (a
+            package). fps: frames per second of the time codes (the video's).
+        cloth_colours, particle_radius: as the renderer takes them (its defaults).
+    """
+    label = "USD"
+
+    def __init__(self, sim, path, fps=30, cloth_colours=None, particle_radius=None):
+        self.path = check_usd_path(path)
+        fps = as_scalar("fps", fps, minimum=0.0, strict=True)
+        Usd, UsdGeom = pxr_modules("Usd", "UsdGeom")
+        self.sim, self.count = sim, 0
+        self.stage = stage = Usd.Stage.CreateInMemory()
+        UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+        UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+        stage.SetTimeCodesPerSecond(fps)
+        stage.SetFramesPerSecond(fps)
+        stage.SetStartTimeCode(0)
+        stage.SetEndTimeCode(0)
+        stage.GetRootLayer().customLayerData = {"creator": f"tcloth {__version__}"}
+        stage.SetDefaultPrim(UsdGeom.Xform.Define(stage, "/World").GetPrim())
+        for group in ("Cloths", "Ropes", "Colliders"):
+            UsdGeom.Xform.Define(stage, f"/World/{group}")
+        scene = sim.scene
+        x0 = scene.positions
+        extent = float(np.linalg.norm(x0.max(0) - x0.min(0))) or 1.0    # as the renderer's
+        _, radius = particle_spheres(scene, particle_radius, extent)
+        palette = cloth_palette(cloth_colours, len(scene.cloths))
+        self.parts = [_cloth(stage, k, c, palette[k, 0], scene.pinned)
+                      for k, c in enumerate(scene.cloths)]
+        self.parts += [_strand(stage, f"/World/Ropes/rope_{k}", r.particles, radius,
+                               scene.pinned) for k, r in enumerate(scene.ropes)]
+        alone = _free_particles(scene)
+        if len(alone):
+            self.parts.append(_strand(stage, "/World/Particles", alone, radius, scene.pinned,
+                                      rope=False))
+        tile = ground_and_checker(scene, False, extent)[1]
+        self.parts += [_collider(stage, k, c, sim, PLANE_HALF * extent, tile)
+                       for k, c in enumerate(scene.colliders)]
+
+    def write(self):
+        """Add the simulator's current state as the next frame."""
+        Sdf, = pxr_modules("Sdf")
+        self.sim._check()
+        x, t = self.sim.positions(), self.sim.time
+        with Sdf.ChangeBlock():
+            for part in self.parts:
+                part(x, t, self.count)
+        self.stage.SetEndTimeCode(self.count)
+        self.count += 1
+
+    def close(self):
+        """Write the stage's frames so far to ``path`` (through ``NAME.partial.EXT``)."""
+        root, ext = os.path.splitext(self.path)
+        partial = root + ".partial" + ext
+        try:
+            written = _export(self.stage.GetRootLayer(), partial, os.path.basename(root))
+        except Exception as e:      # pxr raises Tf.ErrorException
+            written, reason = False, pxr_reason(e)
+        else:
+            reason = "usd-core wrote nothing"
+        if not written:
+            if os.path.exists(partial):
+                os.remove(partial)
+            raise SceneError(f"cannot write USD file {self.path!r}: {reason}")
+        os.replace(partial, self.path)
+
+    def abort(self):
+        """Drop the frames: nothing was written to disk yet."""
+        self.parts = []
+
+
+def record_usd(sim, path, frames=120, steps_per_frame=None, fps=30, progress=True,
+               cloth_colours=None, particle_radius=None):
+    """Simulate ``frames`` frames into one OpenUSD stage at ``path``, as ``tcloth.record``
+    renders them (the first frame is the current state; a progress bar on stderr).
+
+    Args:
+        path: .usda, .usdc, .usd or .usdz. steps_per_frame: simulator steps between
+            frames; None: as many as fill a frame of 1/fps s, round(1 / (fps dt)), at
+            least 1. cloth_colours, particle_radius: as the renderer's.
+    Returns:
+        ``record``'s stats, path the USD file's (write_ms_per_frame: the USD part).
+    On InstabilityError the frames up to the last good one are written to ``path`` and
+    the error is raised again with the frame count added to its message.
+    """
+    fps = as_scalar("fps", fps, minimum=0.0, strict=True)
+    if steps_per_frame is None:
+        steps_per_frame = max(1, round(1.0 / (fps * sim.dt)))
+    writer = UsdWriter(sim, path, fps, cloth_colours, particle_radius)
+    stats = record(sim, None, frames=frames, steps_per_frame=steps_per_frame, fps=fps,
+                   progress=progress, writers=[writer])
+    return {**stats, "path": writer.path}
+
+
+def _export(layer, path, name):
+    """Write a layer to ``path`` in the format its extension names; a .usdz packs it as
+    NAME.usdc. Returns whether usd-core says it wrote it."""
+    if not path.lower().endswith(".usdz"):
+        return layer.Export(path)
+    UsdUtils, Sdf = pxr_modules("UsdUtils", "Sdf")
+    folder = tempfile.mkdtemp(prefix="tcloth-usd-")
+    try:
+        inner = os.path.join(folder, name + ".usdc")
+        return layer.Export(inner) and UsdUtils.CreateNewUsdzPackage(Sdf.AssetPath(inner), path)
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def _free_particles(scene):
+    """The particles in no cloth and no rope."""
+    taken = np.zeros(scene.num_particles, dtype=bool)
+    for part in scene.cloths + scene.ropes:
+        taken[np.ravel(part.particles)] = True
+    return np.flatnonzero(~taken)
+
+
+def _vec3f(values):
+    Vt, = pxr_modules("Vt")
+    return Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(values, dtype=np.float32))
+
+
+def _primvar(prim, name, type_name, interpolation, value):
+    UsdGeom, Sdf = pxr_modules("UsdGeom", "Sdf")
+    UsdGeom.PrimvarsAPI(prim).CreatePrimvar(
+        name, getattr(Sdf.ValueTypeNames, type_name), interpolation).Set(value)
+
+
+def _colour(gprim, rgb, interpolation="constant"):
+    gprim.CreateDisplayColorPrimvar(interpolation).Set(_vec3f(np.reshape(rgb, (-1, 3))))
+
+
+def _pinned(gprim, ids, pinned):
+    Vt, = pxr_modules("Vt")
+    _primvar(gprim.GetPrim(), "pinned", "BoolArray", "vertex",
+             Vt.BoolArray.FromNumpy(np.asarray(pinned)[ids]))
+
+
+def _st(uv, triangles, count):
+    """(values, interpolation) of ``primvars:st``: one (u, v) a vertex where every corner
+    of a vertex has the same, else one a triangle corner."""
+    per_vertex = np.zeros((count, 2))
+    per_vertex[triangles] = uv
+    if np.array_equal(per_vertex[triangles], uv):
+        return per_vertex, "vertex"
+    return uv.reshape(-1, 2), "faceVarying"
+
+
+def _cloth(stage, k, cloth, colour, pinned):
+    """Define cloth k's Mesh; returns its frame writer (x, t, time code)."""
+    UsdGeom, Vt = pxr_modules("UsdGeom", "Vt")
+    ids = np.ravel(cloth.particles)
+    local = np.asarray(cloth.triangles - cloth.offset, dtype=np.int32)
+    mesh = UsdGeom.Mesh.Define(stage, f"/World/Cloths/cloth_{k}")
+    mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    mesh.CreateDoubleSidedAttr(True)
+    mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(local), 3, np.int32)))
+    mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(local.ravel()))
+    _colour(mesh, colour)
+    _pinned(mesh, ids, pinned)
+    if cloth.uv is not None:
+        values, interpolation = _st(cloth.uv, local, len(ids))
+        _primvar(mesh.GetPrim(), "st", "TexCoord2fArray", interpolation,
+                 Vt.Vec2fArray.FromNumpy(values.astype(np.float32)))
+    mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
+    points, normals, extent = (mesh.CreatePointsAttr(), mesh.CreateNormalsAttr(),
+                               mesh.CreateExtentAttr())
+
+    def write(x, t, code):
+        p = x[ids].astype(np.float32)
+        points.Set(_vec3f(p), code)
+        normals.Set(_vec3f(vertex_normals(p, local)), code)
+        extent.Set(_vec3f([p.min(0), p.max(0)]), code)
+    return write
+
+
+def _strand(stage, path, ids, radius, pinned, rope=True):
+    """A rope's linear BasisCurves (rope False: a Points of loose particles), ``radius``
+    wide; returns its frame writer."""
+    UsdGeom, Vt = pxr_modules("UsdGeom", "Vt")
+    if rope:
+        prim = UsdGeom.BasisCurves.Define(stage, path)
+        prim.CreateTypeAttr(UsdGeom.Tokens.linear)
+        prim.CreateCurveVertexCountsAttr(Vt.IntArray([len(ids)]))
+    else:
+        prim = UsdGeom.Points.Define(stage, path)
+    prim.CreateWidthsAttr(Vt.FloatArray([2.0 * radius]))
+    prim.SetWidthsInterpolation(UsdGeom.Tokens.constant)
+    _colour(prim, PARTICLE_COLOUR)
+    _pinned(prim, ids, pinned)
+    points, extent = prim.CreatePointsAttr(), prim.CreateExtentAttr()
+
+    def write(x, t, code):
+        p = x[ids].astype(np.float32)
+        points.Set(_vec3f(p), code)
+        extent.Set(_vec3f([p.min(0) - radius, p.max(0) + radius]), code)
+    return write
+
+
+def _collider(stage, k, c, sim, half, tile):
+    """Define collider k's prim (a plane: a checkered square of side 2 half in tiles of
+    side ``tile``); returns its frame writer (translation and visibility)."""
+    Usd, UsdGeom, Gf = pxr_modules("Usd", "UsdGeom", "Gf")
+    kind = c["kind"]
+    path = f"/World/Colliders/{kind}_{k}"
+    if kind == "plane":
+        v, tris, colours = shape_of(c).mesh(c, half, tile)
+        prim = UsdGeom.Mesh.Define(stage, path)
+        prim.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+        prim.CreateDoubleSidedAttr(True)
+        prim.CreatePointsAttr(_vec3f(v))
+        prim.CreateFaceVertexCountsAttr([3] * len(tris))
+        prim.CreateFaceVertexIndicesAttr(np.ravel(tris).tolist())
+        prim.CreateExtentAttr(_vec3f([v.min(0), v.max(0)]))
+        _colour(prim, colours, "vertex")
+    else:
+        schema = {"sphere": UsdGeom.Sphere, "box": UsdGeom.Cube, "cylinder": UsdGeom.Cylinder,
+                  "capsule": UsdGeom.Capsule}[kind]
+        prim = schema.Define(stage, path)
+        if kind == "box":
+            prim.CreateSizeAttr(2.0)
+        else:
+            prim.CreateRadiusAttr(float(c["radius"]))
+        if kind in ("cylinder", "capsule"):
+            prim.CreateAxisAttr(UsdGeom.Tokens.y)
+            prim.CreateHeightAttr(2.0 * float(c["half_height"]))
+        prim.CreateExtentAttr(UsdGeom.Boundable.ComputeExtentFromPlugins(
+            prim, Usd.TimeCode.Default()))
+        _colour(prim, COLLIDER_COLOUR)
+    translate = prim.AddTranslateOp()
+    if "rotation" in c and not np.array_equal(c["rotation"], np.eye(3)):
+        # Gf matrices act on row vectors: the transpose of the rotation that acts on columns
+        turn = Gf.Matrix3d(*np.asarray(c["rotation"], dtype=float).T.ravel())
+        prim.AddOrientOp().Set(Gf.Quatf(turn.ExtractRotation().GetQuat()))
+    if kind == "box":
+        prim.AddScaleOp().Set(Gf.Vec3f(*np.asarray(c["half_extents"], dtype=float)))
+    centre, velocity = np.asarray(c["center"], float), np.asarray(c["velocity"], float)
+    moving = bool(np.any(velocity != 0))
+    if not moving:
+        translate.Set(Gf.Vec3d(*centre))
+    shown = [True, False]        # visible at the last frame; visibility written yet
+
+    def write(x, t, code):
+        if moving:
+            translate.Set(Gf.Vec3d(*(centre + t * velocity)), code)
+        on = k not in sim.settings["colliders_off"]
+        if on != shown[0]:
+            visibility = prim.GetVisibilityAttr()
+            if not shown[1] and code > 0:     # before a first sample USD holds it
+                visibility.Set(UsdGeom.Tokens.inherited, 0)
+            visibility.Set(UsdGeom.Tokens.inherited if on else UsdGeom.Tokens.invisible, code)
+            shown[:] = on, True
+    return write
