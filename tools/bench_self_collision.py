@@ -163,8 +163,8 @@ def one_second(module, x40, v40, n, integrator, dt, seconds, options):
         if mode == "on":
             out["crossings_max"] = worst
             stats = sim.contact_stats()
-            for key in ("seconds", "failsafe_steps", "swept_searches", "rebuilds",
-                        "guard_corrections", "collider_paths_cut"):
+            for key in ("seconds", "failsafe_steps", "swept_searches", "solve_searches",
+                        "rebuilds", "guard_corrections", "collider_paths_cut"):
                 out[f"stage_{key}"] = stats[key]
     if not any(key.endswith("raised_at_step") for key in out):
         out["ratio"] = out["on_wall_s"] / out["off_wall_s"]

@@ -27,9 +27,10 @@ moving the particles along dV/dx at the substep's start. A step of h (dt / subst
      contact constraint, ``push_out``): the iterations see the colliders, so a cloth that
      lands on one is held by it through its springs within the step, not only where its
      particles touch. With self-collision every pass then keeps the contact stage's
-     pairs on their sides of their separating planes (``ContactStage.begin_solve``: the
-     candidates of the substep's predicted motion, searched again where an iterate
-     leaves it; ``guard.keep_apart``, a parallel Jacobi pass): the planes are inequality
+     pairs on their sides of their separating planes at the step's start
+     (``ContactStage.begin_solve``: the candidates of the step's predicted motion,
+     searched again where an iterate leaves it; ``guard.keep_apart``, a parallel Jacobi
+     pass): the planes are inequality
      constraints of the Gauss-Seidel iterations, and the guard after the step finds
      little left to correct;
   3. v = (x - x_prev) / h; against the colliders it touches, a particle's approaching
@@ -91,6 +92,7 @@ class XPBD(Integrator):
         self.x_prev, self.f, self.dx = (ti.Vector.field(3, real, shape=n) for _ in range(3))
         self.hits = ti.field(ti.i32, shape=n)
         self.stage = model.contact if model.self_collision is not None else None
+        self.x_start = ti.Vector.field(3, real, shape=n) if self.stage is not None else None
         self.pushed = ti.field(real, shape=n)   # how far the colliders pushed, this substep
         self.constrained = bool(self.constraints)
         self.iterated = self.constrained or self.has_colliders
@@ -112,12 +114,17 @@ class XPBD(Integrator):
         x, v = state_out.x, state_out.v
         self._copy(state_in.x, state_in.v, x, v)
         t = state_in.t
-        for _ in range(count):
+        if self.stage is not None:
+            self.x_start.copy_from(state_in.x)
+        for sub in range(count):
             self.external.compute(x, v, t, self.f)
             if self.has_colliders:
                 self.colliders.begin_solve(x, v, h, t)
             self._predict(x, v, h)
             if self.iterated:
+                if self.stage is not None and sub == 0:
+                    self._extrapolate(x, float(count))
+                    self.stage.begin_solve(self.x_start, self.dx)
                 self._solve(x, h, opt["iterations"])
             self._velocities(x, v, 1.0 / h)
             t += h
@@ -127,15 +134,25 @@ class XPBD(Integrator):
 
     def _solve(self, x, h, iterations):
         """The substep's iterations from the prediction x; with self-collision each pass
-        ends keeping the contact stage's pairs on their sides of their planes
-        (``ContactStage.begin_solve``, ``guard.keep_apart``)."""
+        ends keeping the contact stage's pairs on their sides of their planes at the
+        step's start (``ContactStage.begin_solve`` once a step, for the first substep's
+        prediction carried over the step; ``guard.keep_apart``). Every state of the step
+        then keeps every pair on its side of one plane, and so do the straight paths
+        between them."""
         self._zero_multipliers()
-        contacts = self.stage.begin_solve(self.x_prev, x) if self.stage else None
         for _ in range(iterations):
             self._iterate(x, h)
-            if contacts is not None:
-                contacts = self.stage.follow_solve(self.x_prev, x)
+            if self.stage is not None:
+                contacts = self.stage.follow_solve(self.x_start, x)
                 guard.keep_apart(*contacts, x, self.inv_mass, self.dx, self.hits)
+
+    @ti.kernel
+    def _extrapolate(self, x: ti.template(), count: float):
+        """dx = the step's start plus ``count`` times the first substep's predicted move:
+        the step's predicted end, for ``ContactStage.begin_solve``."""
+        ti.loop_config(serialize=ti.static(serial(x)))
+        for p in range(x.shape[0]):
+            self.dx[p] = self.x_start[p] + count * (x[p] - self.x_start[p])
 
     def batch_obstacle(self):
         """None where a step can run inside a batch of substeps (``batch.py``): not with
