@@ -70,9 +70,12 @@ def flight(masses, res=12):
 
 
 def guard_step(sim, x, v, dt):
-    """The contact stage on the free-flight motion x -> x + dt v; returns (x1, v1)."""
+    """The contact stage on the free-flight motion x -> x + dt v; returns (x1, v1). The
+    fields are the simulator's two states' (the stage's kernels compile once a
+    simulator, as for its own steps)."""
     real = sim.state.x.dtype
-    fields = [ti.Vector.field(3, real, shape=len(x)) for _ in range(3)]
+    s_in, s_out = sim._states
+    fields = (s_in.x, s_out.x, s_out.v)
     for f, value in zip(fields, (x, x + dt * v, v)):
         f.from_numpy(value.astype(np.float64 if real == ti.f64 else np.float32))
     sim.model.contact.end_step(*fields, 0.0, dt)
@@ -106,22 +109,25 @@ def test_guard_stops_cloths_passing_wholly_through_each_other(f64, monkeypatch):
             assert stats["failsafe_steps"] == 1 and stats["failsafe_vertices"] > 0
 
 
-@pytest.mark.parametrize("dt", [1e-5, 1e-4, 1e-3, 1.0 / 60.0, 1.0 / 30.0])
-def test_the_guard_adds_no_energy_at_any_dt(f64, dt):
+def test_the_guard_adds_no_energy_at_any_dt(f64):
     """Two parallel cloths a tenth of the thickness apart closing at 1 m/s: the guard
     moves them to a quarter of the thickness apart. Turning that move into a velocity
     over dt took their kinetic energy from 0.019 J to 225 J at dt = 1e-5 s (2.4 J at
-    1e-4, 0.042 J at 1e-3); the guard removes their approaching normal velocity instead. Kinetic energy never rises,
-    momentum is kept, and the layers keep their order without crossing (NumPy)."""
+    1e-4, 0.042 J at 1e-3); the guard removes their approaching normal velocity instead.
+    Kinetic energy never rises, momentum is kept, and the layers keep their order
+    without crossing (NumPy)."""
     scene, x, v, cloths = thrown(1.0, res=12, masses=(0.05, 0.1), gap=0.0006)
-    sim = tcloth.Simulator(scene, "symplectic_euler", dt=dt)
-    x1, v1 = guard_step(sim, x, v, dt)
+    sim = tcloth.Simulator(scene, "symplectic_euler", dt=1e-5)
     m = scene.masses[:, None]
     kinetic = lambda u: 0.5 * float(np.sum(m * u * u))
-    assert kinetic(v1) <= kinetic(v) * (1.0 + 1e-9)
-    np.testing.assert_allclose((m * v1).sum(0), (m * v).sum(0), atol=1e-12 * float(m.sum()))
     sides = (side(x, centre(cloths[0]), cloths[1]), side(x, centre(cloths[1]), cloths[0]))
-    assert count_crossings(x1, scene.triangles) == 0 and order_kept(x1, cloths, sides)
+    for dt in (1e-5, 1e-4, 1e-3, 1.0 / 60.0, 1.0 / 30.0):
+        x1, v1 = guard_step(sim, x, v, dt)
+        assert kinetic(v1) <= kinetic(v) * (1.0 + 1e-9), dt
+        np.testing.assert_allclose((m * v1).sum(0), (m * v).sum(0),
+                                   atol=1e-12 * float(m.sum()))
+        assert count_crossings(x1, scene.triangles) == 0 and order_kept(x1, cloths, sides)
+
 
 def test_a_particle_that_started_inside_a_collider_is_not_pushed_round_its_edge(f64):
     """A particle 0.1 mm inside a box under its top face, 5 mm from a side face, that a
@@ -209,7 +215,7 @@ def test_thrown_cloths_never_cross_at_any_step(f32, integrator, dt):
     assert r["blew_up"] is None
     assert r["crossings_start"] == 0 and r["crossings_max"] == 0, r
     assert r["order_kept"], r
-    assert r["guard_corrections"] + r["contacts_max"] > 10, "the cloths never met"
+    assert r["closing_speed_end"] < 5.0, "the cloths never met"
 
 
 @pytest.mark.parametrize("integrator,dt,collider", [

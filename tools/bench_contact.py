@@ -20,7 +20,8 @@ by the normal of the other's nearest triangle: they may tumble together), their 
 momentum, and no blow-up.
 
 Prints ``contact.<case>.<integrator>.<dt>.<metric>: value`` lines (crossings_max,
-inside_max, closest_collider_m, through, order_kept, momentum_drift, ms_per_step, failsafe_steps, ...).
+inside_max, closest_collider_m, through, order_kept, momentum_drift, closing_speed_end,
+ms_per_step, failsafe_steps, ...).
 
 Usage: python tools/bench_contact.py [--cases thrown_3,fold] [--integrators backward_euler]
                                      [--dts 1/60,1/240] [--seconds S] [--explicit-chunk K]
@@ -190,6 +191,13 @@ def centre(cloth):
     return cloth.particles[cloth.particles.shape[0] // 2, cloth.particles.shape[1] // 2]
 
 
+def closing_speed(v, cloths):
+    """How fast two thrown cloths' centres of mass approach each other along the throw
+    (the y axis; the first cloth is thrown down): the throw's speed until they meet."""
+    a, b = (v[c.particles.ravel()].mean(axis=0) for c in cloths)
+    return float(b[1] - a[1])
+
+
 def order_kept(x, cloths, sides):
     """Each thrown cloth's centre particle is on the side of the other cloth it started
     on (``sides``: the start's ``side`` values): a cloth that passed wholly through the
@@ -254,6 +262,8 @@ def run_case(name, integrator, dt, seconds=None, chunk=1, build=None, options=No
             "through": through if chunk == 1 else None,
             "order_kept": order,
             "momentum_drift": float(np.abs(sim.momentum()[0] - momentum0).max() / scale)
+            if sides is not None else None,
+            "closing_speed_end": closing_speed(sim.velocities(), cloths)
             if sides is not None else None,
             "ms_per_step": 1e3 * float(np.median(times)) if times else math.nan,
             "steps": stepped, "blew_up": blew_up, "contacts_max": contacts,
