@@ -258,6 +258,29 @@ class ContactStage:
         guard.planes(cl, count, x0, x1, self.thickness, reach)
         return cl, count, covered
 
+    # -- inside a batch of substeps (``sim/batch.py``; its scenes have no self-collision) -----
+    @ti.func
+    def batch_begin(self, x):
+        """A step inside a batch starts at x: kept for ``batch_end``'s sweep."""
+        for p in range(x.shape[0]):
+            self.x_start[p] = x[p]
+
+    @ti.func
+    def batch_end(self, x, v, t, dt):
+        """The colliders' sweep (``guard.sweep_colliders``) of the step from
+        ``batch_begin``'s start to x, its cuts counted in ``batch_cuts`` (in all, in the
+        last step); returns how many paths it cut."""
+        cut = guard.sweep_colliders(self.colliders, self.inv_mass, self.x_start, x, v, t, dt,
+                                    self.held)
+        self.batch_cuts[0] += cut
+        self.batch_cuts[1] = cut
+        return cut
+
+    def batch_cut_last(self):
+        """Whether the collider sweep cut a path in a batch's last step (its velocities
+        then changed after the forces were evaluated)."""
+        return self.batch_cuts[1] > 0
+
     def contact_stats(self):
         """A copy of ``stats`` with the current candidate and rebuild counts."""
         out = dict(self.stats)

@@ -17,7 +17,6 @@ Python-callable gust, a GPU, a large scene).
 """
 import taichi as ti
 
-from ..contact.guard import sweep_colliders
 from ..integrators.linalg import copy
 
 
@@ -25,17 +24,17 @@ from ..integrators.linalg import copy
 def _substep(integrator: ti.template(), limiter: ti.template(), contact: ti.template(),
              budget: ti.template(), a, b, t, dt, fresh, x_bound, v_bound):
     """One step of State a in place (b: scratch), with the contact stage's collider sweep
-    (the batch's scenes have no self-collision); returns (the budget's ``check`` of the
-    result: -1, a bad particle, or particles + the fastest one; the paths the sweep cut)."""
+    (``ContactStage.batch_begin`` / ``batch_end``; the batch's scenes have no
+    self-collision); returns (the budget's ``check`` of the result: -1, a bad particle,
+    or particles + the fastest one; the paths the sweep cut)."""
     if ti.static(bool(contact)):
-        copy(contact.x_start, a.x)
+        contact.batch_begin(a.x)
     integrator.advance(a, b, t, dt, fresh)
     if ti.static(bool(limiter)):
         limiter.limit(a, ti.cast(1.0 / dt, float))
     cut = 0
     if ti.static(bool(contact)):
-        cut = sweep_colliders(contact.colliders, contact.inv_mass, contact.x_start, a.x, a.v,
-                              ti.cast(t, float), ti.cast(dt, float), contact.held)
+        cut = contact.batch_end(a.x, a.v, ti.cast(t, float), ti.cast(dt, float))
     return budget.check(a.x, a.v, t + dt, x_bound, v_bound, 0.0), cut
 
 
@@ -71,9 +70,6 @@ def kernel(integrator, limiter, contact, budget, a, b, start, x_bound, v_bound):
                 evaluate = 1
             bad, cut = _substep(integrator, limiter, contact, budget, a, b, t, dt, evaluate,
                                 x_bound, v_bound)
-            if ti.static(bool(contact)):
-                contact.batch_cuts[0] += cut
-                contact.batch_cuts[1] = cut
             if bad >= 0:
                 result = ti.cast(k, ti.i64) * (2 * a.x.shape[0]) + bad
                 break

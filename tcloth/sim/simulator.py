@@ -231,7 +231,7 @@ class Simulator:
             done, error = self._checked_steps(run, a, n, args)
         self.num_steps += done
         self.state.t = self.time
-        swept = self._contact is not None and self._contact.batch_cuts[1] > 0
+        swept = self._contact is not None and self._contact.batch_cut_last()
         if limiter is None and error is None and not swept:
             self.integrator.adopt_forces(self.state)
         else:
@@ -258,7 +258,7 @@ class Simulator:
             if error is not None:
                 self._restore_batch_start(a)
                 return k, error
-            fresh = 1 if self._contact is not None and self._contact.batch_cuts[1] > 0 else 0
+            fresh = 1 if self._contact is not None and self._contact.batch_cut_last() else 0
         return n, None
 
     def _see_gust(self, t):
