@@ -168,6 +168,25 @@ def serial_count(items):
     return cpu() and items < _Runtime.serial_below
 
 
+@ti.func
+def jacobi_zero(dx, hits):
+    """A Jacobi pass's accumulators zeroed: each particle's summed moves dx and their
+    count hits."""
+    ti.loop_config(serialize=ti.static(serial(dx)))
+    for p in range(dx.shape[0]):
+        dx[p] = ti.Vector.zero(float, 3)
+        hits[p] = 0
+
+
+@ti.func
+def jacobi_apply(x, dx, hits):
+    """Each particle moved by the mean of the moves a Jacobi pass summed for it."""
+    ti.loop_config(serialize=ti.static(serial(dx)))
+    for p in range(dx.shape[0]):
+        if hits[p] > 0:
+            x[p] += dx[p] / hits[p]
+
+
 @ti.kernel
 def _copy_out(src: ti.template(), out: ti.types.ndarray()):
     ti.loop_config(serialize=ti.static(serial(src)))

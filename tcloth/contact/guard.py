@@ -44,7 +44,7 @@ are left as they are.
 """
 import taichi as ti
 
-from ..runtime import serial
+from ..runtime import jacobi_apply, jacobi_zero, serial
 from ..geometry.shapes import SHAPES
 from .broad import gap
 from .search import POINT_TRIANGLE
@@ -214,10 +214,7 @@ def keep_apart(cl: ti.template(), count: ti.i32, x: ti.template(), inv_mass: ti.
     vertex pair closer along its normal than delta is moved apart as ``project`` does,
     all pairs at once (Jacobi, in parallel), each vertex by the mean of its moves.
     Returns how many vertex pairs were closer."""
-    ti.loop_config(serialize=ti.static(serial(x)))
-    for p in range(x.shape[0]):
-        dx[p] = ti.Vector.zero(float, 3)
-        hits[p] = 0
+    jacobi_zero(dx, hits)
     closer = 0
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
@@ -230,10 +227,7 @@ def keep_apart(cl: ti.template(), count: ti.i32, x: ti.template(), inv_mass: ti.
             else:
                 for a, b in ti.static(EDGE_EDGE_PAIRS):
                     closer += _separate(ids, a, b, n, delta, x, inv_mass, dx, hits)
-    ti.loop_config(serialize=ti.static(serial(x)))
-    for p in range(x.shape[0]):
-        if hits[p] > 0:
-            x[p] += dx[p] / hits[p]
+    jacobi_apply(x, dx, hits)
     return closer
 
 

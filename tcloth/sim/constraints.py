@@ -12,7 +12,7 @@ import taichi as ti
 
 from .. import runtime
 from ..integrators.linalg import copy
-from ..runtime import serial
+from ..runtime import jacobi_apply, jacobi_zero, serial
 
 
 @ti.kernel
@@ -55,10 +55,7 @@ class StrainLimiter:
         """One Jacobi pass; returns how many springs were too long."""
         dx, hits, inv_mass, pairs, rest = ti.static(self.dx, self.hits, self.inv_mass,
                                                     self.pairs, self.rest)
-        ti.loop_config(serialize=ti.static(serial(dx)))
-        for p in range(dx.shape[0]):
-            dx[p] = ti.Vector.zero(float, 3)
-            hits[p] = 0
+        jacobi_zero(dx, hits)
         violated = 0
         ti.loop_config(serialize=ti.static(serial(self.index)))
         for k in range(self.count):
@@ -75,10 +72,7 @@ class StrainLimiter:
                 hits[i] += 1
                 hits[j] += 1
                 violated += 1
-        ti.loop_config(serialize=ti.static(serial(dx)))
-        for p in range(dx.shape[0]):
-            if hits[p] > 0:
-                x[p] += dx[p] / hits[p]
+        jacobi_apply(x, dx, hits)
         return violated
 
     @ti.func
