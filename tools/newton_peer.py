@@ -39,17 +39,48 @@ def build(n, mass, device):
     builder.add_particles(pos.tolist(), [(0.0, 0.0, 0.0)] * (n * n),
                           mass=[0.0 if p else mass / (n * n) for p in pinned],
                           radius=[0.0] * (n * n), flags=[0 if p else active for p in pinned])
+    add_grid_springs(builder, n, FAMILIES)
+    return builder.finalize(device=device)
+
+
+def add_grid_springs(builder, n, families):
+    """The springs of an n x n grid whose particle (i, j) is builder particle j n + i:
+    ``families`` maps a name to (offsets (di, dj), k_s, k_d); and the grid's colouring
+    for SolverVBD, (i mod 3, j mod 3) (no spring offset of tcloth's families is 0 mod 3 in
+    both coordinates)."""
     idx = np.arange(n * n).reshape(n, n)
-    for offsets, ke, kd in FAMILIES.values():
+    for offsets, ke, kd in families.values():
         for di, dj in offsets:
             for j in range(n):
                 for i in range(n):
                     if 0 <= i + di < n and 0 <= j + dj < n:
                         builder.add_spring(int(idx[j, i]), int(idx[j + dj, i + di]), ke, kd,
                                            control=0.0)
+    ii, jj = np.meshgrid(np.arange(n), np.arange(n))
     colours = ((ii % 3) + 3 * (jj % 3)).ravel()
     builder.set_coloring([np.nonzero(colours == c)[0].astype(int) for c in range(9)])
-    return builder.finalize(device=device)
+
+
+def timed_steps(model, solver, steps, dt, record=None):
+    """Run ``steps`` solver steps from the model's initial state: (final particle
+    positions (N, 3) float64, wall times of all steps but the first, the warm-up in which
+    Warp compiles or loads its kernels). ``record``, if given, is called with each step's
+    particle positions (N, 3), untimed."""
+    import warp as wp
+    states = [model.state(), model.state()]
+    control = model.control()
+    times = []
+    for k in range(steps):
+        start = time.perf_counter()
+        states[0].clear_forces()
+        solver.step(states[0], states[1], control, None, dt)
+        wp.synchronize_device(model.device)
+        if k:
+            times.append(time.perf_counter() - start)
+        if record is not None:
+            record(states[1].particle_q.numpy().copy())
+        states.reverse()
+    return states[0].particle_q.numpy().astype(np.float64), np.array(times)
 
 
 def main():
@@ -69,21 +100,10 @@ def main():
     model = build(args.n, args.mass, args.device)
     solvers = {"vbd": newton.solvers.SolverVBD, "xpbd": newton.solvers.SolverXPBD}
     solver = solvers[args.solver](model, iterations=args.iterations)
-    states = [model.state(), model.state()]
-    control = model.control()
-    times = []
-    for k in range(args.steps):
-        start = time.perf_counter()
-        states[0].clear_forces()
-        solver.step(states[0], states[1], control, None, args.dt)
-        wp.synchronize_device(model.device)
-        if k:
-            times.append(time.perf_counter() - start)
-        states.reverse()
+    positions, times = timed_steps(model, solver, args.steps, args.dt)
     summary = {"newton": newton.__version__, "warp": wp.config.version,
                "solver": args.solver, "iterations": args.iterations}
-    np.savez(args.out, positions=states[0].particle_q.numpy().astype(np.float64),
-             step_times=np.array(times), summary=json.dumps(summary))
+    np.savez(args.out, positions=positions, step_times=times, summary=json.dumps(summary))
 
 
 if __name__ == "__main__":
