@@ -31,7 +31,7 @@ import taichi as ti
 from .. import runtime
 from ..runtime import serial_count
 from .hashgrid import PointGrid, blocks_for
-from .proximity import contact_weights
+from ..geometry.proximity import contact_weights
 from .search import CandidateSearch
 
 # particles per block of the displacement test's reduction

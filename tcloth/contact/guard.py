@@ -321,7 +321,7 @@ def _stop(p, at, n, u, dt, x1, v1, held):
 
 
 @ti.func
-def _offset_stop(shape: ti.template(), col, start, d, phi0, hit, t0):
+def _offset_stop(table: ti.template(), shape: ti.template(), col, start, d, phi0, hit, t0):
     """How far along the unit direction d from ``start`` (distance phi0 >= 0 from the
     collider, whose surface the ray meets at ``hit``) a stopped path ends: where it comes
     within the collider's thickness of the surface, or, from a start already inside the
@@ -334,7 +334,7 @@ def _offset_stop(shape: ti.template(), col, start, d, phi0, hit, t0):
     if phi0 > target:
         for _ in range(STOP_BISECTIONS):
             mid = 0.5 * (lo + hi)
-            phi, normal = SHAPES[shape].signed_distance(col, start + mid * d, t0)
+            phi, normal = table.distance(shape, col, start + mid * d, t0)
             if phi >= target:
                 lo = mid
             else:
@@ -355,34 +355,38 @@ def sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held):
     for p in range(x1.shape[0]):
         if inv_mass[p] > 0.0:
             for g in ti.static(table.groups):
-                for k in range(g.first, g.first + g.count):
-                    col = table.data[k]
-                    if col.stiffness > 0.0:
-                        u = col.velocity
-                        start = x0[p]
-                        rel = x1[p] - dt * u - start
-                        length = rel.norm()
-                        phi0, n0 = SHAPES[g.shape].signed_distance(col, start, t0)
-                        entered = False
-                        if phi0 >= 0.0 and length > phi0:
-                            d = rel / length
-                            hit = SHAPES[g.shape].ray_hit(col, start, d, t0)
-                            if 0.0 <= hit < length - BACK_OFF:
-                                stop = _offset_stop(g.shape, col, start, d, phi0, hit, t0)
-                                entry = start + stop * d
-                                _, n = SHAPES[g.shape].signed_distance(col, entry, t0)
-                                _stop(p, entry, n, u, dt, x1, v1, held)
-                                entered = True
-                        if not entered:
-                            # a path that ends inside without a hit the ray cast resolves
-                            # (a start on the surface within rounding), or one that started
-                            # inside and goes deeper: the particle stays where it was
-                            phi1, _ = SHAPES[g.shape].signed_distance(col, x1[p], t0 + dt)
-                            if phi1 < ti.min(phi0, 0.0):
-                                _stop(p, start, n0, u, dt, x1, v1, held)
-                                entered = True
-                        if entered:
-                            clamped += 1
+                # a mesh's paths are kept off it by its pairs' planes (``obstacle.py``)
+                if ti.static(not SHAPES[g.shape].meshed):
+                    for k in range(g.first, g.first + g.count):
+                        col = table.data[k]
+                        if col.stiffness > 0.0:
+                            u = col.velocity
+                            start = x0[p]
+                            rel = x1[p] - dt * u - start
+                            length = rel.norm()
+                            phi0, n0 = table.distance(g.shape, col, start, t0)
+                            entered = False
+                            if phi0 >= 0.0 and length > phi0:
+                                d = rel / length
+                                hit = table.ray_hit(g.shape, col, start, d, t0)
+                                if 0.0 <= hit < length - BACK_OFF:
+                                    stop = _offset_stop(table, g.shape, col, start, d, phi0,
+                                                        hit, t0)
+                                    entry = start + stop * d
+                                    _, n = table.distance(g.shape, col, entry, t0)
+                                    _stop(p, entry, n, u, dt, x1, v1, held)
+                                    entered = True
+                            if not entered:
+                                # a path that ends inside without a hit the ray cast
+                                # resolves (a start on the surface within rounding), or
+                                # one that started inside and goes deeper: the particle
+                                # stays where it was
+                                phi1, _ = table.distance(g.shape, col, x1[p], t0 + dt)
+                                if phi1 < ti.min(phi0, 0.0):
+                                    _stop(p, start, n0, u, dt, x1, v1, held)
+                                    entered = True
+                            if entered:
+                                clamped += 1
     return clamped
 
 

@@ -32,12 +32,14 @@ import taichi as ti
 from .. import runtime
 from . import guard
 from .broad import BroadPhase
+from .obstacle import ObstaclePairs
 from .swept import SweptSearch, search_step
 
 SWEEPS = 20          # Gauss-Seidel sweeps of the pairs' projection a round
 ROUNDS = 4           # rounds of the projection and the colliders' sweep before the fail-safe
 MARGIN = 0.5         # the swept boxes' margin for the guard's moves, in thicknesses
 SOLVE_MARGIN = 2.0   # the swept boxes' margin for a solve's iterates, in thicknesses
+OBSTACLE_MARGIN = 1.0  # the obstacle pairs' boxes' margin, in thicknesses
 FAR = 1e30           # m: a reach that keeps every candidate of the proximity list
 STATS = {
     "candidates": "rows of the proximity list (pairs within thickness + skin)",
@@ -48,6 +50,11 @@ STATS = {
     "failsafe_steps": "steps that needed the fail-safe (cuts conserve no momentum)",
     "failsafe_vertices": "vertex paths the fail-safe cut short so far",
     "collider_paths_cut": "particle paths that entered a collider and were stopped",
+    "obstacle_pairs": "rows of the mesh colliders' pair list (obstacle.py)",
+    "obstacle_searches": "searches of the mesh colliders' pairs so far",
+    "obstacle_corrections": "cloth vertices the mesh colliders' planes moved so far",
+    "obstacle_carried": ("cloth vertices the mesh colliders' fail-safe carried with the "
+                         "obstacle so far"),
     "solve_searches": ("candidate searches for solvers' iterations (one at a step's start "
                        "where the proximity list does not cover its predicted motion, and "
                        "again where an iterate left what was searched)"),
@@ -66,9 +73,10 @@ class ContactStage:
         colliders: the model's ``collider_table.ColliderTable`` or None without colliders.
         x_start: the step's start positions where a batch of substeps needs them.
         batch_cuts: (paths the collider sweep cut inside batches, in their last step).
+        obstacle: the mesh colliders' pairs (``obstacle.ObstaclePairs``) or None.
     """
 
-    def __init__(self, model):
+    def __init__(self, model, primitives=None):
         self.model = model
         self.table = model.self_collision
         self.colliders = model.colliders if model.colliders.count else None
@@ -92,6 +100,10 @@ class ContactStage:
         self.stats = {key: 0 for key in STATS}
         self.stats["seconds"] = 0.0
         self.solve_list = None      # the list a solve reads (``begin_solve``), or None
+        self.obstacle = None
+        if self.colliders is not None and self.colliders.meshes is not None:
+            self.obstacle = ObstaclePairs(model, primitives, max(
+                c["thickness"] for c in self.colliders.mesh_colliders))
 
     # -- the proximity list ------------------------------------------------------------------
     @property
@@ -159,6 +171,8 @@ class ContactStage:
         back along them, which keeps every pair on its side)."""
         start = time.perf_counter()
         changed = 0
+        if self.obstacle is not None:
+            self.obstacle.begin(x0, x1, t0, dt, OBSTACLE_MARGIN * self.obstacle.thickness)
         if self.broad is None:
             changed = self._sweep(x0, x1, v1, t0, dt, True)
         else:
@@ -171,8 +185,21 @@ class ContactStage:
             if changed or not covered:
                 self._cover(x1)
             self.solve_list = None
+        if self.obstacle is not None:
+            changed += self._obstacle_failsafe(x0, x1, v1, t0, dt)
         self.stats["seconds"] += time.perf_counter() - start
         return changed > 0
+
+    def _obstacle_failsafe(self, x0, x1, v1, t0, dt):
+        """Where a mesh collider's planes are still not met at x1, its fail-safe (cloth
+        vertices carried with it, ``ObstaclePairs.carry``); the vertices carried."""
+        self.obstacle.cover(x0, x1, t0, dt, OBSTACLE_MARGIN * self.obstacle.thickness)
+        carried = 0
+        if self.obstacle.violations(x1):
+            self.stats["failsafe_steps"] += 1
+            carried = self.obstacle.carry(x0, x1, v1, t0, dt)
+            self.stats["obstacle_carried"] += carried
+        return carried
 
     def _resolve(self, cl, count, x0, x1, v1, t0, dt):
         """The rounds, the fail-safe and the last sweep of ``end_step``; returns how much
@@ -203,14 +230,19 @@ class ContactStage:
                 changed += cut + self._sweep(x0, x1, v1, t0, dt, False)
         return changed
 
-    def _sweep(self, x0, x1, v1, t0, dt, first):
+    def _sweep(self, x0, x1, v1, t0, dt, first, obstacle=True):
         """The colliders' sweep (``guard.sweep_colliders``; ``first``: the step's first,
-        which forgets who was held); the paths it cut."""
+        which forgets who was held) and, with ``obstacle``, the mesh colliders' planes
+        (x0, t0 and dt then the step's); the paths it cut and the vertices it moved."""
         if self.colliders is None:
             return 0
         cut = int(guard.sweep_colliders_kernel(self.colliders, self.inv_mass, x0, x1, v1, t0,
                                                dt, self.held, first))
         self.stats["collider_paths_cut"] += cut
+        if self.obstacle is not None and obstacle:
+            corrected = self.obstacle.project(x0, x1, v1, self.held, t0, dt, SWEEPS, ROUNDS)
+            self.stats["obstacle_corrections"] += corrected
+            cut += corrected
         return cut
 
     def _sweep_moves(self, x0, x1, v1, t0, dt):
@@ -219,7 +251,7 @@ class ContactStage:
         take a path that went round a collider's edge through it) (``_sweep``)."""
         if self.colliders is None:
             return 0
-        return (self._sweep(self.x_swept, x1, v1, t0 + dt, 0.0, False)
+        return (self._sweep(self.x_swept, x1, v1, t0 + dt, 0.0, False, obstacle=False)
                 + self._sweep(x0, x1, v1, t0, dt, False))
 
     def _still_covering(self, cl, count, x0, x1):
@@ -276,6 +308,11 @@ class ContactStage:
         self.batch_cuts[1] = cut
         return cut
 
+    def batch_obstacle(self):
+        """Why a batch of substeps cannot run this stage's steps, or None."""
+        return ("mesh colliders search their pairs between steps"
+                if self.obstacle is not None else None)
+
     def batch_cut_last(self):
         """Whether the collider sweep cut a path in a batch's last step (its velocities
         then changed after the forces were evaluated)."""
@@ -288,6 +325,9 @@ class ContactStage:
         if self.broad is not None:
             out["candidates"] = self.broad.count
             out["rebuilds"] = self.broad.rebuilds
+        if self.obstacle is not None:
+            out["obstacle_pairs"] = self.obstacle.count
+            out["obstacle_searches"] = self.obstacle.searches
         return out
 
     def reset_stats(self):
@@ -298,3 +338,5 @@ class ContactStage:
         self.batch_cuts.fill(0)
         if self.broad is not None:
             self.broad.rebuilds = 0
+        if self.obstacle is not None:
+            self.obstacle.searches = 0

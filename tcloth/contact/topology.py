@@ -37,6 +37,15 @@ def contact_topology(scene):
             "start": start, "neighbours": both[order, 1]}
 
 
+def cloth_primitives(scene):
+    """{"edges": (E, 2), "triangles": (T, 3)} of the scene's cloths and ropes (empty
+    where it has none): what a mesh collider's pairs take (``obstacle.py``)."""
+    if not scene.cloths and not scene.ropes:
+        return {"edges": np.zeros((0, 2), np.int64), "triangles": np.zeros((0, 3), np.int64)}
+    topo = contact_topology(scene)
+    return {"edges": topo["edges"], "triangles": topo["triangles"]}
+
+
 def resolve(scene):
     """The scene's self-collision settings with stiffness None replaced by the mean
     stiffness of its structural springs."""

@@ -121,3 +121,27 @@ def vertex_normals(x, triangles):
     n = np.stack([np.bincount(ids, np.tile(face[:, d], 3), len(x)) for d in range(3)], 1)
     length = np.linalg.norm(n, axis=1, keepdims=True)
     return np.divide(n, length, out=np.zeros_like(n), where=length > 0)
+
+
+def icosphere(radius, subdivisions):
+    """(vertices, triangles) of a sphere about the origin: an icosahedron's 20 faces each
+    cut into 4^subdivisions, the vertices pushed onto the sphere; outward-wound, closed,
+    no degenerate face (20 4^s triangles)."""
+    g = (1.0 + 5.0 ** 0.5) / 2.0
+    v = np.array([[-1, g, 0], [1, g, 0], [-1, -g, 0], [1, -g, 0], [0, -1, g], [0, 1, g],
+                  [0, -1, -g], [0, 1, -g], [g, 0, -1], [g, 0, 1], [-g, 0, -1], [-g, 0, 1]],
+                 dtype=np.float64)
+    f = np.array([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9],
+                  [5, 11, 4], [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2],
+                  [3, 2, 6], [3, 6, 8], [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10],
+                  [8, 6, 7], [9, 8, 1]])
+    for _ in range(subdivisions):
+        edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+        unique, inverse = np.unique(edges, axis=0, return_inverse=True)
+        mid = len(v) + inverse.ravel().reshape(3, -1).T       # (F, 3): edges 01, 12, 20
+        v = np.concatenate([v, 0.5 * (v[unique[:, 0]] + v[unique[:, 1]])])
+        a, b, c = f[:, 0], f[:, 1], f[:, 2]
+        ab, bc, ca = mid[:, 0], mid[:, 1], mid[:, 2]
+        f = np.concatenate([np.stack([a, ab, ca], 1), np.stack([b, bc, ab], 1),
+                            np.stack([c, ca, bc], 1), np.stack([ab, bc, ca], 1)])
+    return radius * v / np.linalg.norm(v, axis=1, keepdims=True), f

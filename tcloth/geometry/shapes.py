@@ -348,6 +348,7 @@ class Shape:
     bottom: Callable
     mesh: Callable
     checkered: bool = False
+    meshed: bool = False
 
 
 _OTHERS = "\n\n        Other arguments as for add_sphere.\n        "
@@ -405,6 +406,13 @@ SHAPES = (
           _capsule_normal,
           lambda c: float(c["center"][1] - abs(_axis(c)[1]) * c["half_height"] - c["radius"]),
           lambda c, half, tile: _turned(c, _capsule_mesh(c["radius"], c["half_height"]))),
+    Shape("mesh", (), "A triangle mesh: Scene.add_mesh_collider.",
+          lambda c: (c["reach"], 0.0, 0.0), None, None, None,
+          lambda c: float((c["vertices"] @ np.asarray(c["rotation"]).T)[:, 1].min()
+                          + c["center"][1]),
+          lambda c, half, tile: (c["vertices"] @ np.asarray(c["rotation"], dtype=float).T,
+                                 c["faces"], None),
+          meshed=True),
 )
 SHAPE_NAMES = tuple(s.name for s in SHAPES)
 

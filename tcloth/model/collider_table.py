@@ -1,13 +1,16 @@
 """A scene's colliders as Taichi data: ``ColliderTable``, a struct field with named
 members sorted by shape, and its groups (one per shape the scene has, static for the
-kernels)."""
+kernels); the mesh colliders' geometry in a ``meshstore.MeshStore``, and their motion
+step by step (``advance``)."""
 from dataclasses import dataclass
 
 import numpy as np
 import taichi as ti
 
 from .. import runtime
+from ..geometry.meshstore import MeshStore
 from ..geometry.shapes import SHAPE_NAMES, SHAPES, shape_of
+from ..scene.meshcollider import step_pose, world_vertices
 
 
 def collider_struct():
@@ -16,7 +19,8 @@ def collider_struct():
     vec3 = ti.types.vector(3, real)
     return ti.types.struct(center=vec3, velocity=vec3, extent=vec3,
                            rotation=ti.types.matrix(3, 3, real), thickness=real,
-                           stiffness=real, damping=real, friction=real, stick_velocity=real)
+                           stiffness=real, damping=real, friction=real, stick_velocity=real,
+                           spin=vec3, mesh=ti.i32)
 
 
 @dataclass(frozen=True)
@@ -33,10 +37,14 @@ class ColliderTable:
 
     Attributes:
         data: shape (count,) of ``collider_struct()``: center / plane point (m), velocity
-            (m/s), extent, rotation (box; identity otherwise), thickness (m), stiffness
-            (N/m), damping (ratio of critical), friction (mu), stick_velocity (m/s).
+            (m/s), extent, rotation (box, cylinder, capsule, mesh; identity otherwise),
+            thickness (m), stiffness (N/m), damping (ratio of critical), friction (mu),
+            stick_velocity (m/s), spin (a mesh's angular velocity, rad/s), mesh (its index
+            in ``meshes``).
         groups: tuple of ``Group``, one per shape the scene has.
         count: number of colliders; kinds: (count,) shape index per row (NumPy).
+        meshes: the mesh colliders' ``MeshStore`` (None without); moving: the rows whose
+            pose or vertices ``advance`` sets each step (keyframed, deforming).
     """
 
     def __init__(self, colliders, off=()):
@@ -53,6 +61,13 @@ class ColliderTable:
                                   int((self.kinds == s).sum()))
                             for s in range(len(SHAPES)) if (self.kinds == s).any())
         self.data = collider_struct().field(shape=max(self.count, 1))
+        meshed = [colliders[i] for i in self.rows if colliders[i]["kind"] == "mesh"]
+        self.mesh_rows = [k for k, i in enumerate(self.rows) if colliders[i]["kind"] == "mesh"]
+        self.meshes = MeshStore(meshed) if meshed else None
+        self.mesh_colliders = meshed
+        self.moving = [(k, m, colliders[self.rows[k]]) for m, k in enumerate(self.mesh_rows)
+                       if colliders[self.rows[k]]["keyframes"] is not None
+                       or colliders[self.rows[k]]["deform"] is not None]
         self.upload(colliders, off)
 
     def upload(self, colliders, off=()):
@@ -70,20 +85,81 @@ class ColliderTable:
                   "velocity": column(lambda c: c["velocity"]),
                   "extent": column(lambda c: shape_of(c).extent(c)),
                   "rotation": column(lambda c: c.get("rotation", np.eye(3))),
+                  "spin": column(lambda c: c.get("spin", np.zeros(3))),
                   **{key: column(lambda c, k=key: c[k]) for key in
                      ("thickness", "stiffness", "damping", "friction", "stick_velocity")}}
         values["stiffness"][np.isin(self.rows, list(off))] = 0.0
+        values["mesh"] = np.zeros(self.count, np.int32)
+        values["mesh"][self.mesh_rows] = np.arange(len(self.mesh_rows))
         self.data.from_numpy(values)
+        self._step = None
+
+    def advance(self, t0, dt):
+        """The keyframed and deforming mesh colliders over the step from t0 to t0 + dt: a
+        keyframed one's row moves it from its pose at t0 to its pose at t0 + dt, a
+        deforming one's vertices at both ends go to the store."""
+        if not self.moving or self._step == (t0, dt):
+            return
+        self._step = (t0, dt)
+        for k, m, c in self.moving:
+            if c["keyframes"] is not None:
+                center, velocity, rotation, spin = step_pose(c, t0, dt)
+                for name, value in (("center", center), ("velocity", velocity),
+                                    ("rotation", rotation), ("spin", spin)):
+                    getattr(self.data, name)[k] = value
+            else:
+                self.meshes.set_frames(m, t0, t0 + dt, world_vertices(c, t0),
+                                       world_vertices(c, t0 + dt))
+
+    @ti.func
+    def contact(self, shape: ti.template(), col, x, t):
+        """(phi, outward normal, the surface's velocity there) of x against collider row
+        ``col`` of shape index ``shape`` at time t."""
+        phi, n, u = 0.0, ti.Vector.zero(float, 3), col.velocity
+        if ti.static(SHAPES[shape].meshed):
+            phi, n, u = self.meshes.contact(col, x, t)
+        else:
+            phi, n = SHAPES[shape].signed_distance(col, x, t)
+        return phi, n, u
+
+    @ti.func
+    def distance(self, shape: ti.template(), col, x, t):
+        """(phi, outward normal) of x against collider row ``col`` at time t."""
+        phi, n, _ = self.contact(shape, col, x, t)
+        return phi, n
+
+    @ti.func
+    def ray_hit(self, shape: ti.template(), col, o, d, t):
+        """The shape's ray hit (``shapes.Shape.ray_hit``)."""
+        hit = 0.0
+        if ti.static(SHAPES[shape].meshed):
+            hit = self.meshes.ray_hit(col, o, d, t)
+        else:
+            hit = SHAPES[shape].ray_hit(col, o, d, t)
+        return hit
+
+    @ti.func
+    def normal(self, shape: ti.template(), col, p, t):
+        """The shape's shading normal (``shapes.Shape.normal``)."""
+        n = ti.Vector.zero(ti.f32, 3)
+        if ti.static(SHAPES[shape].meshed):
+            n = self.meshes.normal(col, p, t)
+        else:
+            n = SHAPES[shape].normal(col, p, t)
+        return n
 
     @ti.func
     def for_each_contact(self, x, p, t, body: ti.template(), zero, ctx):
         """The sum over this table's colliders c of ``body(col, c, x, p, phi, n, ctx)``,
         with (phi, n) the signed distance and outward normal of x[p] (read afresh for each
-        collider, so that a body may move the particle); ``zero`` starts the sum."""
+        collider, so that a body may move the particle) and ``col.velocity`` the
+        surface's velocity at the closest point (a turning or deforming mesh's own);
+        ``zero`` starts the sum."""
         acc = zero
         for g in ti.static(self.groups):
             for c in range(g.first, g.first + g.count):
                 col = self.data[c]
-                phi, n = SHAPES[g.shape].signed_distance(col, x[p], t)
+                phi, n, u = self.contact(g.shape, col, x[p], t)
+                col.velocity = u
                 acc += body(col, c, x, p, phi, n, ctx)
         return acc

@@ -17,6 +17,7 @@ import taichi as ti
 
 from .. import runtime
 from ..contact.stage import ContactStage
+from ..contact.topology import cloth_primitives
 from ..errors import SceneError
 from ..features import FEATURES
 from .grid import GridBlock, GridTable
@@ -133,8 +134,8 @@ class Model:
         self.grab = grab
         self.refresh(colliders_off)
         # the contact set and the guard, one per model (and so per simulator)
-        self.contact = (ContactStage(self) if self.self_collision is not None
-                        or self.colliders.count else None)
+        self.contact = (ContactStage(self, cloth_primitives(scene))
+                        if self.self_collision is not None or self.colliders.count else None)
 
     @staticmethod
     def _grid_block(cloth):

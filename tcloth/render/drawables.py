@@ -8,7 +8,6 @@ import taichi as ti
 
 from ..geometry import raycast
 from ..errors import SceneError
-from ..geometry.shapes import SHAPES
 
 CONTACT_REACH = 3.0   # a particle within this many thicknesses of a collider rests on it
 SAMPLES = 4           # a triangle's test points: a barycentric grid, this many steps a side
@@ -122,12 +121,11 @@ class DrawnCloth:
             a, b, c = self.x[i[0]], self.x[i[1]], self.x[i[2]]
             longest = ti.max((b - a).norm(), (c - b).norm(), (a - c).norm())
             for g in ti.static(self.colliders.groups):
-                distance = ti.static(SHAPES[g.shape].signed_distance)
                 for m in range(g.first, g.first + g.count):
                     col = self.colliders.data[m]
-                    phi0, n0 = distance(col, x[i[0]], time)
-                    phi1, n1 = distance(col, x[i[1]], time)
-                    phi2, n2 = distance(col, x[i[2]], time)
+                    phi0, n0 = self.colliders.distance(g.shape, col, x[i[0]], time)
+                    phi1, n1 = self.colliders.distance(g.shape, col, x[i[1]], time)
+                    phi2, n2 = self.colliders.distance(g.shape, col, x[i[2]], time)
                     rest = ti.cast(ti.min(phi0, phi1, phi2), ti.f32)
                     normals = ti.cast(ti.Matrix.rows([n0, n1, n2]), ti.f32)
                     thickness = ti.cast(col.thickness, ti.f32)
@@ -138,7 +136,8 @@ class DrawnCloth:
                         for s in range(SAMPLES + 1):
                             for t in range(SAMPLES + 1 - s):
                                 u, v = s / SAMPLES, t / SAMPLES
-                                phi = _distance(distance, col, a, b, c, u, v, time)
+                                phi = _distance(self.colliders, g.shape, col, a, b, c, u,
+                                                v, time)
                                 if phi < near:
                                     near, nu, nv = phi, u, v
                                 self._ask(i, u, v, target - phi, normals, cap, m)
@@ -152,7 +151,8 @@ class DrawnCloth:
                                                          (1, -1), (-1, 1))):
                                     u, v = bu + du * step, bv + dv * step
                                     if u >= 0.0 and v >= 0.0 and u + v <= 1.0:
-                                        phi = _distance(distance, col, a, b, c, u, v, time)
+                                        phi = _distance(self.colliders, g.shape, col, a, b,
+                                                        c, u, v, time)
                                         if phi < near:
                                             near, nu, nv = phi, u, v
                                 step *= 0.5
@@ -185,14 +185,14 @@ class DrawnCloth:
                 m = raycast.key_id(key)
                 for g in ti.static(self.colliders.groups):
                     if g.first <= m < g.first + g.count:
-                        _, n = SHAPES[g.shape].signed_distance(self.colliders.data[m],
-                                                               self.x[p], time)
+                        _, n = self.colliders.distance(g.shape, self.colliders.data[m],
+                                                       self.x[p], time)
                         self.x[p] += raycast.key_t(key) * ti.cast(n, ti.f32)
 
 
 @ti.func
-def _distance(distance: ti.template(), col, a, b, c, u, v, time):
+def _distance(table: ti.template(), shape: ti.template(), col, a, b, c, u, v, time):
     """Signed distance (float32) from collider ``col`` of the point of weights
     (1 - u - v, u, v) of triangle (a, b, c)."""
-    phi, _ = distance(col, (1.0 - u - v) * a + u * b + v * c, time)
+    phi, _ = table.distance(shape, col, (1.0 - u - v) * a + u * b + v * c, time)
     return ti.cast(phi, ti.f32)

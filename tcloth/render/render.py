@@ -211,8 +211,8 @@ class Renderer:
                 # checkered shapes (planes) receive shadows but cast none worth a test
                 if ti.static(camera or not SHAPES[g.shape].checkered):
                     for k in range(g.first, g.first + g.count):
-                        t = ti.cast(SHAPES[g.shape].ray_hit(self.colliders.data[k], o, d,
-                                                            time), ti.f32)
+                        t = ti.cast(self.colliders.ray_hit(g.shape, self.colliders.data[k],
+                                                           o, d, time), ti.f32)
                         if 0.0 < t < best:
                             best, best_id = t, COLLIDER_ID + k
             key = ti.i64(SKY_KEY)
@@ -399,7 +399,7 @@ class Renderer:
         n = ti.Vector([0.0, 1.0, 0.0], ti.f32)
         for g in ti.static(self.colliders.groups):
             if g.first <= k < g.first + g.count:
-                n = SHAPES[g.shape].normal(self.colliders.data[k], p, time)
+                n = self.colliders.normal(g.shape, self.colliders.data[k], p, time)
         return n
 
     @ti.kernel

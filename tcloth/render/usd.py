@@ -11,8 +11,9 @@ The stage: ``/World`` (the default prim) holds
     ``primvars:pinned`` (bool, per vertex);
   - ``Ropes/rope_<k>``: a linear ``BasisCurves`` per rope, ``Particles``: a ``Points``
     of the particles in no cloth and no rope, both as wide as the renderer draws them;
-  - ``Colliders/<shape>_<k>`` (k: the collider's index in ``scene.colliders``): a
-    ``Sphere``, a ``Cube`` scaled to the box, a ``Cylinder`` or a ``Capsule`` along its
+  - ``Colliders/<shape>_<k>`` (k: the collider's index in ``scene.colliders``): a mesh
+    collider as a ``Mesh`` of its triangles in the world (its points sampled every frame
+    where it moves), a ``Sphere``, a ``Cube`` scaled to the box, a ``Cylinder`` or a ``Capsule`` along its
     local y axis, and a plane as a large thin ``Mesh`` (checkered as the ground is drawn,
     of side six times the scene's extent); translated, turned and scaled by xformOps,
     the translation sampled at every frame where the collider moves, and its visibility
@@ -33,6 +34,7 @@ import numpy as np
 from ..errors import SceneError
 from ..geometry.primitives import vertex_normals
 from ..geometry.shapes import shape_of
+from ..scene.meshcollider import moves, world_vertices
 from ..scene.usdfile import USD_EXTENSIONS, pxr_modules, pxr_reason
 from ..validate import as_scalar
 from ..version import __version__
@@ -272,6 +274,8 @@ def _collider(stage, k, c, sim, half, tile):
     Usd, UsdGeom, Gf = pxr_modules("Usd", "UsdGeom", "Gf")
     kind = c["kind"]
     path = f"/World/Colliders/{kind}_{k}"
+    if kind == "mesh":
+        return _mesh_collider(stage, path, k, c, sim)
     if kind == "plane":
         v, tris, colours = shape_of(c).mesh(c, half, tile)
         prim = UsdGeom.Mesh.Define(stage, path)
@@ -307,11 +311,20 @@ def _collider(stage, k, c, sim, half, tile):
     moving = bool(np.any(velocity != 0))
     if not moving:
         translate.Set(Gf.Vec3d(*centre))
-    shown = [True, False]        # visible at the last frame; visibility written yet
 
     def write(x, t, code):
         if moving:
             translate.Set(Gf.Vec3d(*(centre + t * velocity)), code)
+    return _visibility(prim, k, sim, write)
+
+
+def _visibility(prim, k, sim, write_pose):
+    """A frame writer: ``write_pose`` then collider k's visibility where it changed."""
+    UsdGeom, = pxr_modules("UsdGeom")
+    shown = [True, False]        # visible at the last frame; visibility written yet
+
+    def write(x, t, code):
+        write_pose(x, t, code)
         on = k not in sim.settings["colliders_off"]
         if on != shown[0]:
             visibility = prim.GetVisibilityAttr()
@@ -320,3 +333,25 @@ def _collider(stage, k, c, sim, half, tile):
             visibility.Set(UsdGeom.Tokens.inherited if on else UsdGeom.Tokens.invisible, code)
             shown[:] = on, True
     return write
+
+
+def _mesh_collider(stage, path, k, c, sim):
+    """A mesh collider as a ``Mesh`` of its triangles, its points in the world (sampled
+    every frame where it moves); returns its frame writer."""
+    Usd, UsdGeom = pxr_modules("Usd", "UsdGeom")
+    prim = UsdGeom.Mesh.Define(stage, path)
+    prim.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    prim.CreateDoubleSidedAttr(not c["closed"])
+    prim.CreateFaceVertexCountsAttr([3] * len(c["faces"]))
+    prim.CreateFaceVertexIndicesAttr(np.ravel(c["faces"]).tolist())
+    _colour(prim, COLLIDER_COLOUR)
+    points, extent = prim.CreatePointsAttr(), prim.CreateExtentAttr()
+
+    def pose(x, t, code):
+        v = world_vertices(c, t)
+        points.Set(_vec3f(v), code)
+        extent.Set(_vec3f([v.min(0), v.max(0)]), code)
+    if not moves(c):
+        pose(None, 0.0, Usd.TimeCode.Default())
+        return _visibility(prim, k, sim, lambda x, t, code: None)
+    return _visibility(prim, k, sim, pose)

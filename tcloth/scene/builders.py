@@ -160,7 +160,7 @@ def mesh_springs(faces, triangles):
     return {"structural": structural, "shear": shear, "flexion": flexion}
 
 
-def _mesh_faces(x, faces):
+def check_faces(x, faces):
     """(the faces as tuples of vertex ids, their fan triangles (T,3), each vertex's share
     of the faces' area) of a mesh with vertices x, every face checked: ids in range, no
     repeat, no zero area, no vertex outside every face."""
@@ -254,7 +254,7 @@ def add_mesh_cloth(scene, vertices, faces, mass, structural, shear, flexion, pin
     if faces is None or len(faces) == 0:
         raise SceneError("faces must list at least one face (got none)")
     n = len(x)
-    checked, triangles, vertex_area = _mesh_faces(x, faces)
+    checked, triangles, vertex_area = check_faces(x, faces)
     uv = triangle_uvs(uvs, checked, n)
     springs = mesh_springs(checked, triangles)      # refuses a mesh that is not manifold
     if fabric is not None:

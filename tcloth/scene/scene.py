@@ -6,7 +6,7 @@ input when it is added, so that a ``Simulator`` built from it never sees bad dat
 """
 import numpy as np
 
-from . import builders
+from . import builders, meshcollider
 from .builders import unset
 from ..errors import SceneError
 from ..geometry.shapes import SHAPE_NAMES, SHAPES, collider_builder
@@ -253,6 +253,35 @@ class Scene:
         return builders.add_rope(self, start, end, segments, mass, stiffness, damping, pinned)
 
     # -- colliders -------------------------------------------------------------------------
+    def add_mesh_collider(self, mesh, position=(0.0, 0.0, 0.0), rotation=None, scale=1.0,
+                          friction=0.0, thickness=0.005, stiffness=1000.0, damping=0.5,
+                          stick_velocity=1e-3, velocity=None, angular_velocity=None,
+                          keyframes=None, deform=None, deform_fps=30.0, prim=None):
+        """Add a triangle mesh as an obstacle (docs/mesh_colliders.md).
+
+        Args:
+            mesh: an OBJ or USD path (``prim``: the Mesh prim in a USD file), or a pair
+                (vertices (V,3), faces: F faces of 3 or more vertex ids, polygons fanned
+                into triangles). A closed mesh, each edge in two faces wound alike, has an
+                inside no particle may end in; an open one (a table top, a wall) is
+                two-sided.
+            position, rotation, scale: its pose at t = 0: vertices scaled (a number or
+                three), turned (3x3 rotation; None: none), moved (m).
+            friction, thickness, stiffness, damping, stick_velocity: as add_sphere.
+            One motion: velocity (m/s) and angular_velocity (rad/s, about ``position``),
+                constant; keyframes [(time, position, rotation), ...] interpolated;
+                deform, a callable t -> (V,3) vertices (the mesh's own frame, before the
+                pose) or a (frames, V, 3) array at deform_fps.
+        Returns:
+            dict describing the collider.
+        """
+        common = {"friction": friction, "thickness": as_scalar("thickness", thickness,
+                                                                 minimum=0.0),
+                  "stiffness": stiffness, "damping": damping, "stick_velocity": stick_velocity}
+        return meshcollider.add_mesh_collider(self, mesh, position, rotation, scale, common,
+                                              velocity, angular_velocity, keyframes, deform,
+                                              deform_fps, prim)
+
     def add_collider(self, kind, shape, friction=0.0, velocity=(0.0, 0.0, 0.0),
                      thickness=0.005, stiffness=1000.0, damping=0.5, stick_velocity=1e-3):
         """Add a collider of shape ``kind`` whose own values, ``shape`` (a dict keyed as
@@ -324,4 +353,5 @@ class Scene:
 
 
 for _shape in SHAPES:
-    setattr(Scene, f"add_{_shape.name}", collider_builder(_shape))
+    if not _shape.meshed:
+        setattr(Scene, f"add_{_shape.name}", collider_builder(_shape))

@@ -120,10 +120,39 @@ def scene_to_arrays(scene):
         arrays[f"rope{k}_particles"] = r.particles
         arrays[f"rope{k}_springs"] = r.springs
     desc["ropes"] = len(scene.ropes)
-    for c in scene.colliders:
-        desc["colliders"].append(_plain(c))
+    for k, c in enumerate(scene.colliders):
+        desc["colliders"].append(_plain(c) if c["kind"] != "mesh" else _mesh_to_arrays(
+            k, c, arrays))
     _save_features(scene, desc, arrays)
     return desc, arrays
+
+
+def _mesh_to_arrays(k, c, arrays):
+    """A mesh collider's description, its mesh (and deform frames) into ``arrays``: by
+    content, not by the path it came from."""
+    if callable(c["deform"]):
+        raise SceneError(f"collider {k} (a mesh) deforms by a callable, which a checkpoint "
+                         "cannot store: give deform as a (frames, V, 3) array to save it")
+    arrays[f"collider{k}_vertices"] = c["vertices"]
+    arrays[f"collider{k}_faces"] = c["faces"]
+    if c["deform"] is not None:
+        arrays[f"collider{k}_deform"] = c["deform"] * c["scale"]
+    keep = ("kind", "center", "rotation", "velocity", "spin", "keyframes", "deform_fps",
+            *(name for name, _ in COMMON if name != "velocity"))
+    return {key: _plain(c[key]) if key != "keyframes" or c[key] is None
+            else [[t, p.tolist(), r.tolist()] for t, p, r in c[key]] for key in keep}
+
+
+def _mesh_from_arrays(scene, k, c, arrays):
+    """``_mesh_to_arrays`` read back into ``scene``."""
+    moving = c["keyframes"] is not None or f"collider{k}_deform" in arrays
+    scene.add_mesh_collider(
+        (arrays[f"collider{k}_vertices"], arrays[f"collider{k}_faces"]),
+        position=c["center"], rotation=c["rotation"],
+        velocity=None if moving else c["velocity"],
+        angular_velocity=None if moving else c["spin"], keyframes=c["keyframes"],
+        deform=arrays.get(f"collider{k}_deform"), deform_fps=c["deform_fps"],
+        **{name: c[name] for name, _ in COMMON if name != "velocity"})
 
 
 def _runs(kinds):
@@ -171,11 +200,14 @@ def scene_from_arrays(desc, arrays):
         scene.cloths.append(cloth)
     for k in range(desc["ropes"]):
         scene.ropes.append(Rope(arrays[f"rope{k}_particles"], arrays[f"rope{k}_springs"]))
-    for c in desc["colliders"]:
+    for k, c in enumerate(desc["colliders"]):
         kind = c.get("kind")
         if kind not in SHAPE_NAMES:
             raise SceneError(f"checkpoint holds a collider of unknown kind {kind!r}")
         try:
+            if kind == "mesh":
+                _mesh_from_arrays(scene, k, c, arrays)
+                continue
             getattr(scene, f"add_{kind}")(
                 **{p.name: c[p.stored] for p in shape_of(c).parameters},
                 **{name: c[name] for name, _ in COMMON})

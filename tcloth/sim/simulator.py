@@ -152,6 +152,7 @@ class Simulator:
             return
         for _ in range(int(n)):
             s_in, s_out = self._states
+            self.model.colliders.advance(self.time, self.dt)     # moving mesh colliders
             self.integrator.simulate(self.model, s_in, s_out, self.dt)
             if limiter is not None:
                 limiter.apply(s_out, self.dt)
@@ -188,7 +189,8 @@ class Simulator:
         n = self.model.particle_count
         if not serial_count(n):
             return f"the {n} particles' loops run on several threads"
-        why = self.integrator.batch_obstacle()
+        why = self.integrator.batch_obstacle() or (self._contact and
+                                                   self._contact.batch_obstacle())
         if why is None and self._limiter is not None and self.settings["strain_limiting"]:
             why = self._limiter.batch_obstacle()
         return why

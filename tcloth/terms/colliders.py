@@ -97,10 +97,11 @@ class Colliders(Term):
         self.table = model.colliders
         self.mass, self.inv_mass, self.params = model.mass, model.inv_mass, model.params
         self._lagged = None
-        # (normal, offset) per particle and collider: ``begin_solve``
+        # (normal, offset, the surface's velocity) per particle and collider: ``begin_solve``
         shape = (model.particle_count, max(self.table.count, 1))
         self._planes = (ti.Vector.field(3, runtime.real(), shape=shape),
-                        ti.field(runtime.real(), shape=shape))
+                        ti.field(runtime.real(), shape=shape),
+                        ti.Vector.field(3, runtime.real(), shape=shape))
         self._h = ti.field(runtime.real(), shape=())     # the planes' step
 
     # -- explicit force and energy ---------------------------------------------------------
@@ -263,6 +264,7 @@ class Colliders(Term):
         v0, h, fall = ctx
         self._planes[0][p, c] = n
         self._planes[1][p, c] = -1e30
+        self._planes[2][p, c] = col.velocity
         reach = h * (v0.norm() + col.velocity.norm()) + fall + col.thickness
         if col.stiffness > 0.0 and self.inv_mass[p] > 0.0 and phi < col.thickness + reach:
             self._planes[1][p, c] = n.dot(x0[p] - phi * n + h * col.velocity)
@@ -271,11 +273,14 @@ class Colliders(Term):
     @ti.func
     def _for_each_plane(self, p, x, body: ti.template(), zero, ctx):
         """The sum over colliders c of ``body(col, c, gap, n, ctx)``, gap the height of x[p]
-        above collider c's plane (``begin_solve``; huge where it has none)."""
+        above collider c's plane (``begin_solve``; huge where it has none), col.velocity
+        the surface's velocity at the plane's point."""
         acc = zero
         for c in range(self.table.count):
             n = self._planes[0][p, c]
-            acc += body(self.table.data[c], c, n.dot(x[p]) - self._planes[1][p, c], n, ctx)
+            col = self.table.data[c]
+            col.velocity = self._planes[2][p, c]
+            acc += body(col, c, n.dot(x[p]) - self._planes[1][p, c], n, ctx)
         return acc
 
     @ti.func

@@ -5,14 +5,24 @@ import numpy as np
 
 from ..geometry.primitives import tiles, vertex_normals
 from ..geometry.shapes import shape_of
+from ..scene.meshcollider import moves, world_vertices
 
 
 def collider_mesh(collider, t, half, tile):
     """(vertices, triangles, colours or None) of a scene collider at time t; a plane is a
-    square of side 2 half around its point in tiles of side ``tile``."""
+    square of side 2 half around its point in tiles of side ``tile``; a mesh collider is
+    its mesh where its motion has taken it."""
+    if collider["kind"] == "mesh":
+        return world_vertices(collider, t), collider["faces"], None
     centre = np.asarray(collider["center"]) + t * np.asarray(collider["velocity"])
     v, tris, colours = shape_of(collider).mesh(collider, half, tile)
     return centre + v, tris, colours
 
 
-__all__ = ["vertex_normals", "collider_mesh", "tiles"]
+def collider_moves(collider):
+    """Whether a scene collider moves (its drawn mesh changes with time)."""
+    return moves(collider) if collider["kind"] == "mesh" else bool(
+        np.any(np.asarray(collider["velocity"]) != 0))
+
+
+__all__ = ["vertex_normals", "collider_mesh", "collider_moves", "tiles"]

@@ -20,7 +20,7 @@ from ..render.render import COLLIDER_COLOUR, PARTICLE_COLOUR
 from .camera import OrbitCamera
 from .controls import Controls, contact_lines
 from .display import DisplayError, check_display
-from .meshes import collider_mesh, tiles, vertex_normals
+from .meshes import collider_mesh, collider_moves, tiles, vertex_normals
 
 BACKGROUND = (0.93, 0.94, 0.96)
 PANEL_WIDTH = 0.27          # of the window's width, at its left edge
@@ -100,8 +100,8 @@ class Viewer:
             self.sphere_x = ti.Vector.field(3, ti.f32, shape=self.sphere_count)
 
     def _mesh_fields(self, vertices, triangles, colours=None):
-        """GGUI fields of a collider or ground mesh: vertices, indices, normals (computed
-        once: a collider moves without turning), colours or None."""
+        """GGUI fields of a collider or ground mesh: vertices, indices, normals (a moving
+        mesh collider's are set again each frame, ``_draw``), colours or None."""
         ti = self.ti
         fields = []
         for values in (vertices, vertex_normals(vertices, triangles), colours):
@@ -134,7 +134,7 @@ class Viewer:
         self.colliders = []
         for c in scene.colliders:
             fields = self._mesh_fields(*collider_mesh(c, 0.0, half, size))
-            self.colliders.append((c, fields, bool(np.any(c["velocity"] != 0))))
+            self.colliders.append((c, fields, collider_moves(c)))
 
     # -- per frame ---------------------------------------------------------------------------
     def _draw(self):
@@ -176,8 +176,9 @@ class Viewer:
             if not enabled[k]:
                 continue
             if moving:
-                fields[0].from_numpy(collider_mesh(col, sim.time, 3 * self.extent,
-                                                   self.tile)[0].astype(np.float32))
+                v, tris, _ = collider_mesh(col, sim.time, 3 * self.extent, self.tile)
+                fields[0].from_numpy(v.astype(np.float32))
+                fields[2].from_numpy(vertex_normals(v, tris).astype(np.float32))
             self._draw_mesh(fields)
         held = sim.grabbed
         if held is not None:

@@ -1,0 +1,352 @@
+"""Mesh colliders in the guard: the pairs of cloth and obstacle primitives, kept apart by
+separating planes as the cloth's own pairs are (``guard.py``), with the obstacle side
+immovable.
+
+An obstacle's vertices move on straight lines over a step from their positions at t0 to
+those at t0 + dt (a rigid one's pose at both ends, a deforming one's frames), the cloth's
+from x0 to x1. Three kinds of pairs can cross: a cloth point and an obstacle triangle
+(``POINT_TRIANGLE``), a cloth edge and an obstacle edge (``EDGE_EDGE``: a table's rim under
+a draped cloth), and an obstacle vertex and a cloth triangle (``VERTEX_TRIANGLE``: a
+corner poking up into the cloth). A pair separated at the step's start by its gap D0
+along the unit normal m of its closest points (from the obstacle's side to the cloth's)
+stays separated along the whole step if at its end every cloth vertex a of it and every
+obstacle vertex b keep m . (x_a - x_b) >= delta (the function min_a m . x_a - max_b m . x_b
+is concave on straight paths): with the obstacle's ends known before the step, that is
+one half-space a cloth vertex, m . x_a >= h, h = max_b m . xo1_b + delta, the same delta =
+min(T, max(D0 / 2, T / 4)) as the cloth's own pairs. ``project`` moves each cloth vertex
+onto its half-spaces (Gauss-Seidel over the rows, in order) and removes its normal
+velocity into the obstacle (relative to the obstacle's at the pair): an inelastic
+contact, which adds no energy. A vertex no projection can satisfy (squeezed between two
+sides of a closing obstacle) is carried with the obstacle by ``carry``, the fail-safe:
+moved as the obstacle around it moves, it crosses none of its triangles.
+
+The candidates (``obstacle_search.py``): the pairs whose swept boxes, grown by half the
+thickness and a margin, meet. A list serves while the cloth stays within its margin of the
+boxes it was searched with and a moving obstacle is where it was searched (``holds``).
+"""
+import numpy as np
+import taichi as ti
+
+from .. import runtime
+from ..geometry.meshstore import pose
+from ..geometry.proximity import contact_weights
+from ..runtime import serial_count
+from ..scene.meshcollider import moves
+from .obstacle_search import EDGE_EDGE, POINT_TRIANGLE, VERTEX_TRIANGLE, Rows, is_cloth, search
+from .swept import excess
+FLOOR = 0.25        # pairs end a step at least this fraction of the thickness apart
+LEAST_GAP = 1e-6    # m: a pair closer than this at the step's start has no normal
+SLACK = 1e-3        # a violation below this fraction of FLOOR T is none
+INACTIVE = -1e30    # h of a row without a plane
+ADVANCES = 24       # conservative advancement's steps before it takes the plane where it is
+ADVANCE_SLACK = 0.05  # a gap within this fraction above delta has come down to it
+
+
+def _owners(triangles):
+    """(F, 3) int flags: corner k of face f is where vertex t[f, k] is first listed, and
+    edge k (corner k to k + 1) of face f is where that edge is first listed."""
+    t = np.asarray(triangles, dtype=np.int64)
+    flat = t.ravel()
+    _, first = np.unique(flat, return_index=True)
+    own_v = np.zeros(flat.size, np.int32)
+    own_v[first] = 1
+    edges = np.sort(np.stack([t, np.roll(t, -1, axis=1)], -1).reshape(-1, 2), axis=1)
+    _, first = np.unique(edges, axis=0, return_index=True)
+    own_e = np.zeros(len(edges), np.int32)
+    own_e[first] = 1
+    return own_v.reshape(-1, 3), own_e.reshape(-1, 3)
+
+
+@ti.data_oriented
+class ObstaclePairs:
+    """The pairs of a model's cloth and its mesh colliders (module docstring).
+
+    Attributes:
+        points, edges, triangles: the cloth's primitives (``topology.contact_topology``).
+        xo0, xo1: every obstacle vertex in the world at the step's ends.
+        rows: a ``Rows`` (``count`` in use): the primitives' ids (cloth particles;
+            obstacle vertices of ``xo0``), the kind, the plane's normal m toward the cloth,
+            its level h for the cloth's vertices, the obstacle's velocity u there.
+    """
+
+    def __init__(self, model, topology, thickness):
+        real = runtime.real()
+        self.table, self.store = model.colliders, model.colliders.meshes
+        self.inv_mass = model.inv_mass
+        self.thickness = thickness
+        self.static = all(not moves(c) for c in self.table.mesh_colliders)
+        topology = {"points": np.arange(model.particle_count), **topology}
+        self.counts = tuple(len(topology[k]) for k in ("points", "edges", "triangles"))
+        self.points = _ints(topology["points"], ())
+        self.edges = _ints(topology["edges"], (2,))
+        self.triangles = _ints(topology["triangles"], (3,))
+        n_obstacle = self.store.va.shape[0]
+        self.xo0 = ti.Vector.field(3, real, shape=n_obstacle)
+        self.xo1 = ti.Vector.field(3, real, shape=n_obstacle)
+        # each obstacle vertex's collider row
+        row_of = np.zeros(n_obstacle, np.int32)
+        own_v, own_e = [], []
+        for k, r in zip(self.table.mesh_rows, self.store.records):
+            row_of[r["vert_first"]:r["vert_first"] + len(r["v"])] = k
+            v, e = _owners(r["tris"])
+            own_v.append(v)
+            own_e.append(e)
+        self.row_of = _ints(row_of, ())
+        self.mesh_row = _ints(self.table.mesh_rows, ())
+        self.own_v = _ints(np.concatenate(own_v), (3,))
+        self.own_e = _ints(np.concatenate(own_e), (3,))
+        self.origin = ti.Vector.field(3, real, shape=model.particle_count)
+        self.anchor = ti.Vector.field(3, real, shape=model.particle_count)
+        self.margin = 0.0
+        self.searched = None        # the step (t0, dt) a moving obstacle was searched for
+        self.rows = Rows(4 * sum(self.counts) + 64)
+        self.count = 0
+        self.searches = 0
+
+    # -- the step ------------------------------------------------------------------------
+    def begin(self, x0, x1, t0, dt, margin):
+        """The obstacle at both ends of the step, the candidates of the motion x0 -> x1
+        (searched again where the list does not hold it) and their planes at x0."""
+        _positions(self, t0, dt)
+        self.cover(x0, x1, t0, dt, margin)
+
+    def cover(self, x0, x1, t0, dt, margin):
+        """Make the rows hold the motion x0 -> x1 (search again if they do not) and their
+        planes that motion's."""
+        if not self.holds(x0, x1, t0, dt):
+            self.searches += 1
+            self.origin.copy_from(x0)
+            self.anchor.copy_from(x1)
+            self.margin = margin
+            self.searched = (t0, dt)
+            while True:
+                found = int(search(self, self.rows, x0, x1, 0.5 * self.thickness + margin,
+                                    t0, dt))
+                if found <= self.rows.capacity:
+                    break
+                self.rows = Rows(2 * found)
+            self.count = found
+        _planes(self, self.rows, self.count, x0, x1, self.thickness, dt)
+
+    def holds(self, x0, x1, t0, dt):
+        """Whether the rows hold every pair that can come within the thickness on the
+        motion x0 -> x1 of this step: the cloth within the margin of the searched boxes
+        and the obstacle where it was searched (a static one always is)."""
+        if self.searched is None or not (self.static or self.searched == (t0, dt)):
+            return False
+        return max(float(excess(self.points, self.origin, self.anchor, x))
+                   for x in (x0, x1)) <= self.margin
+
+    def project(self, x0, x1, v1, held, t0, dt, sweeps, rounds):
+        """Rounds of: the rows and planes of the motion as it now is (``cover``), then
+        Gauss-Seidel sweeps of the half-spaces on the cloth's vertices until one corrects
+        nothing (at most ``sweeps``), until a round corrects nothing (at most
+        ``rounds``). Returns the corrections."""
+        total = 0
+        for round_ in range(rounds):
+            if round_:
+                self.cover(x0, x1, t0, dt, self.margin)
+            corrected, _ = _project(self, self.rows, self.count, x0, x1, v1, held, dt, sweeps)
+            total += int(corrected)
+            if not corrected:
+                break
+        return total
+
+    def violations(self, x1):
+        return int(_violations(self, self.rows, self.count, x1))
+
+    def carry(self, x0, x1, v1, t0, dt, rounds=8):
+        """The fail-safe: the free cloth vertices of violated rows moved with the obstacle
+        from their start (as its pose moves them; a deforming one's by the row's
+        obstacle points' motion), rounds until no row is violated. Returns the
+        vertices carried."""
+        carried = 0
+        for _ in range(rounds):
+            moved = int(_carry(self, self.rows, self.count, x0, x1, v1, t0, dt))
+            carried += moved
+            if not moved:
+                break
+        return carried
+
+
+def _ints(values, inner):
+    values = np.asarray(values, dtype=np.int32)
+    rows = max(len(values), 1)
+    f = ti.field(ti.i32, shape=rows) if not inner else ti.Vector.field(inner[0], ti.i32,
+                                                                       shape=rows)
+    if len(values):
+        f.from_numpy(values)
+    return f
+
+
+@ti.kernel
+def _positions(o: ti.template(), t0: float, dt: float):
+    """xo0, xo1: the obstacle's vertices in the world at t0 and t0 + dt."""
+    ti.loop_config(serialize=ti.static(serial_count(o.xo0.shape[0])))
+    for i in range(o.xo0.shape[0]):
+        col = o.table.data[o.row_of[i]]
+        if o.store.meshes[col.mesh][6]:
+            o.xo0[i], o.xo1[i] = o.store.va[i], o.store.vb[i]
+        else:
+            r0, c0 = pose(col, t0)
+            r1, c1 = pose(col, t0 + dt)
+            o.xo0[i], o.xo1[i] = r0 @ o.store.va[i] + c0, r1 @ o.store.va[i] + c1
+
+
+@ti.func
+def _gap(ids, kind, x0, x1, xo0, xo1, s):
+    """(gap vector from the obstacle's side to the cloth's, alpha) of a row with every
+    vertex a fraction s along its path."""
+    y = [ti.Vector.zero(float, 3) for _ in ti.static(range(4))]
+    for k in ti.static(range(4)):
+        if is_cloth(kind, k):
+            y[k] = x0[ids[k]] + s * (x1[ids[k]] - x0[ids[k]])
+        else:
+            y[k] = xo0[ids[k]] + s * (xo1[ids[k]] - xo0[ids[k]])
+    alpha = contact_weights(1 if kind == EDGE_EDGE else 0, y[0], y[1], y[2], y[3])
+    g = alpha[0] * y[0] + alpha[1] * y[1] + alpha[2] * y[2] + alpha[3] * y[3]
+    if kind == VERTEX_TRIANGLE:
+        g = -g
+    return g, alpha
+
+
+@ti.func
+def _closing(ids, kind, x0, x1, xo0, xo1):
+    """The most the row's gap can close over the step: the longest relative displacement
+    of a cloth and an obstacle vertex of it (the gap is a convex combination of such
+    differences)."""
+    most = 0.0
+    for a in ti.static(range(4)):
+        if is_cloth(kind, a):
+            for b in ti.static(range(4)):
+                if not is_cloth(kind, b):
+                    most = ti.max(most, ((x1[ids[a]] - x0[ids[a]])
+                                         - (xo1[ids[b]] - xo0[ids[b]])).norm())
+    return most
+
+
+@ti.kernel
+def _planes(o: ti.template(), rows: ti.template(), count: ti.i32, x0: ti.template(),
+            x1: ti.template(), thickness: float, dt: float):
+    """Each row's plane for the motion x0 -> x1 (module docstring): the first fraction s
+    of the step at which its gap comes down to a quarter of the thickness (FLOOR T),
+    found by conservative advancement (the gap closes by at most ``_closing`` over the
+    whole step, so moving s on by (gap - FLOOR T) / closing cannot pass it). A row whose
+    gap stays above that all along has none (h = INACTIVE): its path crosses nothing, and
+    a cloth sliding over a curved obstacle at the contact law's offset is not held to the
+    tangent planes it passed. The plane is that of the closest points at s, m toward the
+    cloth, h = max_b m . xo1_b + delta (delta as the cloth's own pairs': min(T, max(D0 /
+    2, FLOOR T))), with the obstacle's velocity u there."""
+    ti.loop_config(serialize=ti.static(serial_count(rows.capacity)))
+    for c in range(count):
+        ids, kind = rows.ids[c], rows.kind[c]
+        g, alpha = _gap(ids, kind, x0, x1, o.xo0, o.xo1, 0.0)
+        d0 = g.norm()
+        delta = FLOOR * thickness
+        target = delta
+        closing = _closing(ids, kind, x0, x1, o.xo0, o.xo1)
+        s, d, hit = 0.0, d0, d0 <= target * (1.0 + ADVANCE_SLACK)
+        for _ in range(ADVANCES):
+            if hit or s >= 1.0 or closing <= 0.0:
+                break
+            s = ti.min(s + (d - target) / closing, 1.0)
+            g, alpha = _gap(ids, kind, x0, x1, o.xo0, o.xo1, s)
+            d = g.norm()
+            hit = d <= target * (1.0 + ADVANCE_SLACK)
+        if s < 1.0 and not hit:
+            hit = True              # out of advances short of the end: take the plane here
+        m = g / ti.max(d, LEAST_GAP)
+        level, weight = -1e30, 0.0
+        u = ti.Vector.zero(float, 3)
+        for k in ti.static(range(4)):
+            if not is_cloth(kind, k):
+                level = ti.max(level, m.dot(o.xo1[ids[k]]))
+                u += abs(alpha[k]) * (o.xo1[ids[k]] - o.xo0[ids[k]]) / dt
+                weight += abs(alpha[k])
+        rows.m[c] = m
+        rows.u[c] = u / ti.max(weight, 1e-30)
+        rows.delta[c] = delta
+        rows.h[c] = level + delta if hit and d > LEAST_GAP else INACTIVE
+
+
+@ti.kernel
+def _project(o: ti.template(), rows: ti.template(), count: ti.i32, x0: ti.template(),
+             x1: ti.template(), v1: ti.template(), held: ti.template(), dt: float,
+             sweeps: ti.i32) -> ti.types.vector(2, ti.i32):
+    """``ObstaclePairs.project``: a vertex short of a half-space moves onto it along its
+    normal (it slides along the plane of the contact its path made)."""
+    total, ran = 0, 0
+    ti.loop_config(serialize=True)
+    for _ in range(sweeps):
+        corrected = 0
+        for c in range(count):
+            ids, kind = rows.ids[c], rows.kind[c]
+            m, h = rows.m[c], rows.h[c]
+            for k in ti.static(range(4)):
+                if is_cloth(kind, k):
+                    a = ids[k]
+                    short = h - m.dot(x1[a])
+                    if o.inv_mass[a] > 0.0 and short > SLACK * rows.delta[c]:
+                        x1[a] += short * m
+                        vn = (v1[a] - rows.u[c]).dot(m)
+                        if vn < 0.0:
+                            v1[a] -= vn * m
+                        held[a] = m
+                        corrected += 1
+        total += corrected
+        ran += 1
+        if corrected == 0:
+            break
+    return ti.Vector([total, ran])
+
+
+@ti.func
+def _short(o: ti.template(), rows: ti.template(), c, x1):
+    """Whether a free cloth vertex of row c is below its half-space at x1."""
+    ids, kind = rows.ids[c], rows.kind[c]
+    bad = False
+    for k in ti.static(range(4)):
+        if is_cloth(kind, k):
+            a = ids[k]
+            if o.inv_mass[a] > 0.0 and rows.h[c] - rows.m[c].dot(x1[a]) > SLACK * rows.delta[c]:
+                bad = True
+    return bad
+
+
+@ti.kernel
+def _violations(o: ti.template(), rows: ti.template(), count: ti.i32, x1: ti.template()) -> ti.i32:
+    bad = 0
+    ti.loop_config(serialize=ti.static(serial_count(rows.capacity)))
+    for c in range(count):
+        if _short(o, rows, c, x1):
+            bad += 1
+    return bad
+
+
+@ti.kernel
+def _carry(o: ti.template(), rows: ti.template(), count: ti.i32, x0: ti.template(), x1: ti.template(),
+           v1: ti.template(), t0: float, dt: float) -> ti.i32:
+    """Carry the free cloth vertices of each violated row with the obstacle (``carry``);
+    a carried vertex's row is kept (h = INACTIVE: it moves as the obstacle does)."""
+    moved = 0
+    ti.loop_config(serialize=True)
+    for c in range(count):
+        if _short(o, rows, c, x1):
+            ids, kind = rows.ids[c], rows.kind[c]
+            b = ids[1] if kind == POINT_TRIANGLE else (ids[2] if kind == EDGE_EDGE else ids[0])
+            col = o.table.data[o.row_of[b]]
+            deforming = o.store.meshes[col.mesh][6]
+            r0, c0 = pose(col, t0)
+            r1, c1 = pose(col, t0 + dt)
+            for k in ti.static(range(4)):
+                if is_cloth(kind, k):
+                    a = ids[k]
+                    if o.inv_mass[a] > 0.0:
+                        end = r1 @ (r0.transpose() @ (x0[a] - c0)) + c1
+                        if deforming:
+                            end = x0[a] + rows.u[c] * dt
+                        v1[a] = (end - x0[a]) / dt
+                        x1[a] = end
+                        moved += 1
+            rows.h[c] = INACTIVE
+    return moved
