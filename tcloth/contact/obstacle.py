@@ -24,6 +24,8 @@ The candidates (``obstacle_search.py``): the pairs whose swept boxes, grown by h
 thickness and a margin, meet. A list serves while the cloth stays within its margin of the
 boxes it was searched with and a moving obstacle is where it was searched (``holds``).
 """
+import time
+
 import numpy as np
 import taichi as ti
 
@@ -75,11 +77,23 @@ class ObstaclePairs:
         self.inv_mass = model.inv_mass
         self.thickness = thickness
         self.static = all(not moves(c) for c in self.table.mesh_colliders)
-        topology = {"points": np.arange(model.particle_count), **topology}
-        self.counts = tuple(len(topology[k]) for k in ("points", "edges", "triangles"))
-        self.points = _ints(topology["points"], ())
-        self.edges = _ints(topology["edges"], (2,))
-        self.triangles = _ints(topology["triangles"], (3,))
+        # a cloth triangle's query lists the pairs of its own vertices and edges too (each
+        # from the first triangle that has it: ``own_cv``, ``own_ce``); points and edges
+        # in no triangle (loose particles, ropes) have queries of their own
+        triangles = np.asarray(topology["triangles"], dtype=np.int64).reshape(-1, 3)
+        edges = np.asarray(topology["edges"], dtype=np.int64).reshape(-1, 2)
+        own_cv, own_ce = _owners(triangles) if len(triangles) else (np.zeros((0, 3)),) * 2
+        lonely_points = np.setdiff1d(np.arange(model.particle_count), triangles)
+        in_triangles = {tuple(e) for e in np.sort(np.concatenate(
+            [triangles[:, [0, 1]], triangles[:, [1, 2]], triangles[:, [2, 0]]]), axis=1)}
+        lonely_edges = np.array([e for e in edges if tuple(np.sort(e)) not in in_triangles],
+                                dtype=np.int64).reshape(-1, 2)
+        self.counts = (len(lonely_points), len(lonely_edges), len(triangles))
+        self.points = _ints(lonely_points, ())
+        self.edges = _ints(lonely_edges, (2,))
+        self.triangles = _ints(triangles, (3,))
+        self.own_cv, self.own_ce = _ints(own_cv, (3,)), _ints(own_ce, (3,))
+        self.every_point = _ints(np.arange(model.particle_count), ())
         n_obstacle = self.store.va.shape[0]
         self.xo0 = ti.Vector.field(3, real, shape=n_obstacle)
         self.xo1 = ti.Vector.field(3, real, shape=n_obstacle)
@@ -102,18 +116,23 @@ class ObstaclePairs:
         self.rows = Rows(4 * sum(self.counts) + 64)
         self.count = 0
         self.searches = 0
+        self.search_seconds = 0.0     # wall time of the searches (their kernels waited for)
+        self.current = False          # the planes are those of the motion as it now is
 
     # -- the step ------------------------------------------------------------------------
     def begin(self, x0, x1, t0, dt, margin):
-        """The obstacle at both ends of the step, the candidates of the motion x0 -> x1
-        (searched again where the list does not hold it) and their planes at x0."""
-        _positions(self, t0, dt)
+        """The obstacle at both ends of the step (once for good where it is still), the
+        candidates of the motion x0 -> x1 (searched again where the list does not hold
+        it) and their planes."""
+        if not (self.static and self.searched is not None):
+            _positions(self, t0, dt)
         self.cover(x0, x1, t0, dt, margin)
 
     def cover(self, x0, x1, t0, dt, margin):
         """Make the rows hold the motion x0 -> x1 (search again if they do not) and their
         planes that motion's."""
         if not self.holds(x0, x1, t0, dt):
+            start = time.perf_counter()
             self.searches += 1
             self.origin.copy_from(x0)
             self.anchor.copy_from(x1)
@@ -126,6 +145,7 @@ class ObstaclePairs:
                     break
                 self.rows = Rows(2 * found)
             self.count = found
+            self.search_seconds += time.perf_counter() - start
         _planes(self, self.rows, self.count, x0, x1, self.thickness, dt)
 
     def holds(self, x0, x1, t0, dt):
@@ -134,20 +154,22 @@ class ObstaclePairs:
         and the obstacle where it was searched (a static one always is)."""
         if self.searched is None or not (self.static or self.searched == (t0, dt)):
             return False
-        return max(float(excess(self.points, self.origin, self.anchor, x))
+        return max(float(excess(self.every_point, self.origin, self.anchor, x))
                    for x in (x0, x1)) <= self.margin
 
     def project(self, x0, x1, v1, held, t0, dt, sweeps, rounds):
         """Rounds of: the rows and planes of the motion as it now is (``cover``), then
         Gauss-Seidel sweeps of the half-spaces on the cloth's vertices until one corrects
         nothing (at most ``sweeps``), until a round corrects nothing (at most
-        ``rounds``). Returns the corrections."""
+        ``rounds``). Returns the corrections; ``current`` says whether the planes are
+        those of the motion it leaves (its last round corrected nothing)."""
         total = 0
         for round_ in range(rounds):
             if round_:
                 self.cover(x0, x1, t0, dt, self.margin)
             corrected, _ = _project(self, self.rows, self.count, x0, x1, v1, held, dt, sweeps)
             total += int(corrected)
+            self.current = not corrected
             if not corrected:
                 break
         return total

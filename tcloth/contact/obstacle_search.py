@@ -91,31 +91,52 @@ def _append(rows: ti.template(), ids, kind):
 
 
 @ti.func
-def _emit(o: ti.template(), rows: ti.template(), kind, q, tri, lo, hi):
-    """The pairs of cloth primitive q (its box lo, hi) and obstacle triangle ``tri``."""
+def _emit(o: ti.template(), rows: ti.template(), kind, q, tri, lo, hi, x0, x1, grow):
+    """The pairs of cloth primitive q (its box lo, hi) and obstacle triangle ``tri``: a
+    loose point's, a rope edge's, or a cloth triangle's with its own vertices and edges
+    (each listed by one triangle) and the obstacle's vertices."""
     t = o.store.tris[tri]
-    if kind == POINT_TRIANGLE:
-        _append(rows, ti.Vector([o.points[q], t[0], t[1], t[2]]), POINT_TRIANGLE)
-    elif kind == EDGE_EDGE:
-        e = o.edges[q]
-        for k in ti.static(range(3)):
-            if o.own_e[tri][k]:
-                a, b = t[k], t[(k + 1) % 3]
-                blo, bhi = _swept(o.xo0, o.xo1, a, o.xo0[a], o.xo0[a])
-                blo, bhi = _swept(o.xo0, o.xo1, b, blo, bhi)
-                if _overlap(lo, hi, blo, bhi):
-                    _append(rows, ti.Vector([e[0], e[1], a, b]), EDGE_EDGE)
-    else:
-        c = o.triangles[q]
-        for k in ti.static(range(3)):
-            if o.own_v[tri][k]:
-                a = t[k]
-                if _overlap(lo, hi, ti.min(o.xo0[a], o.xo1[a]), ti.max(o.xo0[a], o.xo1[a])):
-                    _append(rows, ti.Vector([a, c[0], c[1], c[2]]), VERTEX_TRIANGLE)
+    tlo, thi = _swept(o.xo0, o.xo1, t[0], o.xo0[t[0]], o.xo0[t[0]])
+    tlo, thi = _swept(o.xo0, o.xo1, t[1], tlo, thi)
+    tlo, thi = _swept(o.xo0, o.xo1, t[2], tlo, thi)
+    if _overlap(lo, hi, tlo, thi):
+        if kind == POINT_TRIANGLE:
+            _append(rows, ti.Vector([o.points[q], t[0], t[1], t[2]]), POINT_TRIANGLE)
+        elif kind == EDGE_EDGE:
+            _edge_pairs(o, rows, o.edges[q], t, tri, lo, hi)
+        else:
+            c = o.triangles[q]
+            for k in ti.static(range(3)):
+                if o.own_cv[q][k]:
+                    plo, phi = _swept(x0, x1, c[k], x0[c[k]], x0[c[k]])
+                    if _overlap(plo - grow, phi + grow, tlo, thi):
+                        _append(rows, ti.Vector([c[k], t[0], t[1], t[2]]), POINT_TRIANGLE)
+                if o.own_ce[q][k]:
+                    e = ti.Vector([c[k], c[(k + 1) % 3]])
+                    elo, ehi = _swept(x0, x1, e[0], x0[e[0]], x0[e[0]])
+                    elo, ehi = _swept(x0, x1, e[1], elo, ehi)
+                    _edge_pairs(o, rows, e, t, tri, elo - grow, ehi + grow)
+                if o.own_v[tri][k]:
+                    a = t[k]
+                    if _overlap(lo, hi, ti.min(o.xo0[a], o.xo1[a]), ti.max(o.xo0[a], o.xo1[a])):
+                        _append(rows, ti.Vector([a, c[0], c[1], c[2]]), VERTEX_TRIANGLE)
 
 
 @ti.func
-def _query(o: ti.template(), rows: ti.template(), kind, q, lo, hi, t0, dt):
+def _edge_pairs(o: ti.template(), rows: ti.template(), e, t, tri, lo, hi):
+    """Cloth edge e (its box lo, hi) against the edges obstacle triangle ``tri`` (vertices
+    t) lists."""
+    for k in ti.static(range(3)):
+        if o.own_e[tri][k]:
+            a, b = t[k], t[(k + 1) % 3]
+            blo, bhi = _swept(o.xo0, o.xo1, a, o.xo0[a], o.xo0[a])
+            blo, bhi = _swept(o.xo0, o.xo1, b, blo, bhi)
+            if _overlap(lo, hi, blo, bhi):
+                _append(rows, ti.Vector([e[0], e[1], a, b]), EDGE_EDGE)
+
+
+@ti.func
+def _query(o: ti.template(), rows: ti.template(), kind, q, lo, hi, t0, dt, x0, x1, grow):
     """Every obstacle triangle whose swept box meets (lo, hi): ``_emit``."""
     for m in range(o.store.meshes.shape[0]):
         info = o.store.meshes[m]
@@ -125,6 +146,9 @@ def _query(o: ti.template(), rows: ti.template(), kind, q, lo, hi, t0, dt):
         if info[6]:
             r0, r1 = ti.Matrix.identity(float, 3), ti.Matrix.identity(float, 3)
             c0, c1 = ti.Vector.zero(float, 3), ti.Vector.zero(float, 3)
+        # a mesh still over the step: the query's box in its frame, the nodes' as built
+        still = (r0 == r1).all() and (c0 == c1).all()
+        qlo, qhi = _world_box(lo - c0, hi - c0, r0.transpose(), ti.Vector.zero(float, 3))
         leaves, node0, tri0, tris = info[4], info[3], info[0], info[1]
         stack = ti.Vector([0] * STACK)
         stack[0], top = 1, 1
@@ -132,19 +156,19 @@ def _query(o: ti.template(), rows: ti.template(), kind, q, lo, hi, t0, dt):
             top -= 1
             k = stack[top]
             nlo, nhi = o.store.node_lo[node0 + k], o.store.node_hi[node0 + k]
-            a_lo, a_hi = _world_box(nlo, nhi, r0, c0)
-            b_lo, b_hi = _world_box(nlo, nhi, r1, c1)
-            if (nlo <= nhi).all() and _overlap(lo, hi, ti.min(a_lo, b_lo), ti.max(a_hi, b_hi)):
+            meets = False
+            if still:
+                meets = _overlap(qlo, qhi, nlo, nhi)
+            else:
+                a_lo, a_hi = _world_box(nlo, nhi, r0, c0)
+                b_lo, b_hi = _world_box(nlo, nhi, r1, c1)
+                meets = _overlap(lo, hi, ti.min(a_lo, b_lo), ti.max(a_hi, b_hi))
+            if (nlo <= nhi).all() and meets:
                 if k >= leaves:
                     for j in range(trimesh.LEAF):
                         tri = (k - leaves) * trimesh.LEAF + j
                         if tri < tris:
-                            t = o.store.tris[tri0 + tri]
-                            tlo, thi = _swept(o.xo0, o.xo1, t[0], o.xo0[t[0]], o.xo0[t[0]])
-                            tlo, thi = _swept(o.xo0, o.xo1, t[1], tlo, thi)
-                            tlo, thi = _swept(o.xo0, o.xo1, t[2], tlo, thi)
-                            if _overlap(lo, hi, tlo, thi):
-                                _emit(o, rows, kind, q, tri0 + tri, lo, hi)
+                            _emit(o, rows, kind, q, tri0 + tri, lo, hi, x0, x1, grow)
                 else:
                     stack[top], stack[top + 1] = 2 * k + 1, 2 * k
                     top += 2
@@ -165,7 +189,7 @@ def search(o: ti.template(), rows: ti.template(), x0: ti.template(), x1: ti.temp
         elif q >= P:
             kind, item = EDGE_EDGE, q - P
         lo, hi = _cloth_box(o, kind, item, x0, x1, grow)
-        _query(o, rows, kind, item, lo, hi, t0, dt)
+        _query(o, rows, kind, item, lo, hi, t0, dt, x0, x1, grow)
     return rows.found[None]
 
 

@@ -39,7 +39,7 @@ SWEEPS = 20          # Gauss-Seidel sweeps of the pairs' projection a round
 ROUNDS = 4           # rounds of the projection and the colliders' sweep before the fail-safe
 MARGIN = 0.5         # the swept boxes' margin for the guard's moves, in thicknesses
 SOLVE_MARGIN = 2.0   # the swept boxes' margin for a solve's iterates, in thicknesses
-OBSTACLE_MARGIN = 1.0  # the obstacle pairs' boxes' margin, in thicknesses
+OBSTACLE_MARGIN = 0.25  # the obstacle pairs' boxes' margin, in thicknesses
 FAR = 1e30           # m: a reach that keeps every candidate of the proximity list
 STATS = {
     "candidates": "rows of the proximity list (pairs within thickness + skin)",
@@ -52,6 +52,7 @@ STATS = {
     "collider_paths_cut": "particle paths that entered a collider and were stopped",
     "obstacle_pairs": "rows of the mesh colliders' pair list (obstacle.py)",
     "obstacle_searches": "searches of the mesh colliders' pairs so far",
+    "obstacle_search_seconds": "wall time of those searches so far (the broad phase's)",
     "obstacle_corrections": "cloth vertices the mesh colliders' planes moved so far",
     "obstacle_carried": ("cloth vertices the mesh colliders' fail-safe carried with the "
                          "obstacle so far"),
@@ -192,8 +193,11 @@ class ContactStage:
 
     def _obstacle_failsafe(self, x0, x1, v1, t0, dt):
         """Where a mesh collider's planes are still not met at x1, its fail-safe (cloth
-        vertices carried with it, ``ObstaclePairs.carry``); the vertices carried."""
-        self.obstacle.cover(x0, x1, t0, dt, OBSTACLE_MARGIN * self.obstacle.thickness)
+        vertices carried with it, ``ObstaclePairs.carry``); the vertices carried. Its
+        planes are computed again unless they are the motion's as it now is (the cloth's
+        own pairs' projection moves particles after them)."""
+        if self.broad is not None or not self.obstacle.current:
+            self.obstacle.cover(x0, x1, t0, dt, OBSTACLE_MARGIN * self.obstacle.thickness)
         carried = 0
         if self.obstacle.violations(x1):
             self.stats["failsafe_steps"] += 1
@@ -240,6 +244,8 @@ class ContactStage:
                                                dt, self.held, first))
         self.stats["collider_paths_cut"] += cut
         if self.obstacle is not None and obstacle:
+            if cut or not first:        # x1 moved since ``begin`` computed the planes
+                self.obstacle.cover(x0, x1, t0, dt, OBSTACLE_MARGIN * self.obstacle.thickness)
             corrected = self.obstacle.project(x0, x1, v1, self.held, t0, dt, SWEEPS, ROUNDS)
             self.stats["obstacle_corrections"] += corrected
             cut += corrected
@@ -328,6 +334,7 @@ class ContactStage:
         if self.obstacle is not None:
             out["obstacle_pairs"] = self.obstacle.count
             out["obstacle_searches"] = self.obstacle.searches
+            out["obstacle_search_seconds"] = self.obstacle.search_seconds
         return out
 
     def reset_stats(self):
@@ -339,4 +346,4 @@ class ContactStage:
         if self.broad is not None:
             self.broad.rebuilds = 0
         if self.obstacle is not None:
-            self.obstacle.searches = 0
+            self.obstacle.searches, self.obstacle.search_seconds = 0, 0.0

@@ -6,8 +6,9 @@ collider table (its ``mesh`` the store's mesh index):
   - ``contact(col, x, t)``: (phi, outward unit normal n, surface velocity u) of x at time
     t: phi is the distance to the mesh's closest point, signed by the pseudo normal of
     the feature that point lies on where the mesh is closed (negative inside), unsigned
-    on an open mesh (two-sided: n points from the mesh to x). Only points within the
-    collider's reach (``col.extent[0]``) are searched; farther ones get phi = reach.
+    on an open mesh (two-sided: n points from the mesh to x). Only points within a reach
+    (at most the collider's, ``col.extent[0]``) are searched; farther ones get phi =
+    reach.
   - ``ray_hit(col, o, d, t)`` and ``normal(col, p, t)``: the renderer's ray hit and the
     shading normal (the vertex normals interpolated at the closest point).
 
@@ -132,6 +133,13 @@ class MeshStore:
             field.from_numpy(_finite(cat[key]).astype(npr))
         self.tris.from_numpy(cat["tris"].astype(np.int32))
 
+    def open(self, m):
+        """Take mesh m as open (two-sided; its distance unsigned)."""
+        self.records[m]["closed"] = False
+        row = self.meshes[m]
+        row[5] = 0
+        self.meshes[m] = row
+
     def set_frames(self, m, ta, tb, va, vb):
         """A deforming mesh m's vertices (own frame) at the ends ta < tb of a step: its
         hierarchy refit over both, its pseudo normals those at tb."""
@@ -232,13 +240,13 @@ class MeshStore:
         return pn
 
     @ti.func
-    def contact(self, col, x, t):
-        """(phi, outward unit normal, surface velocity) of x at time t (module docstring)."""
+    def contact(self, col, x, t, reach):
+        """(phi, outward unit normal, surface velocity) of x at time t (module docstring),
+        searched within ``reach`` (phi = reach beyond it)."""
         m = col.mesh
         r, c = self._frame(col, t)
         q = r.transpose() @ (x - c)
         s = self._share(m, t)
-        reach = col.extent[0]
         tri, w, dist2 = self.closest(m, q, s, reach)
         phi, n, u = reach, ti.Vector([0.0, 1.0, 0.0]), col.velocity
         if tri >= 0:
@@ -265,11 +273,6 @@ class MeshStore:
                         u += w[k] * (self.vb[i[k]] - self.va[i[k]]) / span
         return phi, n, u
 
-    @ti.func
-    def signed_distance(self, col, x, t):
-        phi, n, _ = self.contact(col, x, t)
-        return phi, n
-
     # -- the renderer ----------------------------------------------------------------------
     @ti.func
     def ray_hit(self, col, o, d, t):
@@ -278,30 +281,45 @@ class MeshStore:
         r, c = self._frame(col, t)
         ol = r.transpose() @ (ti.cast(o, float) - c)
         dl = r.transpose() @ ti.cast(d, float)
-        s_share = self._share(m, t)
+        best = self._first_hit(m, ol, dl, self._share(m, t), 1e30, -1, -1)
+        return best if best < 1e30 else -1.0
+
+    @ti.func
+    def _first_hit(self, m, o, d, s, limit, skip_a, skip_b):
+        """The nearest 0 < hit < limit along the ray o + hit d in mesh m's frame (at share
+        s of a deforming one's step) on a triangle with neither vertex skip_a nor skip_b;
+        ``limit`` where none is."""
         info = self.meshes[m]
         leaves, node0, tri0, tris = info[4], info[3], info[0], info[1]
-        best = 1e30
+        best = limit
         stack = ti.Vector([0] * STACK)
         stack[0], top = 1, 1
         while top > 0:
             top -= 1
             k = stack[top]
-            if _slab(self.node_lo[node0 + k], self.node_hi[node0 + k], ol, dl, best):
+            if _slab(self.node_lo[node0 + k], self.node_hi[node0 + k], o, d, best):
                 if k >= leaves:
                     for j in range(trimesh.LEAF):
                         tri = (k - leaves) * trimesh.LEAF + j
                         if tri < tris:
                             i = self.tris[tri0 + tri]
-                            h = raycast.hit_triangle(ol, dl, self._vertex(i[0], s_share),
-                                                     self._vertex(i[1], s_share),
-                                                     self._vertex(i[2], s_share))
-                            if 0.0 < h[0] < best:
-                                best = h[0]
+                            if (i != skip_a).all() and (i != skip_b).all():
+                                h = raycast.hit_triangle(o, d, self._vertex(i[0], s),
+                                                         self._vertex(i[1], s),
+                                                         self._vertex(i[2], s))
+                                if 0.0 < h[0] < best:
+                                    best = h[0]
                 else:
                     stack[top], stack[top + 1] = 2 * k + 1, 2 * k
                     top += 2
-        return best if best < 1e30 else -1.0
+        return best
+
+    def crossed(self, m):
+        """Whether mesh m crosses itself: one of its edges passes through one of its
+        triangles that shares no vertex with it (each edge cast as a segment from its
+        first vertex)."""
+        return int(_crossed(self, m, self.records[m]["tri_first"],
+                            len(self.records[m]["tris"]))) > 0
 
     @ti.func
     def normal(self, col, p, t):
@@ -319,6 +337,22 @@ class MeshStore:
                  + w[2] * self.vertex_n[i[2]].normalized())
             n = r @ n.normalized()
         return ti.cast(n, ti.f32)
+
+
+@ti.kernel
+def _crossed(store: ti.template(), m: ti.i32, first: ti.i32, count: ti.i32) -> ti.i32:
+    crossings = 0
+    for f in range(first, first + count):
+        i = store.tris[f]
+        for k in ti.static(range(3)):
+            a, b = i[k], i[(k + 1) % 3]
+            along = store.va[b] - store.va[a]
+            length = along.norm()
+            if length > 0.0:
+                hit = store._first_hit(m, store.va[a], along / length, 0.0, length, a, b)
+                if hit < length:
+                    crossings += 1
+    return crossings
 
 
 def _boxes(v, tris):

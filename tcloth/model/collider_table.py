@@ -2,6 +2,7 @@
 members sorted by shape, and its groups (one per shape the scene has, static for the
 kernels); the mesh colliders' geometry in a ``meshstore.MeshStore``, and their motion
 step by step (``advance``)."""
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,6 +30,15 @@ class Group:
     shape: int
     first: int
     count: int
+
+
+def _speed(c):
+    """The fastest a scene collider's surface moves at the speeds it was given (m/s)."""
+    speed = float(np.linalg.norm(c["velocity"]))
+    if c["kind"] == "mesh":
+        speed += float(np.linalg.norm(c["spin"])) * float(
+            np.linalg.norm(c["vertices"], axis=1).max())
+    return speed
 
 
 @ti.data_oriented
@@ -65,6 +75,14 @@ class ColliderTable:
         self.mesh_rows = [k for k, i in enumerate(self.rows) if colliders[i]["kind"] == "mesh"]
         self.meshes = MeshStore(meshed) if meshed else None
         self.mesh_colliders = meshed
+        for m, c in enumerate(meshed):
+            if c["closed"] and self.meshes.crossed(m):
+                warnings.warn("a mesh collider crosses itself: it is taken as open "
+                              "(two-sided)", stacklevel=4)
+                self.meshes.open(m)
+        # (the fastest any collider's surface moves, m/s: a spinning mesh's rim; the
+        # thickest collider, m): bounds for the solvers' reach at a step's start
+        self.bounds = ti.field(runtime.real(), shape=2)
         self.moving = [(k, m, colliders[self.rows[k]]) for m, k in enumerate(self.mesh_rows)
                        if colliders[self.rows[k]]["keyframes"] is not None
                        or colliders[self.rows[k]]["deform"] is not None]
@@ -89,6 +107,8 @@ class ColliderTable:
                   **{key: column(lambda c, k=key: c[k]) for key in
                      ("thickness", "stiffness", "damping", "friction", "stick_velocity")}}
         values["stiffness"][np.isin(self.rows, list(off))] = 0.0
+        self.bounds.from_numpy(np.array([max(_speed(c) for c in ordered), max(
+            c["thickness"] for c in ordered)], dtype=npr))
         values["mesh"] = np.zeros(self.count, np.int32)
         values["mesh"][self.mesh_rows] = np.arange(len(self.mesh_rows))
         self.data.from_numpy(values)
@@ -112,12 +132,17 @@ class ColliderTable:
                                        world_vertices(c, t0 + dt))
 
     @ti.func
-    def contact(self, shape: ti.template(), col, x, t):
+    def contact(self, shape: ti.template(), col, x, t, beyond=-1.0):
         """(phi, outward normal, the surface's velocity there) of x against collider row
-        ``col`` of shape index ``shape`` at time t."""
+        ``col`` of shape index ``shape`` at time t. ``beyond`` >= 0: only phi below the
+        collider's thickness plus that much is needed (a mesh searches no farther and
+        answers that bound for points beyond it)."""
         phi, n, u = 0.0, ti.Vector.zero(float, 3), col.velocity
         if ti.static(SHAPES[shape].meshed):
-            phi, n, u = self.meshes.contact(col, x, t)
+            reach = col.extent[0]
+            if beyond >= 0.0:
+                reach = ti.min(reach, col.thickness + beyond)
+            phi, n, u = self.meshes.contact(col, x, t, reach)
         else:
             phi, n = SHAPES[shape].signed_distance(col, x, t)
         return phi, n, u
@@ -149,17 +174,18 @@ class ColliderTable:
         return n
 
     @ti.func
-    def for_each_contact(self, x, p, t, body: ti.template(), zero, ctx):
+    def for_each_contact(self, x, p, t, body: ti.template(), zero, ctx, beyond=-1.0):
         """The sum over this table's colliders c of ``body(col, c, x, p, phi, n, ctx)``,
         with (phi, n) the signed distance and outward normal of x[p] (read afresh for each
         collider, so that a body may move the particle) and ``col.velocity`` the
         surface's velocity at the closest point (a turning or deforming mesh's own);
-        ``zero`` starts the sum."""
+        ``zero`` starts the sum; ``beyond``: as ``contact``'s (bodies then see phi no
+        larger than the thickness plus it)."""
         acc = zero
         for g in ti.static(self.groups):
             for c in range(g.first, g.first + g.count):
                 col = self.data[c]
-                phi, n, u = self.contact(g.shape, col, x[p], t)
+                phi, n, u = self.contact(g.shape, col, x[p], t, beyond)
                 col.velocity = u
                 acc += body(col, c, x, p, phi, n, ctx)
         return acc

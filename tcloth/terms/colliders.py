@@ -121,7 +121,8 @@ class Colliders(Term):
         """The contact force on particle p at (x, v) and time t."""
         f = ti.Vector.zero(float, 3)
         if self.inv_mass[p] > 0.0:
-            f = self.table.for_each_contact(x, p, t, self._force_body, f, (v[p], self.mass[p]))
+            f = self.table.for_each_contact(x, p, t, self._force_body, f, (v[p], self.mass[p]),
+                                            0.0)
         return f
 
     @ti.func
@@ -137,7 +138,7 @@ class Colliders(Term):
         """k/2 (thickness - phi)^2 summed over the colliders particle p penetrates, J."""
         e = 0.0
         if self.inv_mass[p] > 0.0:
-            e = self.table.for_each_contact(x, p, t, self._energy_body, e, 0)
+            e = self.table.for_each_contact(x, p, t, self._energy_body, e, 0, 0.0)
         return e
 
     @ti.func
@@ -178,7 +179,7 @@ class Colliders(Term):
 
     @ti.func
     def begin(self, p, x0, t0):
-        self.table.for_each_contact(x0, p, t0, self._begin_body, 0, 0)
+        self.table.for_each_contact(x0, p, t0, self._begin_body, 0, 0, 0.0)
 
     @ti.func
     def _incremental_parts(self, col, c, gap, n, ctx):
@@ -255,9 +256,12 @@ class Colliders(Term):
         self._h[None] = h
         g = ti.Vector([self.params[0], self.params[1], self.params[2]])
         ti.loop_config(serialize=ti.static(serial(x0)))
+        speed, thick = self.table.bounds[0], self.table.bounds[1]
         for p in range(x0.shape[0]):
+            # the farthest _plane_body looks: searched no farther
+            beyond = h * (v0[p].norm() + speed) + h * h * g.norm() + thick
             self.table.for_each_contact(x0, p, t0, self._plane_body, 0,
-                                        (v0[p], h, h * h * g.norm()))
+                                        (v0[p], h, h * h * g.norm()), beyond)
 
     @ti.func
     def _plane_body(self, col, c, x0, p, phi, n, ctx):
@@ -354,7 +358,7 @@ def _touching(term: ti.template(), x: ti.template(), t: float) -> ti.i32:
     count = 0
     for p in range(x.shape[0]):
         if term.inv_mass[p] > 0.0:
-            if term.table.for_each_contact(x, p, t, term._touch_body, 0, 0) > 0:
+            if term.table.for_each_contact(x, p, t, term._touch_body, 0, 0, 0.0) > 0:
                 count += 1
     return count
 
