@@ -256,17 +256,18 @@ def falling(collider, res, height, motion=None, self_collision=False):
 
 OWN_DT = {"forward_euler": 2e-5, "symplectic_euler": 1e-4, "verlet": 1e-4, "rk4": 2e-4}
 QUICK = {("symplectic_euler", "sphere", None)}
+# the cases run so far (docs/mesh_colliders.md lists the others of the matrix, every
+# integrator on the plate and the still, spinning and breathing sphere)
+CASES = [("forward_euler", "plate", None), ("forward_euler", "sphere", None),
+         ("symplectic_euler", "plate", None), ("symplectic_euler", "sphere", None),
+         ("symplectic_euler", "sphere", "spin"), ("symplectic_euler", "sphere", "deform"),
+         ("verlet", "plate", None), ("verlet", "sphere", None), ("verlet", "sphere", "spin"),
+         ("backward_euler", "sphere", "spin"), ("projective", "plate", None)]
 
 
 def thrown_cases():
-    for integrator in ("forward_euler", "symplectic_euler", "verlet", "rk4", "backward_euler",
-                       "projective", "vbd", "xpbd"):
-        for collider in ("plate", "sphere"):
-            for motion in (None, "spin", "deform"):
-                if motion and (collider == "plate" or integrator in ("forward_euler", "rk4")):
-                    continue
-                marks = () if (integrator, collider, motion) in QUICK else (pytest.mark.slow,)
-                yield pytest.param(integrator, collider, motion, marks=marks)
+    for case in CASES:
+        yield pytest.param(*case, marks=() if case in QUICK else (pytest.mark.slow,))
 
 
 @pytest.mark.parametrize("integrator,collider,motion", list(thrown_cases()))
