@@ -123,11 +123,15 @@ class DrawnCloth:
             for g in ti.static(self.colliders.groups):
                 for m in range(g.first, g.first + g.count):
                     col = self.colliders.data[m]
-                    phi0, n0 = self.colliders.distance(g.shape, col, x[i[0]], time)
-                    phi1, n1 = self.colliders.distance(g.shape, col, x[i[1]], time)
-                    phi2, n2 = self.colliders.distance(g.shape, col, x[i[2]], time)
-                    rest = ti.cast(ti.min(phi0, phi1, phi2), ti.f32)
-                    normals = ti.cast(ti.Matrix.rows([n0, n1, n2]), ti.f32)
+                    # (one call of the contact law each loop: a mesh's query is long, and
+                    # every call site compiles it again)
+                    rest = ti.f32(1e30)
+                    normals = ti.Matrix.zero(ti.f32, 3, 3)
+                    for j in range(3):
+                        phi, n = self.colliders.distance(g.shape, col, x[_corner(i, j)], time)
+                        rest = ti.min(rest, ti.cast(phi, ti.f32))
+                        for d in ti.static(range(3)):
+                            normals[j, d] = ti.cast(n[d], ti.f32)
                     thickness = ti.cast(col.thickness, ti.f32)
                     if col.stiffness > 0.0 and rest < CONTACT_REACH * thickness:
                         target = ti.max(rest, thickness) - (1.0 - CLEARANCE) * thickness
@@ -147,8 +151,8 @@ class DrawnCloth:
                             step = 0.5 / SAMPLES
                             for level in range(REFINE):
                                 bu, bv = nu, nv
-                                for du, dv in ti.static(((1, 0), (-1, 0), (0, 1), (0, -1),
-                                                         (1, -1), (-1, 1))):
+                                for nb in range(6):
+                                    du, dv = _neighbour(nb)
                                     u, v = bu + du * step, bv + dv * step
                                     if u >= 0.0 and v >= 0.0 and u + v <= 1.0:
                                         phi = _distance(self.colliders, g.shape, col, a, b,
@@ -188,6 +192,34 @@ class DrawnCloth:
                         _, n = self.colliders.distance(g.shape, self.colliders.data[m],
                                                        self.x[p], time)
                         self.x[p] += raycast.key_t(key) * ti.cast(n, ti.f32)
+
+
+@ti.func
+def _corner(i, j):
+    """Corner j of triangle i (indices), j a loop variable."""
+    out = i[0]
+    if j == 1:
+        out = i[1]
+    elif j == 2:
+        out = i[2]
+    return out
+
+
+@ti.func
+def _neighbour(k):
+    """The k-th of the six neighbours (du, dv) of a point of a triangular grid."""
+    du, dv = 1, -1
+    if k == 0:
+        du, dv = 1, 0
+    elif k == 1:
+        du, dv = -1, 0
+    elif k == 2:
+        du, dv = 0, 1
+    elif k == 3:
+        du, dv = 0, -1
+    elif k == 5:
+        du, dv = -1, 1
+    return du, dv
 
 
 @ti.func
