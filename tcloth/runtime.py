@@ -155,12 +155,14 @@ def cpu():
     return _Runtime.arch_name in ("x64", "arm64")
 
 
-def serial(field):
+def serial(field, work=1):
     """True where a loop over ``field`` should run on one CPU thread: below
     ``init(serial_below=...)`` items (default SERIAL_BELOW) the thread pool's start-up and
-    hand-offs cost more than the second thread gains. Evaluated at compile time
-    (``ti.static``), so it is fixed when a simulator's kernels compile; never on GPUs."""
-    return serial_count(field.shape[0])
+    hand-offs cost more than the second thread gains; an item that costs ``work`` simple
+    ones (a mesh collider's hierarchy query: ``meshstore.QUERY_WORK``) counts as that many.
+    Evaluated at compile time (``ti.static``), so it is fixed when a simulator's kernels
+    compile; never on GPUs."""
+    return serial_count(field.shape[0] * work)
 
 
 def serial_count(items):

@@ -34,7 +34,8 @@ from ..geometry.meshstore import pose
 from ..geometry.proximity import contact_weights
 from ..runtime import serial_count
 from ..scene.meshcollider import moves
-from .obstacle_search import EDGE_EDGE, POINT_TRIANGLE, VERTEX_TRIANGLE, Rows, is_cloth, search
+from .obstacle_search import (EDGE_EDGE, POINT_TRIANGLE, VERTEX_TRIANGLE, Rows, is_cloth,
+                              obstacle_boxes, order, search)
 from .swept import excess
 FLOOR = 0.25        # pairs end a step at least this fraction of the thickness apart
 LEAST_GAP = 1e-6    # m: a pair closer than this at the step's start has no normal
@@ -94,9 +95,23 @@ class ObstaclePairs:
         self.triangles = _ints(triangles, (3,))
         self.own_cv, self.own_ce = _ints(own_cv, (3,)), _ints(own_ce, (3,))
         self.every_point = _ints(np.arange(model.particle_count), ())
+        # each query's rows (``obstacle_search``): how many, and where they start
+        self.per = ti.field(ti.i32, shape=max(sum(self.counts), 1))
+        self.start = ti.field(ti.i32, shape=max(sum(self.counts), 1))
+        self.next = ti.field(ti.i32, shape=max(sum(self.counts), 1))   # its chunk's next
+        self.end = ti.field(ti.i32, shape=max(sum(self.counts), 1))    # and end raw row
+        self.total = ti.field(ti.i32, shape=())
         n_obstacle = self.store.va.shape[0]
         self.xo0 = ti.Vector.field(3, real, shape=n_obstacle)
         self.xo1 = ti.Vector.field(3, real, shape=n_obstacle)
+        # boxes over the step (``obstacle_search``): the obstacle's vertices and triangles,
+        # the cloth's vertices
+        self.vert_lo = ti.Vector.field(3, real, shape=n_obstacle)
+        self.vert_hi = ti.Vector.field(3, real, shape=n_obstacle)
+        self.tri_lo = ti.Vector.field(3, real, shape=self.store.tris.shape[0])
+        self.tri_hi = ti.Vector.field(3, real, shape=self.store.tris.shape[0])
+        self.cloth_lo = ti.Vector.field(3, real, shape=model.particle_count)
+        self.cloth_hi = ti.Vector.field(3, real, shape=model.particle_count)
         # each obstacle vertex's collider row
         row_of = np.zeros(n_obstacle, np.int32)
         own_v, own_e = [], []
@@ -126,6 +141,7 @@ class ObstaclePairs:
         it) and their planes."""
         if not (self.static and self.searched is not None):
             _positions(self, t0, dt)
+            obstacle_boxes(self)
         self.cover(x0, x1, t0, dt, margin)
 
     def cover(self, x0, x1, t0, dt, margin):
@@ -144,7 +160,7 @@ class ObstaclePairs:
                 if found <= self.rows.capacity:
                     break
                 self.rows = Rows(2 * found)
-            self.count = found
+            self.count = int(order(self, self.rows, found))
             self.search_seconds += time.perf_counter() - start
         _planes(self, self.rows, self.count, x0, x1, self.thickness, dt)
 
@@ -267,14 +283,24 @@ def _planes(o: ti.template(), rows: ti.template(), count: ti.i32, x0: ti.templat
         delta = FLOOR * thickness
         target = delta
         closing = _closing(ids, kind, x0, x1, o.xo0, o.xo1)
-        s, d, hit = 0.0, d0, d0 <= target * (1.0 + ADVANCE_SLACK)
+        reach = target * (1.0 + ADVANCE_SLACK)      # a gap this near has come down to it
+        s, d, hit = 0.0, d0, d0 <= reach
+        if d0 - closing > reach:
+            s = 1.0                 # it cannot close to the target within the step
+        elif not hit:
+            # nor where the gap at either end, closing at most ``closing`` over the
+            # step, keeps it above the target all along: d(s) >= max(d0 - closing s,
+            # d1 - closing (1 - s)) >= (d0 + d1 - closing) / 2
+            g1, _ = _gap(ids, kind, x0, x1, o.xo0, o.xo1, 1.0)
+            if d0 + g1.norm() - closing > 2.0 * reach:
+                s = 1.0
         for _ in range(ADVANCES):
             if hit or s >= 1.0 or closing <= 0.0:
                 break
             s = ti.min(s + (d - target) / closing, 1.0)
             g, alpha = _gap(ids, kind, x0, x1, o.xo0, o.xo1, s)
             d = g.norm()
-            hit = d <= target * (1.0 + ADVANCE_SLACK)
+            hit = d <= reach
         if s < 1.0 and not hit:
             hit = True              # out of advances short of the end: take the plane here
         m = g / ti.max(d, LEAST_GAP)

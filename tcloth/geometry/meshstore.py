@@ -28,6 +28,10 @@ from .proximity import triangle_weights
 
 STACK = 64        # the traversal's stack (a tree of 2^32 leaves needs 33)
 TINY = 1e-12      # m: below this a distance has no direction of its own
+QUERY_WORK = 64   # a query of the hierarchy costs about this many simple loop items
+                  # (``runtime.serial``: a loop of a few thousand queries runs threaded)
+GRAZING = 1e-3    # an edge this near its plane (|cos| to the normal) lies in a triangle's
+                  # plane: it touches it, and float32's rounding would make a hit of it
 
 
 @ti.func
@@ -281,14 +285,15 @@ class MeshStore:
         r, c = self._frame(col, t)
         ol = r.transpose() @ (ti.cast(o, float) - c)
         dl = r.transpose() @ ti.cast(d, float)
-        best = self._first_hit(m, ol, dl, self._share(m, t), 1e30, -1, -1)
+        best = self._first_hit(m, ol, dl, self._share(m, t), 1e30, -1, -1, 0.0)
         return best if best < 1e30 else -1.0
 
     @ti.func
-    def _first_hit(self, m, o, d, s, limit, skip_a, skip_b):
+    def _first_hit(self, m, o, d, s, limit, skip_a, skip_b, grazing):
         """The nearest 0 < hit < limit along the ray o + hit d in mesh m's frame (at share
-        s of a deforming one's step) on a triangle with neither vertex skip_a nor skip_b;
-        ``limit`` where none is."""
+        s of a deforming one's step) on a triangle with neither vertex skip_a nor skip_b
+        that the ray does not graze (|d . n| > ``grazing``, n its unit normal); ``limit``
+        where none is."""
         info = self.meshes[m]
         leaves, node0, tri0, tris = info[4], info[3], info[0], info[1]
         best = limit
@@ -303,7 +308,8 @@ class MeshStore:
                         tri = (k - leaves) * trimesh.LEAF + j
                         if tri < tris:
                             i = self.tris[tri0 + tri]
-                            if (i != skip_a).all() and (i != skip_b).all():
+                            if ((i != skip_a).all() and (i != skip_b).all() and
+                                    abs(d.dot(self.face_n[tri0 + tri].normalized())) > grazing):
                                 h = raycast.hit_triangle(o, d, self._vertex(i[0], s),
                                                          self._vertex(i[1], s),
                                                          self._vertex(i[2], s))
@@ -317,7 +323,7 @@ class MeshStore:
     def crossed(self, m):
         """Whether mesh m crosses itself: one of its edges passes through one of its
         triangles that shares no vertex with it (each edge cast as a segment from its
-        first vertex)."""
+        first vertex; one in the triangle's plane touches it: ``GRAZING``)."""
         return int(_crossed(self, m, self.records[m]["tri_first"],
                             len(self.records[m]["tris"]))) > 0
 
@@ -349,7 +355,8 @@ def _crossed(store: ti.template(), m: ti.i32, first: ti.i32, count: ti.i32) -> t
             along = store.va[b] - store.va[a]
             length = along.norm()
             if length > 0.0:
-                hit = store._first_hit(m, store.va[a], along / length, 0.0, length, a, b)
+                hit = store._first_hit(m, store.va[a], along / length, 0.0, length, a, b,
+                                       GRAZING)
                 if hit < length:
                     crossings += 1
     return crossings

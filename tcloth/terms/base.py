@@ -102,6 +102,7 @@ class Term:
     in_kernel = True
     provides = frozenset()
     options = {}
+    work = 1            # what a particle's evaluation costs, in simple items (runtime.serial)
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)
@@ -215,7 +216,7 @@ def particle_energy(term: ti.template(), x: ti.template(), t: float,
     """The sum over particles of a per-particle term's potential, accumulated in ``out``'s
     type (f64 where the backend has it)."""
     out[0] = 0
-    ti.loop_config(serialize=ti.static(serial(x)))
+    ti.loop_config(serialize=ti.static(serial(x, term.work)))
     for p in range(x.shape[0]):
         out[0] += ti.cast(term.potential(p, x, t), out.dtype)
     return ti.cast(out[0], ti.f64)

@@ -32,6 +32,7 @@ without colliders has no collider term.
 import taichi as ti
 
 from .. import runtime
+from ..geometry.meshstore import QUERY_WORK
 from ..runtime import serial
 from .base import Term, particle_energy
 
@@ -96,6 +97,8 @@ class Colliders(Term):
     def __init__(self, model):
         self.table = model.colliders
         self.mass, self.inv_mass, self.params = model.mass, model.inv_mass, model.params
+        # a mesh collider's contact is a query of its hierarchy (``runtime.serial``)
+        self.work = QUERY_WORK if self.table.meshes is not None else 1
         self._lagged = None
         # (normal, offset, the surface's velocity) per particle and collider: ``begin_solve``
         shape = (model.particle_count, max(self.table.count, 1))
@@ -144,7 +147,7 @@ class Colliders(Term):
     @ti.func
     def accumulate(self, x, v, t, f_out):
         """f_out += the contact forces of every collider."""
-        ti.loop_config(serialize=ti.static(serial(f_out)))
+        ti.loop_config(serialize=ti.static(serial(f_out, self.work)))
         for p in range(f_out.shape[0]):
             f_out[p] += self.force(p, x, v, t)
 
@@ -255,7 +258,7 @@ class Colliders(Term):
         """``begin_solve`` as a ``ti.func``."""
         self._h[None] = h
         g = ti.Vector([self.params[0], self.params[1], self.params[2]])
-        ti.loop_config(serialize=ti.static(serial(x0)))
+        ti.loop_config(serialize=ti.static(serial(x0, self.work)))
         speed, thick = self.table.bounds[0], self.table.bounds[1]
         for p in range(x0.shape[0]):
             # the farthest _plane_body looks: searched no farther
@@ -356,6 +359,7 @@ class Colliders(Term):
 @ti.kernel
 def _touching(term: ti.template(), x: ti.template(), t: float) -> ti.i32:
     count = 0
+    ti.loop_config(serialize=ti.static(serial(x, term.work)))
     for p in range(x.shape[0]):
         if term.inv_mass[p] > 0.0:
             if term.table.for_each_contact(x, p, t, term._touch_body, 0, 0, 0.0) > 0:
@@ -365,7 +369,7 @@ def _touching(term: ti.template(), x: ti.template(), t: float) -> ti.i32:
 
 @ti.kernel
 def begin_contacts(term: ti.template(), x0: ti.template(), t0: float):
-    ti.loop_config(serialize=ti.static(serial(x0)))
+    ti.loop_config(serialize=ti.static(serial(x0, term.work)))
     for p in range(x0.shape[0]):
         term.begin(p, x0, t0)
 
