@@ -110,6 +110,9 @@ LONG = {
     "test_render::test_every_scene_script_renders_headless[table.py]",
     "test_render::test_every_scene_script_renders_headless[turntable.py]",
     "test_render::test_every_scene_script_renders_headless[breathing.py]",
+    "test_scene_regression::test_every_scene_script_matches_its_snapshot_after_0_1_s[table]",
+    "test_scene_regression::test_every_scene_script_matches_its_snapshot_after_0_1_s[turntable]",
+    "test_scene_regression::test_every_scene_script_matches_its_snapshot_after_0_1_s[breathing]",
     "test_mesh_collider::test_a_particle_on_a_sloped_mesh_obeys_coulomb_s_bound",
 }
 
