@@ -73,22 +73,19 @@ class Rows:
 
 
 @ti.func
-def _swept(x0, x1, i, lo, hi):
-    return ti.min(lo, x0[i], x1[i]), ti.max(hi, x0[i], x1[i])
-
-
-@ti.func
-def _cloth_box(o: ti.template(), kind, q, x0, x1, grow):
-    """The swept box of cloth primitive q of ``kind``, grown by ``grow``."""
+def _cloth_box(o: ti.template(), kind, q, grow):
+    """The swept box of cloth primitive q of ``kind`` (its vertices' boxes over the step,
+    ``cloth_lo``, ``cloth_hi``), grown by ``grow``."""
     lo, hi = ti.Vector([1e30, 1e30, 1e30]), ti.Vector([-1e30, -1e30, -1e30])
     if kind == POINT_TRIANGLE:
-        lo, hi = _swept(x0, x1, o.points[q], lo, hi)
+        lo, hi = o.cloth_lo[o.points[q]], o.cloth_hi[o.points[q]]
     elif kind == EDGE_EDGE:
         for k in ti.static(range(2)):
-            lo, hi = _swept(x0, x1, o.edges[q][k], lo, hi)
+            lo, hi = ti.min(lo, o.cloth_lo[o.edges[q][k]]), ti.max(hi, o.cloth_hi[o.edges[q][k]])
     else:
         for k in ti.static(range(3)):
-            lo, hi = _swept(x0, x1, o.triangles[q][k], lo, hi)
+            lo = ti.min(lo, o.cloth_lo[o.triangles[q][k]])
+            hi = ti.max(hi, o.cloth_hi[o.triangles[q][k]])
     return lo - grow, hi + grow
 
 
@@ -112,7 +109,7 @@ def _append(o: ti.template(), rows: ti.template(), slot, ids, kind):
 
 
 @ti.func
-def _emit(o: ti.template(), rows: ti.template(), slot, kind, q, tri, lo, hi, x0, x1, grow):
+def _emit(o: ti.template(), rows: ti.template(), slot, kind, q, tri, lo, hi, grow):
     """The pairs of cloth primitive q (its box lo, hi) and obstacle triangle ``tri``: a
     loose point's, a rope edge's, or a cloth triangle's with its own vertices and edges
     (each listed by one triangle) and the obstacle's vertices."""
@@ -155,8 +152,7 @@ def _edge_pairs(o: ti.template(), rows: ti.template(), slot, e, t, tri, lo, hi):
 
 
 @ti.func
-def _query(o: ti.template(), rows: ti.template(), slot, kind, q, lo, hi, t0, dt, x0, x1,
-           grow):
+def _query(o: ti.template(), rows: ti.template(), slot, kind, q, lo, hi, t0, dt, grow):
     """Every obstacle triangle whose swept box meets (lo, hi): ``_emit``."""
     for m in range(o.store.meshes.shape[0]):
         info = o.store.meshes[m]
@@ -188,7 +184,7 @@ def _query(o: ti.template(), rows: ti.template(), slot, kind, q, lo, hi, t0, dt,
                     for j in range(trimesh.LEAF):
                         tri = (k - leaves) * trimesh.LEAF + j
                         if tri < tris:
-                            _emit(o, rows, slot, kind, q, tri0 + tri, lo, hi, x0, x1, grow)
+                            _emit(o, rows, slot, kind, q, tri0 + tri, lo, hi, grow)
                 else:
                     stack[top], stack[top + 1] = 2 * k + 1, 2 * k
                     top += 2
@@ -214,8 +210,8 @@ def search(o: ti.template(), rows: ti.template(), x0: ti.template(), x1: ti.temp
             kind, item = VERTEX_TRIANGLE, q - P - E
         elif q >= P:
             kind, item = EDGE_EDGE, q - P
-        lo, hi = _cloth_box(o, kind, item, x0, x1, grow)
-        _query(o, rows, q, kind, item, lo, hi, t0, dt, x0, x1, grow)
+        lo, hi = _cloth_box(o, kind, item, grow)
+        _query(o, rows, q, kind, item, lo, hi, t0, dt, grow)
         for r in range(o.next[q], ti.min(o.end[q], rows.capacity)):
             rows.owner[r] = -1      # the rest of its last chunk: no row
     return rows.found[None]
