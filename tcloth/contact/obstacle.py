@@ -12,12 +12,18 @@ along the unit normal m of its closest points (from the obstacle's side to the c
 stays separated along the whole step if at its end every cloth vertex a of it and every
 obstacle vertex b keep m . (x_a - x_b) >= delta (the function min_a m . x_a - max_b m . x_b
 is concave on straight paths): with the obstacle's ends known before the step, that is
-one half-space a cloth vertex, m . x_a >= h, h = max_b m . xo1_b + delta, delta =
-min(T, max(D0, T / 4)): the contact law's offset T, or the start's gap D0 where the pair
-began nearer (no push away). A landing cloth is held at T, where the contact law rests it;
-held at T / 4 it lay within the law's offset, whose penalty then held energy the step
-never gave (a 32 x 32 cloth landing flat on a mesh box: 6.9 J against the scene's 0.75 J,
-and the energy budget stopped it). ``project`` moves each cloth vertex
+one half-space a cloth vertex, m . x_a >= h, h = max_b m . xo1_b + delta. A point-triangle
+pair's m is the obstacle's surface normal at the point (or that of the edge or corner
+nearest it): delta = min(T, max(D0, T / 4)), the contact law's offset T, or the start's
+gap D0 where the pair began nearer (no push away), so a landing cloth is held where the
+contact law rests it (held at T / 4 it lay within the law's offset, whose penalty then
+held energy the step never gave: a 32 x 32 cloth landing flat on a mesh box, 6.9 J
+against the scene's 0.75 J). An edge-edge or vertex-triangle pair's m is a gap direction
+between primitives that can lie far from the surface's normal (a cloth triangle's normal
+over an obstacle's corner, the common normal of two edges), and every cloth vertex of the
+pair must meet it: held at T along it, a cloth landing at 10 m/s on a mesh sphere was
+pushed sideways by up to 5.8 cm (strain 2.3); those pairs keep delta = T / 4, what the
+guarantee needs (strain 0.67). ``project`` moves each cloth vertex
 onto its half-spaces (Gauss-Seidel over the rows, in order) and removes its normal
 velocity into the obstacle (relative to the obstacle's at the pair): an inelastic
 contact, which adds no energy. A vertex no projection can satisfy (squeezed between two
@@ -38,15 +44,16 @@ from ..geometry.meshstore import pose
 from ..geometry.proximity import contact_weights
 from ..runtime import serial_count
 from ..scene.meshcollider import moves
-from .obstacle_search import (EDGE_EDGE, POINT_TRIANGLE, VERTEX_TRIANGLE, Rows, is_cloth,
-                              obstacle_boxes, order, search)
+from .hold import Hold
+from .obstacle_search import (EDGE_EDGE, INACTIVE, POINT_TRIANGLE, VERTEX_TRIANGLE, Rows,
+                              is_cloth, obstacle_boxes, order, search)
 from .swept import excess
 FLOOR = 0.25        # pairs end a step at least this fraction of the thickness apart
 LEAST_GAP = 1e-6    # m: a pair closer than this at the step's start has no normal
 SLACK = 1e-3        # a violation below this fraction of FLOOR T is none
-INACTIVE = -1e30    # h of a row without a plane
 ADVANCES = 24       # conservative advancement's steps before it takes the plane where it is
 ADVANCE_SLACK = 0.05  # a gap within this fraction above delta has come down to it
+FLAT = 1e-6         # faces whose unit normals' dot is within this of 1 are in one plane
 
 
 def _owners(triangles):
@@ -62,6 +69,34 @@ def _owners(triangles):
     own_e = np.zeros(len(edges), np.int32)
     own_e[first] = 1
     return own_v.reshape(-1, 3), own_e.reshape(-1, 3)
+
+
+def _flat(vertices, triangles):
+    """(F, 3) bool flags as ``_owners``'s: corner k of face f is a vertex and edge k an
+    edge inside a flat patch (each edge in exactly two faces whose unit normals agree
+    within FLAT; a vertex whose every edge is such). Such an edge or vertex needs no
+    pairs: a cloth primitive that starts clear of a flat patch first crosses it through
+    one of its faces or its border, and the patch's faces and border have theirs; their
+    common normals (two edges in the top of a platter, a cloth triangle over a vertex in
+    it) can tilt far from the surface's and would push the cloth sideways."""
+    t = np.asarray(triangles, dtype=np.int64)
+    v = np.asarray(vertices, dtype=np.float64)
+    n = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    edges = np.sort(np.stack([t, np.roll(t, -1, axis=1)], -1).reshape(-1, 2), axis=1)
+    _, which, counts = np.unique(edges, axis=0, return_inverse=True, return_counts=True)
+    which = which.ravel()
+    faces = np.repeat(np.arange(len(t)), 3)
+    by_edge = np.argsort(which, kind="stable")      # each edge's faces side by side
+    start = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    shared = counts == 2
+    f0, f1 = faces[by_edge[start[shared]]], faces[by_edge[start[shared] + 1]]
+    flat = np.zeros(len(counts), bool)
+    flat[shared] = np.einsum("ij,ij->i", n[f0], n[f1]) >= 1.0 - FLAT
+    flat_e = flat[which]
+    flat_v = np.ones(len(v), bool)
+    np.logical_and.at(flat_v, edges.ravel(), np.repeat(flat_e, 2))
+    return flat_v[t], flat_e.reshape(-1, 3)
 
 
 @ti.data_oriented
@@ -118,16 +153,23 @@ class ObstaclePairs:
         self.cloth_hi = ti.Vector.field(3, real, shape=model.particle_count)
         # each obstacle vertex's collider row
         row_of = np.zeros(n_obstacle, np.int32)
-        own_v, own_e = [], []
+        own_v, own_e, flat = [], [], []
         for k, r in zip(self.table.mesh_rows, self.store.records):
             row_of[r["vert_first"]:r["vert_first"] + len(r["v"])] = k
             v, e = _owners(r["tris"])
-            own_v.append(v)
-            own_e.append(e)
+            flat_v = flat_e = np.zeros(v.shape, bool)
+            if not r["deforming"]:
+                flat_v, flat_e = _flat(r["v"], r["tris"])
+            own_v.append(v * ~flat_v)       # no pairs of a flat patch's inner corners, edges
+            own_e.append(e * ~flat_e)
+            flat.append((flat_e << np.arange(3)).sum(1) + (flat_v << np.arange(3, 6)).sum(1))
         self.row_of = _ints(row_of, ())
         self.mesh_row = _ints(self.table.mesh_rows, ())
         self.own_v = _ints(np.concatenate(own_v), (3,))
         self.own_e = _ints(np.concatenate(own_e), (3,))
+        # each triangle's edges (bit k: corner k to k + 1) and corners (bit 3 + k) inside a
+        # flat patch (``_flat``; none on a deforming mesh)
+        self.flat = _ints(np.concatenate(flat), ())
         self.origin = ti.Vector.field(3, real, shape=model.particle_count)
         self.anchor = ti.Vector.field(3, real, shape=model.particle_count)
         self.margin = 0.0
@@ -137,6 +179,7 @@ class ObstaclePairs:
         self.searches = 0
         self.search_seconds = 0.0     # wall time of the searches (their kernels waited for)
         self.current = False          # the planes are those of the motion as it now is
+        self.hold = Hold(model)       # the planes inside a solve (``hold.py``)
 
     # -- the step ------------------------------------------------------------------------
     def begin(self, x0, x1, t0, dt, margin):
@@ -277,18 +320,20 @@ def _planes(o: ti.template(), rows: ti.template(), count: ti.i32, x0: ti.templat
     gap stays above that all along has none (h = INACTIVE): its path crosses nothing, and
     a cloth sliding over a curved obstacle at the contact law's offset is not held to the
     tangent planes it passed. The plane is that of the closest points at s, m toward the
-    cloth, h = max_b m . xo1_b + delta, delta = min(T, max(D0, FLOOR T)), with the
-    obstacle's velocity u there."""
+    cloth, h = max_b m . xo1_b + delta (delta = min(T, max(D0, FLOOR T)) for a
+    point-triangle row, FLOOR T for the others), with the obstacle's velocity u there."""
     ti.loop_config(serialize=ti.static(serial_count(rows.capacity)))
     for c in range(count):
         ids, kind = rows.ids[c], rows.kind[c]
         g, alpha = _gap(ids, kind, x0, x1, o.xo0, o.xo1, 0.0)
         d0 = g.norm()
-        # the plane is taken where the gap comes down to FLOOR T; it holds the cloth at the
-        # contact law's offset T, or at its start's gap where it began nearer (no push
-        # away), at least FLOOR T
+        # the plane is taken where the gap comes down to FLOOR T; a point-triangle row's
+        # holds the cloth at the contact law's offset T, or at its start's gap where it
+        # began nearer (no push away), at least FLOOR T; the others' at FLOOR T
         target = FLOOR * thickness
-        delta = ti.min(thickness, ti.max(d0, target))
+        delta = target
+        if kind == POINT_TRIANGLE:
+            delta = ti.min(thickness, ti.max(d0, target))
         closing = _closing(ids, kind, x0, x1, o.xo0, o.xo1)
         reach = target * (1.0 + ADVANCE_SLACK)      # a gap this near has come down to it
         s, d, hit = 0.0, d0, d0 <= reach
@@ -311,6 +356,8 @@ def _planes(o: ti.template(), rows: ti.template(), count: ti.i32, x0: ti.templat
         if s < 1.0 and not hit:
             hit = True              # out of advances short of the end: take the plane here
         m = g / ti.max(d, LEAST_GAP)
+        if kind == POINT_TRIANGLE:
+            m = _patch_normal(o, ids, rows.face[c], alpha, s, g, m)
         level, weight = -1e30, 0.0
         u = ti.Vector.zero(float, 3)
         for k in ti.static(range(4)):
@@ -322,6 +369,39 @@ def _planes(o: ti.template(), rows: ti.template(), count: ti.i32, x0: ti.templat
         rows.u[c] = u / ti.max(weight, 1e-30)
         rows.delta[c] = delta
         rows.h[c] = level + delta if hit and d > LEAST_GAP else INACTIVE
+
+
+@ti.func
+def _patch_normal(o: ti.template(), ids, face, alpha, s, g, m):
+    """A point-triangle row's normal: the triangle's own, toward the point, where the
+    point's closest point on it (weights -alpha[1:]) lies on an edge or corner inside a
+    flat patch (``_flat``); else m, the gap's direction. Beside a triangle of a flat
+    surface the gap's direction tilts toward the surface (a point T/4 above the top of a
+    turntable's platter, 1 cm across from a triangle's edge: 78 degrees from the normal)
+    and its plane pushed the cloth sideways by up to 1.3 cm; the surface's normal
+    separates it from that triangle too (the point is not below the patch's plane)."""
+    zeros, at = 0, 0
+    for k in ti.static(range(3)):
+        if alpha[k + 1] == 0.0:
+            zeros += 1
+        else:
+            at = k
+    flat = o.flat[face]
+    inside = False
+    if zeros == 1:
+        for k in ti.static(range(3)):
+            if alpha[k + 1] == 0.0:
+                inside = (flat >> ((k + 1) % 3)) & 1 == 1     # the edge across corner k
+    elif zeros == 2:
+        inside = (flat >> (3 + at)) & 1 == 1
+    out = m
+    if inside:
+        y = [o.xo0[ids[k]] + s * (o.xo1[ids[k]] - o.xo0[ids[k]]) for k in ti.static(range(1, 4))]
+        n = (y[1] - y[0]).cross(y[2] - y[0])
+        if n.norm() > 0.0:
+            n = n.normalized()
+            out = n if n.dot(g) >= 0.0 else -n
+    return out
 
 
 @ti.kernel

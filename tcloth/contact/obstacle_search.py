@@ -17,6 +17,7 @@ from ..geometry.meshstore import QUERY_WORK, STACK, pose
 
 POINT_TRIANGLE, EDGE_EDGE, VERTEX_TRIANGLE = 0, 1, 2
 CHUNK = 32          # raw rows a query reserves at a time
+INACTIVE = -1e30    # h of a row without a plane (``obstacle.py``)
 
 
 @ti.func
@@ -51,16 +52,18 @@ def _world_box(lo, hi, r, c):
 @ti.data_oriented
 class Rows:
     """The pair list's fields, ``capacity`` rows (a larger list is a new one: a kernel
-    compiled for one keeps reading its fields): ids (4,), kind, m, h, delta, u
-    (``ObstaclePairs``), ``found``, the rows a search found, and the search's rows as
-    found (``raw_ids``, ``raw_kind``; each one's query ``owner`` and its place ``local``
-    among that query's rows) before ``order`` sorts them."""
+    compiled for one keeps reading its fields): ids (4,), kind, the obstacle triangle
+    ``face`` that listed the row, m, h, delta, u (``ObstaclePairs``), ``found``, the rows
+    a search found, and the search's rows as found (``raw_ids``, ``raw_kind``,
+    ``raw_face``; each one's query ``owner`` and its place ``local`` among that query's
+    rows) before ``order`` sorts them."""
 
     def __init__(self, capacity):
         real = runtime.real()
         self.capacity = capacity
         self.ids = ti.Vector.field(4, ti.i32, shape=capacity)
         self.kind = ti.field(ti.i32, shape=capacity)
+        self.face = ti.field(ti.i32, shape=capacity)
         self.m = ti.Vector.field(3, real, shape=capacity)
         self.h = ti.field(real, shape=capacity)
         self.delta = ti.field(real, shape=capacity)
@@ -68,6 +71,7 @@ class Rows:
         self.found = ti.field(ti.i32, shape=())
         self.raw_ids = ti.Vector.field(4, ti.i32, shape=capacity)
         self.raw_kind = ti.field(ti.i32, shape=capacity)
+        self.raw_face = ti.field(ti.i32, shape=capacity)
         self.owner = ti.field(ti.i32, shape=capacity)
         self.local = ti.field(ti.i32, shape=capacity)
 
@@ -90,7 +94,7 @@ def _cloth_box(o: ti.template(), kind, q, grow):
 
 
 @ti.func
-def _append(o: ti.template(), rows: ti.template(), slot, ids, kind):
+def _append(o: ti.template(), rows: ti.template(), slot, ids, kind, face):
     """A row of query ``slot``: its place among the raw rows (the next of the query's
     chunk; a new chunk of ``CHUNK`` reserved where that is used up: one atomic operation
     on the shared count per chunk, not per row) and among the query's rows."""
@@ -104,6 +108,7 @@ def _append(o: ti.template(), rows: ti.template(), slot, ids, kind):
     if row < rows.capacity:
         rows.raw_ids[row] = ids
         rows.raw_kind[row] = kind
+        rows.raw_face[row] = face
         rows.owner[row] = slot
         rows.local[row] = local
 
@@ -117,7 +122,8 @@ def _emit(o: ti.template(), rows: ti.template(), slot, kind, q, tri, lo, hi, gro
     tlo, thi = o.tri_lo[tri], o.tri_hi[tri]
     if _overlap(lo, hi, tlo, thi):
         if kind == POINT_TRIANGLE:
-            _append(o, rows, slot, ti.Vector([o.points[q], t[0], t[1], t[2]]), POINT_TRIANGLE)
+            _append(o, rows, slot, ti.Vector([o.points[q], t[0], t[1], t[2]]), POINT_TRIANGLE,
+                    tri)
         elif kind == EDGE_EDGE:
             _edge_pairs(o, rows, slot, o.edges[q], t, tri, lo, hi)
         else:
@@ -126,7 +132,7 @@ def _emit(o: ti.template(), rows: ti.template(), slot, kind, q, tri, lo, hi, gro
                 if o.own_cv[q][k]:
                     if _overlap(o.cloth_lo[c[k]] - grow, o.cloth_hi[c[k]] + grow, tlo, thi):
                         _append(o, rows, slot, ti.Vector([c[k], t[0], t[1], t[2]]),
-                                POINT_TRIANGLE)
+                                POINT_TRIANGLE, tri)
                 if o.own_ce[q][k]:
                     e = ti.Vector([c[k], c[(k + 1) % 3]])
                     elo = ti.min(o.cloth_lo[e[0]], o.cloth_lo[e[1]])
@@ -136,7 +142,7 @@ def _emit(o: ti.template(), rows: ti.template(), slot, kind, q, tri, lo, hi, gro
                     a = t[k]
                     if _overlap(lo, hi, o.vert_lo[a], o.vert_hi[a]):
                         _append(o, rows, slot, ti.Vector([a, c[0], c[1], c[2]]),
-                                VERTEX_TRIANGLE)
+                                VERTEX_TRIANGLE, tri)
 
 
 @ti.func
@@ -148,7 +154,7 @@ def _edge_pairs(o: ti.template(), rows: ti.template(), slot, e, t, tri, lo, hi):
             a, b = t[k], t[(k + 1) % 3]
             if _overlap(lo, hi, ti.min(o.vert_lo[a], o.vert_lo[b]),
                         ti.max(o.vert_hi[a], o.vert_hi[b])):
-                _append(o, rows, slot, ti.Vector([e[0], e[1], a, b]), EDGE_EDGE)
+                _append(o, rows, slot, ti.Vector([e[0], e[1], a, b]), EDGE_EDGE, tri)
 
 
 @ti.func
@@ -247,6 +253,7 @@ def order(o: ti.template(), rows: ti.template(), found: ti.i32) -> ti.i32:
             place = o.start[rows.owner[r]] + rows.local[r]
             rows.ids[place] = rows.raw_ids[r]
             rows.kind[place] = rows.raw_kind[r]
+            rows.face[place] = rows.raw_face[r]
     return o.total[None]
 
 

@@ -54,6 +54,10 @@ STATS = {
     "obstacle_searches": "searches of the mesh colliders' pairs so far",
     "obstacle_search_seconds": "wall time of those searches so far (the broad phase's)",
     "obstacle_corrections": "cloth vertices the mesh colliders' planes moved so far",
+    "hold_steps": ("steps whose solver iterated again to pull the cloth onto the mesh "
+                   "colliders' planes (hold.py)"),
+    "hold_dropped": ("planes past a cloth vertex's hold.SLOTS, left to the guard, so "
+                     "far"),
     "obstacle_carried": ("cloth vertices the mesh colliders' fail-safe carried with the "
                          "obstacle so far"),
     "solve_searches": ("candidate searches for solvers' iterations (one at a step's start "
@@ -153,6 +157,29 @@ class ContactStage:
         held = (self.broad.covers(x0, x) if cl is self.broad.candidates
                 else self.swept.holds(x0, x))
         return (cl, count) if held else self.begin_solve(x0, x)
+
+    @property
+    def hold(self):
+        """The mesh colliders' ``hold.Hold`` (a per-particle potential term a solver
+        includes), or None without mesh colliders."""
+        return None if self.obstacle is None else self.obstacle.hold
+
+    def begin_hold(self, x0, x, t0, dt):
+        """The mesh colliders' pairs and planes for a solver's motion x0 -> x over the
+        step (t0, dt), searched where the list does not hold that motion; where a cloth
+        vertex ends below one, the hold on (``hold.py``: the solver iterates again with
+        the planes as a stiff penalty, then calls ``end_hold``). Returns the rows short of
+        their plane (0: the hold stays off)."""
+        o = self.obstacle
+        o.begin(x0, x, t0, dt, OBSTACLE_MARGIN * o.thickness)
+        short = o.violations(x)
+        if short:
+            o.hold.begin(o.rows, o.count, dt)
+            self.stats["hold_steps"] += 1
+        return short
+
+    def end_hold(self):
+        self.obstacle.hold.end()
 
     # -- the guard ---------------------------------------------------------------------------
     def end_step(self, x0, x1, v1, t0, dt):
@@ -335,6 +362,7 @@ class ContactStage:
             out["obstacle_pairs"] = self.obstacle.count
             out["obstacle_searches"] = self.obstacle.searches
             out["obstacle_search_seconds"] = self.obstacle.search_seconds
+            out["hold_dropped"] = self.obstacle.hold.dropped
         return out
 
     def reset_stats(self):
@@ -347,3 +375,4 @@ class ContactStage:
             self.broad.rebuilds = 0
         if self.obstacle is not None:
             self.obstacle.searches, self.obstacle.search_seconds = 0, 0.0
+            self.obstacle.hold.dropped = 0

@@ -72,7 +72,9 @@ class BackwardEuler(Integrator):
     (the last CG relative residual), converged, fallbacks (iterations whose Newton
     direction lowered E by no step, replaced by the preconditioned gradient) and potential
     (E at the start and after each accepted iterate: it never rises by more than its
-    rounding error). A step that reaches the cap unconverged keeps the iterate with the
+    rounding error), and hold (None, or the iterations and E of a second Newton solve
+    where the step ended below a mesh collider's planes, with them as a penalty in E:
+    ``contact/hold.py``). A step that reaches the cap unconverged keeps the iterate with the
     lowest E found, adds one to ``unconverged`` and, the first time, warns
     (``tcloth.ConvergenceWarning``): it is not the backward Euler step, and may gain
     energy. With ``newton_iterations=1`` (Baraff & Witkin's single solve) nothing is
@@ -104,6 +106,8 @@ class BackwardEuler(Integrator):
         self.potential = IncrementalPotential(model, exact=self.exact)
         self.hessian = hessian.make(model, self.potential, self.exact, self.grid)
         self.x_try = ti.Vector.field(3, model.mass.dtype, shape=model.particle_count)
+        # mesh colliders: the stage's planes as a penalty after the solve (``hold.py``)
+        self.stage = model.contact if self.potential.hold is not None else None
         self.stats = {}
         self.unconverged = 0
         self._eps = float(np.finfo(runtime.numpy_real()).eps)
@@ -113,12 +117,44 @@ class BackwardEuler(Integrator):
         opt = self.options
         x, e = state_out.x, self.potential
         e.begin(state_in.x, state_in.v, h, state_in.t, x)
-        cg_total, residual, it, converged = 0, 0.0, 0, False
         self._fallbacks = 0
         # a full Newton step below this is converged: newton_tol of the velocities, or
         # the positions' own rounding (in float32 at dt = 1e-4 that is 6e-4 m/s)
         tol = max(opt["newton_tol"] * h * (1.0 + linalg.max_norm(state_in.v)),
                   8.0 * self._eps * linalg.max_norm(state_in.x))
+        it, cg_total, residual, converged, energies = self._newton(x, h, t1, tol)
+        held = None
+        if self.stage is not None and self.stage.begin_hold(state_in.x, x, state_in.t, h):
+            # the mesh colliders' planes the step ends below, as a penalty in E
+            # (``contact/hold.py``): Newton again on the new E
+            held = self._newton(x, h, t1, tol)
+            self.stage.end_hold()
+            cg_total += held[1]
+            residual, converged = held[2], held[3]
+        _velocities(e.x0, x, 1.0 / h, state_out.v)
+        state_out.t = t1
+        self.stats = {"newton_iterations": it, "cg_iterations": cg_total, "residual": residual,
+                      "converged": converged, "fallbacks": self._fallbacks,
+                      "potential": energies,
+                      "hold": None if held is None else {"newton_iterations": held[0],
+                                                         "potential": held[4]}}
+        if not converged and opt["newton_iterations"] > 1:
+            self.unconverged += 1
+            if self.unconverged == 1:
+                warnings.warn(
+                    f"backward Euler stopped after {it} Newton iterations without converging "
+                    f"(t = {t1:.6g} s, dt = {h:.3g} s): the step keeps the iterate with the "
+                    f"lowest incremental potential found. Give newton_iterations > "
+                    f"{opt['newton_iterations']} or a smaller dt; the integrator's "
+                    f"'unconverged' counts such steps (reported once per simulator)",
+                    ConvergenceWarning, stacklevel=4)
+
+    def _newton(self, x, h, t1, tol):
+        """Newton's iterations on E from the iterate x (in place) until converged or
+        ``newton_iterations``. Returns (iterations, CG iterations, the last CG residual,
+        converged, E at the start and after each accepted iterate)."""
+        opt, e = self.options, self.potential
+        cg_total, residual, it, converged = 0, 0.0, 0, False
         energy = e.evaluate(x, h, t1, True)[0]
         energies = [energy]
         for it in range(1, opt["newton_iterations"] + 1):
@@ -138,21 +174,7 @@ class BackwardEuler(Integrator):
                 break
             if not opt["line_search"]:
                 energy = e.evaluate(x, h, t1, True)[0]
-        _velocities(e.x0, x, 1.0 / h, state_out.v)
-        state_out.t = t1
-        self.stats = {"newton_iterations": it, "cg_iterations": cg_total, "residual": residual,
-                      "converged": converged, "fallbacks": self._fallbacks,
-                      "potential": energies}
-        if not converged and opt["newton_iterations"] > 1:
-            self.unconverged += 1
-            if self.unconverged == 1:
-                warnings.warn(
-                    f"backward Euler stopped after {it} Newton iterations without converging "
-                    f"(t = {t1:.6g} s, dt = {h:.3g} s): the step keeps the iterate with the "
-                    f"lowest incremental potential found. Give newton_iterations > "
-                    f"{opt['newton_iterations']} or a smaller dt; the integrator's "
-                    f"'unconverged' counts such steps (reported once per simulator)",
-                    ConvergenceWarning, stacklevel=4)
+        return it, cg_total, residual, converged, energies
 
     def _search(self, x, h, t, energy, fallback):
         """The line search along the Newton direction; where no step lowers E (a truncated

@@ -25,7 +25,8 @@ class IncrementalPotential:
     Attributes:
         x0, x_hat: the step's start and inertial prediction x0 + h v0, (n,) vec3.
         grad: the gradient of the last evaluation with ``with_grad``, (n,) vec3.
-        particle_terms: the per-particle potential terms (gravity and drag, colliders).
+        particle_terms: the per-particle potential terms (gravity and drag, colliders,
+            the mesh colliders' hold).
         springs: the Springs term or None.
         pair_terms: the other potential terms (bending, membrane, pressure, self-contact),
             which provide "couplings" (``terms/base.py``).
@@ -38,6 +39,11 @@ class IncrementalPotential:
         terms = term_modules.build(model, lambda cls: cls.implicit == "potential",
                                    **term_options)
         self.particle_terms = tuple(t for t in terms if t.per_particle)
+        # the mesh colliders' planes as a penalty, on while a solver holds the cloth to
+        # them (``contact/hold.py``; weight 0 otherwise)
+        self.hold = model.contact.hold if model.contact is not None else None
+        if self.hold is not None:
+            self.particle_terms += (self.hold,)
         self.springs = term_modules.find(terms, term_modules.Springs)
         self.pair_terms = tuple(t for t in terms if not t.per_particle and t is not self.springs)
         self.terms = terms

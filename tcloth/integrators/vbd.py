@@ -135,6 +135,8 @@ class VBD(ForceCache, Integrator):
             ti.Vector.field(3, real, shape=n) for _ in range(5))
         self.hits = ti.field(ti.i32, shape=n)
         stage = model.contact
+        # mesh colliders: their planes as a penalty after the sweeps (``hold.py``)
+        self.hold_stage = stage if self.potential.hold is not None else None
         self.bounds = (DisplacementBounds(stage.broad, model.inv_mass)
                        if opt["bounds"] and stage is not None and stage.broad is not None
                        else None)
@@ -218,6 +220,14 @@ class VBD(ForceCache, Integrator):
                 if self.bounds.detect(x):
                     for term in self.pair_terms:        # the list's rows changed
                         term.begin_step(state_in.x, state_in.t)
+        if self.hold_stage is not None and self.hold_stage.begin_hold(state_in.x, x,
+                                                                     state_in.t, h):
+            # the mesh colliders' planes the step ends below, as a penalty in E
+            # (``contact/hold.py``): the sweeps again
+            for _ in range(opt["iterations"]):
+                self._contacts(x, h)
+                self._sweep(x, h, t1)
+            self.hold_stage.end_hold()
         if self.track_potential:
             energies.append(e.evaluate(x, h, t1, False)[0])
         self._finish(x, self.v_start, 1.0 / h, state_out.v, state_out.f)

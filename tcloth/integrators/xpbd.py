@@ -38,6 +38,10 @@ moving the particles along dV/dx at the substep's start. A step of h (dt / subst
      velocity its pushes gave it (Coulomb, ``terms.Colliders.coulomb``); then the
      self-contact projection, as in projective dynamics.
 
+Where the step ends below a mesh collider's planes (the contact stage's for the step's
+motion, ``contact/hold.py``), the last substep's iterations run again with each pass
+ending on those half-spaces (inequality constraints), and its velocities are taken again.
+
 With many iterations a step solves alpha lambda = -C(x) and M (x - x_pred) = grad C^T
 lambda (up to the term XPBD drops, Macklin 2016 eq. 11): backward Euler's step of the
 springs with the other forces explicit (tested against the backward Euler step).
@@ -94,6 +98,10 @@ class XPBD(Integrator):
         self.stage = model.contact if model.self_collision is not None else None
         self.x_start = ti.Vector.field(3, real, shape=n) if self.stage is not None else None
         self.pushed = ti.field(real, shape=n)   # how far the colliders pushed, this substep
+        # mesh colliders: their planes as constraints after the substeps (``hold.py``)
+        self.hold_stage = (model.contact if model.contact is not None
+                           and model.contact.hold is not None else None)
+        self.hold = self.hold_stage.hold if self.hold_stage is not None else None
         self.constrained = bool(self.constraints)
         self.iterated = self.constrained or self.has_colliders
         self.stats = {}
@@ -130,7 +138,24 @@ class XPBD(Integrator):
             t += h
             for term in self.projections:
                 term.project(x, v, t)
+        if self.hold_stage is not None and self.hold_stage.begin_hold(state_in.x, x,
+                                                                     state_in.t, dt):
+            # the mesh colliders' planes the step ends below, as inequality constraints
+            # of the last substep's iterations, run again (``contact/hold.py``)
+            for _ in range(opt["iterations"]):
+                self._iterate(x, h)
+                self._hold_pass(x)
+            self.hold_stage.end_hold()
+            self._velocities(x, v, 1.0 / h)
+            for term in self.projections:
+                term.project(x, v, t)
         state_out.t = state_in.t + dt
+
+    @ti.kernel
+    def _hold_pass(self, x: ti.template()):
+        ti.loop_config(serialize=ti.static(serial(x)))
+        for p in range(x.shape[0]):
+            self.hold.project(p, x)
 
     def _solve(self, x, h, iterations):
         """The substep's iterations from the prediction x; with self-collision each pass
