@@ -155,6 +155,15 @@ def f32(request):
     use_runtime("f32", request.module.__name__)
 
 
+@pytest.fixture
+def fresh_f32():
+    """float32 in a new program of its own, for a test that builds a large simulator of
+    its own and shares nothing: a module of many such (the mesh colliders' stress set)
+    gathered field trees in one program past Taichi's bound, and its worker crashed
+    (a segmentation fault in a field's to_numpy)."""
+    tcloth.init(arch="cpu", precision="f32", serial_below=tcloth.runtime.SERIAL_BELOW)
+
+
 def scene_module(name):
     """The scene script scenes/NAME.py as a module."""
     return load_script(os.path.join(SCENES, name + ".py"))[0]

@@ -21,19 +21,8 @@ from tcloth.sim.checkpoint import scene_to_arrays
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "tools"))
-from crossings import count_obstacle_crossings, inside_mask  # noqa: E402
-
-CLOTH = {"structural": (400.0, 0.05), "shear": (80.0, 0.02), "flexion": (10.0, 0.005),
-         "pinned": []}
-
-
-def box_mesh(half):
-    """(8 vertices, 6 quads) of a box of half extents ``half`` about the origin."""
-    corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)],
-                       dtype=float) * half
-    return corners, [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4),
-                     (1, 5, 7, 3)]
-
+from crossings import inside_mask  # noqa: E402
+from thrown_mesh import CLOTH, INTEGRATORS, OBSTACLES, box_mesh, thrown  # noqa: E402
 
 def closest_on_triangles(p, a, b, c):
     """(closest points (F, 3), their distances) of point p to triangles a, b, c (F, 3):
@@ -231,84 +220,25 @@ def test_a_particle_on_a_sloped_mesh_obeys_coulomb_s_bound(f64):
             assert slid == pytest.approx(expected, rel=0.03)
 
 
-def falling(collider, res, height, motion=None, self_collision=False):
-    """A res x res cloth of 0.6 m at ``height`` falling at 10 m/s onto a mesh plate 1 cm
-    thick (its top at 0.105) or a mesh sphere of radius 0.12 (2000 faces), centred at
-    (0, 0.1, 0) and still, spinning about y at 2 rad/s or breathing (its radius 1 +- 0.2
-    times at 12 rad/s); a plane below. Returns (scene, velocities, collider, cloth)."""
-    scene = tcloth.Scene(gravity=(0.0, -9.81, 0.0))
-    cloth = scene.add_cloth(resolution=(res, res), size=(0.6, 0.6), center=(0.0, height, 0.0),
-                            mass=0.2, **CLOTH)
-    if collider == "plate":
-        v, f = box_mesh(np.array([0.25, 0.005, 0.25]))
-    else:
-        v, f = icosphere(0.12, 3)
-    motions = {None: {}, "spin": {"angular_velocity": (0.0, 2.0, 0.0)},
-               "deform": {"deform": lambda t: v * (1.0 + 0.2 * np.sin(12.0 * t))}}
-    c = scene.add_mesh_collider((v, f), position=(0.0, 0.1, 0.0), friction=0.3,
-                                **motions[motion])
-    scene.add_plane((0.0, -0.3, 0.0), (0.0, 1.0, 0.0), friction=0.3)
-    if self_collision:
-        scene.set_self_collision(thickness=0.006)
-    velocities = scene.velocities
-    velocities[cloth.particles.ravel(), 1] = -10.0
-    return scene, velocities, c, cloth
+# every integrator on the plate and on the still, spinning and breathing sphere; each case
+# compiles a simulator (40-120 s on two cores): the slow set
+CASES = [pytest.param(integrator, collider, motion, marks=pytest.mark.slow)
+         for integrator in INTEGRATORS for collider, motion in OBSTACLES]
 
 
-OWN_DT = {"forward_euler": 2e-5, "symplectic_euler": 1e-4, "verlet": 1e-4, "rk4": 2e-4}
-QUICK = set()      # every case compiles a simulator (40-120 s on two cores): the full set
-# every integrator on the plate and on the still, spinning and breathing sphere
-CASES = [(integrator, collider, motion)
-         for integrator in ("forward_euler", "symplectic_euler", "verlet", "rk4", "backward_euler",
-                            "projective", "vbd", "xpbd")
-         for collider, motion in (("plate", None), ("sphere", None), ("sphere", "spin"),
-                                  ("sphere", "deform"))]
-
-
-def thrown_cases():
-    for case in CASES:
-        yield pytest.param(*case, marks=() if case in QUICK else (pytest.mark.slow,))
-
-
-@pytest.mark.parametrize("integrator,collider,motion", list(thrown_cases()))
-def test_a_thrown_cloth_never_enters_or_crosses_a_mesh(f32, integrator, collider, motion):
+@pytest.mark.parametrize("integrator,collider,motion", CASES)
+def test_a_thrown_cloth_never_enters_or_crosses_a_mesh(fresh_f32, integrator, collider,
+                                                        motion):
     """A cloth thrown down at 10 m/s onto a mesh plate 1 cm thick or a mesh sphere (still,
     spinning or breathing): after every step no particle is inside the obstacle and no
     cloth edge crosses an obstacle triangle nor an obstacle edge a cloth triangle (NumPy
-    counts), nothing blows up, and the cloth reached it. The frame-rate solvers at 1/60 s
-    (a 24 x 24 cloth: its triangles are small beside the sphere's curvature, as a cloth
-    must be to lie on it without the sphere showing through), 0.4 s; the explicit ones at
-    their own dt from 4.5 cm above, 15 ms."""
-    dt = OWN_DT.get(integrator, 1.0 / 60.0)
-    frame = dt > 1e-3
-    top = 0.105 if collider == "plate" else 0.22
-    # VBD's 24 x 24 cloth landing at 10 m/s on a plate 1 cm thick blows up in its step on
-    # the analytic box too (tools/bench_contact.py's falling scene): its own limit, and
-    # the 12 x 12 cloth that the analytic box's test uses (test_contact.py) lands
-    res = 12 if not frame or (integrator == "vbd" and collider == "plate") else 24
-    scene, velocities, c, cloth = falling(collider, res, 0.3 if frame else top + 0.045,
-                                          motion)
-    options = {"strain_bound": 2.0}
-    if integrator in ("vbd", "xpbd"):
-        options["substeps"] = "auto"
-    sim = tcloth.Simulator(scene, integrator, dt=dt, **options)
-    sim.set_state(velocities=velocities)
-    faces = np.asarray(c["faces"])
-    closest = np.inf
-    steps = int(round((0.4 if frame else 0.015) / dt))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        for k in range(steps):
-            sim.step(1)
-            if not frame and k % 5:
-                continue
-            x = sim.positions().astype(np.float64)
-            obstacle = world_vertices(c, sim.time)
-            assert count_obstacle_crossings(x, cloth.triangles, obstacle, faces) == 0, k
-            assert not inside_mask(x, obstacle, faces).any(), k
-            closest = min(closest, np.min(np.linalg.norm(
-                x[:, None] - obstacle[None], axis=2)))
-    assert closest < 0.05                        # it reached the obstacle
+    counts), nothing blows up, and the cloth reached it: the frame-rate solvers at 1/60 s,
+    the explicit ones at their own dt (``tools/thrown_mesh.py``, which runs the matrix at
+    any dt)."""
+    r = thrown(integrator, collider, motion)         # tools/thrown_mesh.py
+    assert r["error"] is None, r["error"]
+    assert r["crossings"] == 0 and r["inside"] == 0, r
+    assert r["closest"] < 0.05, r                   # it reached the obstacle
 
 
 @pytest.mark.slow
@@ -450,7 +380,7 @@ def test_flat_patches_are_found_by_their_faces_normals():
 
 
 @pytest.mark.slow
-def test_a_cloth_landing_on_a_platter_with_a_rim_gains_no_energy(f32):
+def test_a_cloth_landing_on_a_platter_with_a_rim_gains_no_energy(fresh_f32):
     """Projective dynamics drops a cloth onto scenes/turntable.py's turntable, standing
     still, its corners past the platter's rim: contact is inelastic, so the total energy
     (kinetic, gravitational, springs', contact's) never rises above its start. The guard's
