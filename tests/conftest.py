@@ -114,6 +114,13 @@ LONG = {
     "test_scene_regression::test_every_scene_script_matches_its_snapshot_after_0_1_s[turntable]",
     "test_scene_regression::test_every_scene_script_matches_its_snapshot_after_0_1_s[breathing]",
     "test_mesh_collider::test_a_particle_on_a_sloped_mesh_obeys_coulomb_s_bound",
+    # the quick set's three longest (25-30 s each on two cores), with which it ran 10:09
+    # in a fresh clone on 2026-11-26
+    "test_contact::test_cloth_falling_at_10_m_per_s_stays_out_of_thin_colliders"
+    "[projective-0.016666666666666666-sphere]",
+    "test_contact::test_thrown_cloths_never_cross_at_any_step[verlet-None]",
+    "test_implicit::test_newton_never_raises_the_incremental_potential_and_reports_"
+    "non_convergence[f64]",
 }
 
 
