@@ -142,7 +142,8 @@ class BackwardEuler(Integrator):
             self.unconverged += 1
             if self.unconverged == 1:
                 warnings.warn(
-                    f"backward Euler stopped after {it} Newton iterations without converging "
+                    f"backward Euler stopped after {it if held is None else held[0]} Newton "
+                    f"iterations{'' if held is None else ' (of the hold)'} without converging "
                     f"(t = {t1:.6g} s, dt = {h:.3g} s): the step keeps the iterate with the "
                     f"lowest incremental potential found. Give newton_iterations > "
                     f"{opt['newton_iterations']} or a smaller dt; the integrator's "
