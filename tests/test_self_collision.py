@@ -348,11 +348,11 @@ def test_displacement_test_matches_numpy_on_one_thread_and_on_several():
                 centre = 0.5 * (both.min(axis=0) + both.max(axis=0))
                 expected = 2 * np.linalg.norm(both - centre, axis=1).max()
                 if previous is None:
-                    got = broad_phase._spread(broad, other.x, other.x, False)
+                    got = broad_phase._spread(broad, broad.x_ref, other.x, other.x, False)
                 else:
                     prev = sim.model.state()
                     prev.x.from_numpy(previous)
-                    got = broad_phase._spread(broad, other.x, prev.x, True)
+                    got = broad_phase._spread(broad, broad.x_ref, other.x, prev.x, True)
                 assert got == pytest.approx(expected, rel=1e-12)
                 np.testing.assert_allclose(broad.centre.to_numpy(), centre, rtol=0,
                                            atol=1e-15)

@@ -67,6 +67,8 @@ class ContactList:
         # the guard's separating plane per row at a step's start (``guard.planes``)
         self.plane_n = ti.Vector.field(3, real, shape=capacity)
         self.plane_delta = ti.field(real, shape=capacity)
+        # the vertex pairs the projection's Jacobi passes moved (``projection.py``)
+        self.touched = ti.field(ti.i32, shape=capacity)
         if not lagged:
             return
         self.lag_fn = ti.field(real, shape=capacity)
@@ -91,9 +93,9 @@ class ContactList:
 
 
 @ti.kernel
-def _spread(broad: ti.template(), x: ti.template(), y: ti.template(),
+def _spread(broad: ti.template(), ref: ti.template(), x: ti.template(), y: ti.template(),
             both: ti.template()) -> ti.f64:
-    """Twice the largest distance of a displacement (x - x_ref, and y - x_ref when
+    """Twice the largest distance of a displacement (x - ref, and y - ref when
     ``both``) from the middle of all the displacements' bounding box: no two particles
     have moved relative to each other by more, from x_ref to x or y or anywhere on the
     straight path between them. Blocks of DISPLACEMENT_BLOCK particles reduce in parallel,
@@ -108,10 +110,10 @@ def _spread(broad: ti.template(), x: ti.template(), y: ti.template(),
         hi = ti.Vector([-1e30, -1e30, -1e30], ti.f64)
         for i in range(blk * DISPLACEMENT_BLOCK, ti.min((blk + 1) * DISPLACEMENT_BLOCK, P)):
             p = broad.table.points[i]
-            d = ti.cast(x[p] - broad.x_ref[p], ti.f64)
+            d = ti.cast(x[p] - ref[p], ti.f64)
             lo, hi = ti.min(lo, d), ti.max(hi, d)
             if ti.static(both):
-                e = ti.cast(y[p] - broad.x_ref[p], ti.f64)
+                e = ti.cast(y[p] - ref[p], ti.f64)
                 lo, hi = ti.min(lo, e), ti.max(hi, e)
         broad.moved_lo[blk], broad.moved_hi[blk] = lo, hi
     ti.loop_config(serialize=True)
@@ -126,10 +128,10 @@ def _spread(broad: ti.template(), x: ti.template(), y: ti.template(),
         farthest = ti.cast(0.0, ti.f64)
         for i in range(blk * DISPLACEMENT_BLOCK, ti.min((blk + 1) * DISPLACEMENT_BLOCK, P)):
             p = broad.table.points[i]
-            farthest = ti.max(farthest, (ti.cast(x[p] - broad.x_ref[p], ti.f64) - c).norm_sqr())
+            farthest = ti.max(farthest, (ti.cast(x[p] - ref[p], ti.f64) - c).norm_sqr())
             if ti.static(both):
                 farthest = ti.max(farthest,
-                                  (ti.cast(y[p] - broad.x_ref[p], ti.f64) - c).norm_sqr())
+                                  (ti.cast(y[p] - ref[p], ti.f64) - c).norm_sqr())
         broad.moved_far[blk] = farthest
     ti.loop_config(serialize=True)
     for _ in range(1):
@@ -217,13 +219,19 @@ class BroadPhase(CandidateSearch):
         and on the straight path from x to y."""
         if self.skin is None:
             return False
-        return _spread(self, x, x if y is None else y, y is not None) <= self.skin
+        y = x if y is None else y
+        return _spread(self, self.x_ref, x, y, y is not x) <= self.skin
+
+    def would_cover(self, x0, x1, skin):
+        """Whether a list built at x0 with ``skin`` would cover the motion x0 -> x1 (no
+        two particles move by more than the skin relative to each other)."""
+        return _spread(self, x0, x1, x1, False) <= skin
 
     def unlisted_distance(self, x):
         """A lower bound on the distance at x of every pair the list leaves out: its
         reach less how far particles moved relative to each other since the build
         (``covers``)."""
-        return float(self.reach[None]) - _spread(self, x, x, False)
+        return float(self.reach[None]) - _spread(self, self.x_ref, x, x, False)
 
     def build(self, x, skin):
         """List the pairs within thickness + skin at x."""

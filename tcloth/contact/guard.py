@@ -4,7 +4,7 @@ collider, whatever the integrator and the step size (``docs/contact.md``).
 The motion of a step is the straight path of every particle from its start x0 to its end
 x1. Kernels here change x1 (and v1 by the same change over dt) until that motion is safe:
 
-  - ``project``: each candidate pair (a point and a triangle, or two edges) was
+  - ``projection.project``: each candidate pair (a point and a triangle, or two edges) was
     separated at x0 by its gap D0 > 0 along the unit normal n of its closest points. The
     pair stays separated by the plane normal to n along the whole motion if, at x1, every
     vertex a of its first side and b of its second keep n . (x_a - x_b) >= delta: the
@@ -14,7 +14,9 @@ x1. Kernels here change x1 (and v1 by the same change over dt) until that motion
     one closer than a quarter of the thickness ends the step that far apart (float32
     resolves no gap of a few ulps of the coordinates). Violated vertex pairs are
     moved apart along n in proportion to their inverse masses (Gauss-Seidel sweeps over
-    the candidates), and their approaching normal velocity is removed by an impulse
+    the candidates on CPUs; on GPUs Jacobi passes, all at once, each correction scaled
+    by 1 / the larger of its two vertices' corrections in the pass, the same on both),
+    and their approaching normal velocity is removed by an impulse
     along the same directions (inelastic: a move is not turned into a velocity, which
     at a small dt would add |move| / dt, so the guard adds no energy at any dt): each
     correction moves equal and opposite momenta, except where a
@@ -53,7 +55,6 @@ from .search import POINT_TRIANGLE
 POINT_TRIANGLE_PAIRS = ((0, 1), (0, 2), (0, 3))
 EDGE_EDGE_PAIRS = ((0, 2), (0, 3), (1, 2), (1, 3))
 SLACK = 1e-3             # a violation below this fraction of delta is no violation
-HELD_ALONG = 0.5         # a held vertex moves along a normal only if this much is left
 KEEP = 0.9               # the fail-safe stops a vertex at this fraction of its way to a plane
 FLOOR = 0.25             # pairs end a step at least this fraction of the thickness apart
 BACK_OFF = 1e-6          # m: a path a collider stops ends this far before the surface
@@ -70,44 +71,6 @@ def _normal_margin(ids, kind, x0, thickness):
     d0 = g.norm()
     n = g / ti.max(d0, LEAST_GAP)
     return n, d0, ti.min(thickness, ti.max(0.5 * d0, FLOOR * thickness))
-
-
-@ti.func
-def _allowed(m, d):
-    """Unit direction d less its part into a collider whose outward normal is m (m = 0:
-    none); zero where less than HELD_ALONG of d's length along d is left (the vertex
-    would slide far along the collider for a small gain along d)."""
-    free = d - ti.min(d.dot(m), 0.0) * m
-    return free if free.dot(d) >= HELD_ALONG else ti.Vector.zero(float, 3)
-
-
-@ti.func
-def _correct(ids, a: ti.template(), b: ti.template(), n, delta, x1, v1, inv_mass, held):
-    """Move vertices a and b of a candidate apart along n until n . (x_a - x_b) = delta,
-    in proportion to their inverse masses (equal and opposite momenta), and remove their
-    approaching normal velocity n . (v_a - v_b) < 0 by an impulse along the same
-    directions (an inelastic contact: a correction adds no energy at any dt, where
-    turning the move into a velocity change over dt would add |move| / dt); a vertex a
-    collider holds this step (``held``: the collider's outward normal m where it
-    stopped, else 0) moves only along the part of its direction (+n for a, -n for b)
-    that does not point into the collider (the collider takes the rest). 1 if they
-    were closer, else 0."""
-    pa, pb = ids[a], ids[b]
-    violation = delta - n.dot(x1[pa] - x1[pb])
-    da, db = _allowed(held[pa], n), _allowed(held[pb], -n)
-    wa, wb = inv_mass[pa] * n.dot(da), -inv_mass[pb] * n.dot(db)
-    corrected = 0
-    if violation > SLACK * delta and wa + wb > 0.0:
-        lam = violation / (wa + wb)
-        x1[pa] += inv_mass[pa] * lam * da
-        x1[pb] += inv_mass[pb] * lam * db
-        approach = n.dot(v1[pa] - v1[pb])
-        if approach < 0.0:
-            stop = -approach / (wa + wb)
-            v1[pa] += inv_mass[pa] * stop * da
-            v1[pb] += inv_mass[pb] * stop * db
-        corrected = 1
-    return corrected
 
 
 @ti.func
@@ -153,43 +116,6 @@ def planes(cl: ti.template(), count: ti.i32, x0: ti.template(), x1: ti.template(
 
 
 @ti.func
-def _project_row(cl, c, x1, v1, inv_mass, held):
-    """Correct the violated vertex pairs of candidate c in place; the number corrected."""
-    ids, kind = cl.ids[c], cl.kind[c]
-    n, delta = cl.plane_n[c], cl.plane_delta[c]
-    corrected = 0
-    if delta > 0.0:
-        if kind == POINT_TRIANGLE:
-            for a, b in ti.static(POINT_TRIANGLE_PAIRS):
-                corrected += _correct(ids, a, b, n, delta, x1, v1, inv_mass, held)
-        else:
-            for a, b in ti.static(EDGE_EDGE_PAIRS):
-                corrected += _correct(ids, a, b, n, delta, x1, v1, inv_mass, held)
-    return corrected
-
-
-@ti.kernel
-def project(cl: ti.template(), count: ti.i32, x1: ti.template(), v1: ti.template(),
-            inv_mass: ti.template(), held: ti.template(),
-            sweeps: ti.i32) -> ti.types.vector(2, ti.i32):
-    """Gauss-Seidel sweeps over the candidates (their ``planes``) until one corrects
-    nothing, at most ``sweeps``. Returns (corrections, the sweeps run); the last sweep
-    corrected nothing when fewer than ``sweeps`` ran."""
-    total = 0
-    ran = 0
-    ti.loop_config(serialize=True)
-    for _ in range(sweeps):
-        corrected = 0
-        for c in range(count):
-            corrected += _project_row(cl, c, x1, v1, inv_mass, held)
-        total += corrected
-        ran += 1
-        if corrected == 0:
-            break
-    return ti.Vector([total, ran])
-
-
-@ti.func
 def _separate(ids, a: ti.template(), b: ti.template(), n, delta, x, inv_mass, dx, hits):
     """``_correct``'s move of vertices a and b, summed into dx and counted in hits
     instead of applied (a Jacobi pass); 1 if they were closer than delta, else 0."""
@@ -211,9 +137,9 @@ def _separate(ids, a: ti.template(), b: ti.template(), n, delta, x, inv_mass, dx
 def keep_apart(cl: ti.template(), count: ti.i32, x: ti.template(), inv_mass: ti.template(),
                dx: ti.template(), hits: ti.template()) -> ti.i32:
     """One pass of the candidates' planes (``planes``) inside a solver's iterations: every
-    vertex pair closer along its normal than delta is moved apart as ``project`` does,
-    all pairs at once (Jacobi, in parallel), each vertex by the mean of its moves.
-    Returns how many vertex pairs were closer."""
+    vertex pair closer along its normal than delta is moved apart as
+    ``projection.project`` moves it, all pairs at once (Jacobi, in parallel), each vertex
+    by the mean of its moves. Returns how many vertex pairs were closer."""
     jacobi_zero(dx, hits)
     closer = 0
     ti.loop_config(serialize=ti.static(serial(cl.ids)))

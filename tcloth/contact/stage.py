@@ -30,12 +30,12 @@ import time
 import taichi as ti
 
 from .. import runtime
-from . import guard
+from . import guard, projection
 from .broad import BroadPhase
 from .obstacle import ObstaclePairs
 from .swept import SweptSearch, search_step
 
-SWEEPS = 20          # Gauss-Seidel sweeps of the pairs' projection a round
+SWEEPS = 20          # sweeps of the pairs' projection a round (projection.project)
 ROUNDS = 4           # rounds of the projection and the colliders' sweep before the fail-safe
 MARGIN = 0.5         # the swept boxes' margin for the guard's moves, in thicknesses
 SOLVE_MARGIN = 2.0   # the swept boxes' margin for a solve's iterates, in thicknesses
@@ -45,8 +45,9 @@ STATS = {
     "candidates": "rows of the proximity list (pairs within thickness + skin)",
     "rebuilds": "builds of the proximity list so far",
     "swept_searches": "steps whose motion needed the swept-box search",
-    "guard_corrections": "vertex pairs the guard moved apart so far",
-    "guard_sweeps": "Gauss-Seidel sweeps the guard ran so far",
+    "guard_corrections": ("vertex pairs the guard found closer than their planes allow "
+                          "(at each round's start) and moved apart, so far"),
+    "guard_sweeps": "sweeps of the guard's projection so far (projection.project)",
     "failsafe_steps": "steps that needed the fail-safe (cuts conserve no momentum)",
     "failsafe_vertices": "vertex paths the fail-safe cut short so far",
     "collider_paths_cut": "particle paths that entered a collider and were stopped",
@@ -94,6 +95,8 @@ class ContactStage:
             self.thickness = float(self.table.settings["thickness"])
             self.skin = float(self.table.settings["skin"])
             self.cut = ti.field(real, shape=n)
+            # the projection's Jacobi passes on GPUs: a particle's corrections and their sum
+            self.work = (ti.field(ti.i32, shape=n), ti.Vector.field(3, real, shape=n))
         # x1 after the step's first collider sweep, where later sweeps start
         self.x_swept = ti.Vector.field(3, real, shape=n) \
             if self.colliders and self.table is not None else None
@@ -245,8 +248,8 @@ class ContactStage:
                 cl, count = self._still_covering(cl, count, x0, x1)
                 if not cut and not guard.violations(cl, count, x1):
                     break
-            corrected, sweeps = (int(v) for v in guard.project(
-                cl, count, x1, v1, self.inv_mass, self.held, SWEEPS))
+            corrected, sweeps = projection.project(cl, count, x1, v1, self.inv_mass,
+                                                   self.held, SWEEPS, self.work)
             self.stats["guard_corrections"] += corrected
             self.stats["guard_sweeps"] += sweeps
             changed += corrected
@@ -302,15 +305,21 @@ class ContactStage:
     def _step_candidates(self, x0, x1):
         """(list, rows, whether it is the proximity list) holding every pair that can come
         within the thickness on the motion x0 -> x1, with their separating planes at x0:
-        the proximity list where it covers the motion (then it covers x1 too), else the
+        the proximity list where it covers the motion (then it covers x1 too; built
+        again at x0 where the motion is within the skin), else the
         swept search's, grown by MARGIN thicknesses for the guard's moves, less the pairs
         that cannot come within the thickness on this motion (``guard.planes``: the
         rounds compute them again for the motion as it then is)."""
-        if self.broad.covers(x0, x1):
-            cl, count, covered = self.broad.candidates, self.broad.count, True
-            reach = FAR
+        covered = self.broad.covers(x0, x1)
+        if not covered and self.broad.would_cover(x0, x1, self.skin):
+            # a step small against the skin (an explicit integrator's): the list built
+            # at x0 covers it and x1, where a swept search and a build at x1 would cost two
+            self.broad.build(x0, self.skin)
+            covered = True
+        if covered:
+            cl, count, reach = self.broad.candidates, self.broad.count, FAR
         else:
-            covered, reach = False, self.thickness
+            reach = self.thickness
             solved = (self.solve_list is not None
                       and self.solve_list[0] is self.swept.candidates)
             if solved and self.swept.holds(x0, x1):      # a solve's search holds the step

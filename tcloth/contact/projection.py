@@ -1,0 +1,232 @@
+"""The guard's projection (``docs/contact.md``): each candidate pair's vertex pairs moved
+onto the pair's separating plane (``guard.planes``: n . (x_a - x_b) >= delta) in proportion
+to their inverse masses, and their approaching normal velocity removed (an inelastic
+contact), equal and opposite momenta except where a collider holds a vertex this step
+(it then moves only along the collider's surface; the collider takes the rest).
+
+Two ways to sweep the candidates (``project``): Gauss-Seidel on one thread, as on CPUs (a
+few sweeps, and the same numbers whatever the threads), and Jacobi passes, all candidates
+at once, as on GPUs (where one thread over the candidates is one GPU thread): each
+correction of a pass scaled by 1 / the larger of its two vertices' corrections in that
+pass, the same on both, so the momenta stay equal and opposite and the corrections a vertex
+receives sum to at most the largest of them; the velocities in passes of their own after
+the positions, over the vertex pairs those moved (each row's ``touched`` bits).
+"""
+import taichi as ti
+
+from .. import runtime
+from ..runtime import serial
+from .guard import EDGE_EDGE_PAIRS, POINT_TRIANGLE_PAIRS, SLACK
+from .search import POINT_TRIANGLE
+
+HELD_ALONG = 0.5         # a held vertex moves along a normal only if this much is left
+JACOBI = False           # the Jacobi passes on CPUs too (``project``)
+
+
+@ti.func
+def _allowed(m, d):
+    """Unit direction d less its part into a collider whose outward normal is m (m = 0:
+    none); zero where less than HELD_ALONG of d's length along d is left (the vertex
+    would slide far along the collider for a small gain along d)."""
+    free = d - ti.min(d.dot(m), 0.0) * m
+    return free if free.dot(d) >= HELD_ALONG else ti.Vector.zero(float, 3)
+
+
+@ti.func
+def _bit(a: ti.template(), b: ti.template()):
+    """A row's bit for its vertex pair (a, b)."""
+    return ti.static(1 << (4 * a + b))
+
+
+@ti.func
+def _violated(ids, a: ti.template(), b: ti.template(), n, delta, x1, v1, inv_mass, held,
+              touched, velocity: ti.template()):
+    """Whether vertices a and b of a candidate need a correction, with what ``_correct``
+    needs: their directions da and db (+n for a, -n for b, less the part into a collider
+    that holds the vertex this step: ``held`` is the collider's outward normal m where it
+    stopped the vertex's path, else 0; the collider takes the rest), the sum w of their
+    inverse masses along n and how much to take away: with ``velocity`` False, their
+    distance along n short of delta (a correction where it is above SLACK delta); with
+    ``velocity``, their approaching normal velocity -n . (v_a - v_b), where a position
+    pass moved them (``touched``, the row's bits ``_bit``; a correction where it is above
+    0)."""
+    pa, pb = ids[a], ids[b]
+    short = delta - n.dot(x1[pa] - x1[pb])
+    da, db = _allowed(held[pa], n), _allowed(held[pb], -n)
+    w = inv_mass[pa] * n.dot(da) - inv_mass[pb] * n.dot(db)
+    need = short
+    needed = short > SLACK * delta
+    if ti.static(velocity):
+        need = -n.dot(v1[pa] - v1[pb])
+        needed = (touched & _bit(a, b)) != 0 and need > 0.0
+    return needed and w > 0.0, da, db, w, need
+
+
+@ti.func
+def _count(ids, a: ti.template(), b: ti.template(), n, delta, x1, v1, inv_mass, held, hits,
+           touched, velocity: ti.template()):
+    """Count the vertex pair's correction on both its vertices (``_violated``)."""
+    if _violated(ids, a, b, n, delta, x1, v1, inv_mass, held, touched, velocity)[0]:
+        hits[ids[a]] += 1
+        hits[ids[b]] += 1
+
+
+@ti.func
+def _correct(ids, a: ti.template(), b: ti.template(), n, delta, x1, v1, inv_mass, held,
+             hits, dx, touched, velocity: ti.template()):
+    """The move that takes vertices a and b of a candidate apart along n until
+    n . (x_a - x_b) = delta (with ``velocity``: the impulse that removes their approaching
+    normal velocity, an inelastic contact), in proportion to their inverse masses (equal
+    and opposite momenta), scaled by 1 / the larger of the two vertices' corrections this
+    pass (``hits``), summed into dx. The same scale on both keeps the momenta equal and
+    opposite; with it, the corrections a vertex receives sum to at most the largest of
+    them (a Jacobi pass that cannot overshoot where several pairs push one vertex the
+    same way). Returns (1 if they needed it, else 0; ``touched`` with their bit set where
+    a position pass moved them)."""
+    pa, pb = ids[a], ids[b]
+    needed, da, db, w, need = _violated(ids, a, b, n, delta, x1, v1, inv_mass, held,
+                                        touched, velocity)
+    corrected = 0
+    mark = touched
+    if needed:
+        lam = need / (w * ti.max(hits[pa], hits[pb]))
+        dx[pa] += inv_mass[pa] * lam * da
+        dx[pb] += inv_mass[pb] * lam * db
+        corrected = 1
+        if ti.static(not velocity):
+            mark |= _bit(a, b)
+    return corrected, mark
+
+
+@ti.func
+def _correct_now(ids, a: ti.template(), b: ti.template(), n, delta, x1, v1, inv_mass, held):
+    """``_correct`` in place, positions and velocities at once (a Gauss-Seidel step):
+    the vertex pair moved onto its plane and its approaching normal velocity removed.
+    1 if they were closer, else 0."""
+    pa, pb = ids[a], ids[b]
+    closer, da, db, w, short = _violated(ids, a, b, n, delta, x1, v1, inv_mass, held, 0,
+                                         False)
+    corrected = 0
+    if closer:
+        lam = short / w
+        x1[pa] += inv_mass[pa] * lam * da
+        x1[pb] += inv_mass[pb] * lam * db
+        approach = n.dot(v1[pa] - v1[pb])
+        if approach < 0.0:
+            stop = -approach / w
+            v1[pa] += inv_mass[pa] * stop * da
+            v1[pb] += inv_mass[pb] * stop * db
+        corrected = 1
+    return corrected
+
+
+@ti.kernel
+def _gauss_seidel(cl: ti.template(), count: ti.i32, x1: ti.template(), v1: ti.template(),
+                  inv_mass: ti.template(), held: ti.template(),
+                  sweeps: ti.i32) -> ti.types.vector(2, ti.i32):
+    """Serial sweeps of ``_correct_now`` over the candidates until one corrects nothing,
+    at most ``sweeps``: (corrections of the first sweep, the sweeps run)."""
+    found = 0
+    ran = 0
+    ti.loop_config(serialize=True)
+    for _ in range(sweeps):
+        corrected = 0
+        for c in range(count):
+            ids, kind = cl.ids[c], cl.kind[c]
+            n, delta = cl.plane_n[c], cl.plane_delta[c]
+            if delta > 0.0:
+                if kind == POINT_TRIANGLE:
+                    for a, b in ti.static(POINT_TRIANGLE_PAIRS):
+                        corrected += _correct_now(ids, a, b, n, delta, x1, v1, inv_mass,
+                                                  held)
+                else:
+                    for a, b in ti.static(EDGE_EDGE_PAIRS):
+                        corrected += _correct_now(ids, a, b, n, delta, x1, v1, inv_mass,
+                                                  held)
+        if ran == 0:
+            found = corrected
+        ran += 1
+        if corrected == 0:
+            break
+    return ti.Vector([found, ran])
+
+
+@ti.kernel
+def _project_pass(cl: ti.template(), count: ti.i32, x1: ti.template(), v1: ti.template(),
+                  inv_mass: ti.template(), held: ti.template(), hits: ti.template(),
+                  dx: ti.template(), velocity: ti.template(), first: ti.template()) -> ti.i32:
+    """One Jacobi pass of ``project`` on x1 (with ``velocity``: on v1): every vertex pair
+    that needs a correction counted, then corrected (``_correct``) from the same x1 and
+    v1, all candidates at once; the corrections. ``first``: the rows' ``touched`` bits
+    cleared before."""
+    ti.loop_config(serialize=ti.static(serial(x1)))
+    for p in range(x1.shape[0]):
+        hits[p] = 0
+        dx[p] = ti.Vector.zero(float, 3)
+    ti.loop_config(serialize=ti.static(serial(cl.ids)))
+    for c in range(count):
+        if ti.static(first):
+            cl.touched[c] = 0
+        ids, kind = cl.ids[c], cl.kind[c]
+        n, delta, touched = cl.plane_n[c], cl.plane_delta[c], cl.touched[c]
+        if delta > 0.0:
+            if kind == POINT_TRIANGLE:
+                for a, b in ti.static(POINT_TRIANGLE_PAIRS):
+                    _count(ids, a, b, n, delta, x1, v1, inv_mass, held, hits, touched,
+                           velocity)
+            else:
+                for a, b in ti.static(EDGE_EDGE_PAIRS):
+                    _count(ids, a, b, n, delta, x1, v1, inv_mass, held, hits, touched,
+                           velocity)
+    corrected = 0
+    ti.loop_config(serialize=ti.static(serial(cl.ids)))
+    for c in range(count):
+        ids, kind = cl.ids[c], cl.kind[c]
+        n, delta, touched = cl.plane_n[c], cl.plane_delta[c], cl.touched[c]
+        if delta > 0.0:
+            if kind == POINT_TRIANGLE:
+                for a, b in ti.static(POINT_TRIANGLE_PAIRS):
+                    done, touched = _correct(ids, a, b, n, delta, x1, v1, inv_mass, held,
+                                             hits, dx, touched, velocity)
+                    corrected += done
+            else:
+                for a, b in ti.static(EDGE_EDGE_PAIRS):
+                    done, touched = _correct(ids, a, b, n, delta, x1, v1, inv_mass, held,
+                                             hits, dx, touched, velocity)
+                    corrected += done
+            cl.touched[c] = touched
+    ti.loop_config(serialize=ti.static(serial(x1)))
+    for p in range(x1.shape[0]):
+        if hits[p] > 0:
+            if ti.static(velocity):
+                v1[p] += dx[p]
+            else:
+                x1[p] += dx[p]
+    return corrected
+
+
+def project(cl, count, x1, v1, inv_mass, held, sweeps, work):
+    """The candidates' projection (their ``planes``): sweeps until one corrects nothing,
+    at most ``sweeps``. On CPUs (unless JACOBI) Gauss-Seidel on one thread
+    (``_gauss_seidel``: a few sweeps where Jacobi's passes take many, and the same
+    numbers whatever the threads); on GPUs (or with JACOBI) Jacobi passes in parallel
+    (``_project_pass``): on the positions, then on the velocities of the pairs the
+    positions' passes moved (an inelastic contact, as Gauss-Seidel's). work: (hits, dx), a particle's count and sum.
+    Returns (the vertex pairs the first sweep corrected, the sweeps run); the last
+    corrected nothing when fewer than ``sweeps`` ran."""
+    if JACOBI or not runtime.cpu():
+        found = ran = 0
+        while ran < sweeps:
+            corrected = int(_project_pass(cl, count, x1, v1, inv_mass, held, *work, False,
+                                      ran == 0))
+            found = found or corrected
+            ran += 1
+            if corrected == 0:
+                break
+        if found:
+            for _ in range(sweeps):
+                if not int(_project_pass(cl, count, x1, v1, inv_mass, held, *work, True,
+                                     False)):
+                    break
+        return found, ran
+    return (int(v) for v in _gauss_seidel(cl, count, x1, v1, inv_mass, held, sweeps))
