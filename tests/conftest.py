@@ -18,8 +18,11 @@ LONG = {
     "test_contact::test_self_collision_does_not_hold_a_falling_cloth_back[xpbd]",
     "test_contact::test_self_collision_does_not_hold_a_falling_cloth_back[vbd]",
     "test_contact::test_self_collision_does_not_hold_a_falling_cloth_back[projective]",
-    "test_contact::test_the_frame_rate_solvers_keep_the_planes_inside_their_iterations[xpbd]",
-    "test_contact::test_the_frame_rate_solvers_keep_the_planes_inside_their_iterations[vbd]",
+    "test_contact::test_the_frame_rate_solvers_keep_the_planes_inside_their_iterations[xpbd-False]",
+    "test_contact::test_the_frame_rate_solvers_keep_the_planes_inside_their_iterations[vbd-False]",
+    "test_contact::test_the_frame_rate_solvers_keep_the_planes_inside_their_iterations[vbd-True]",
+    "test_contact::test_the_guard_adds_no_energy_at_any_dt[True]",
+    "test_contact::test_guard_stops_cloths_passing_wholly_through_each_other[True]",
     "test_batch::test_a_batch_equals_single_steps_bit_for_bit[forward_euler]",
     "test_batch::test_a_batch_equals_single_steps_bit_for_bit[rk4]",
     "test_batch::test_a_batch_equals_single_steps_bit_for_bit[verlet]",
@@ -125,10 +128,20 @@ LONG = {
 
 
 def pytest_collection_modifyitems(config, items):
+    seen, modules = set(), set()
     for item in items:
         module, _, name = item.nodeid.partition("::")
-        if f"{os.path.splitext(os.path.basename(module))[0]}::{name}" in LONG:
+        key = f"{os.path.splitext(os.path.basename(module))[0]}::{name}"
+        seen.add(key)
+        modules.add(key.partition("::")[0])
+        if key in LONG:
             item.add_marker(pytest.mark.slow)
+    # an entry whose test was renamed or re-parametrised would leave a long test in the
+    # ten-minute set without a word (two 40 s cases did)
+    chosen = any("::" in arg for arg in config.args)       # named tests collect alone
+    stale = sorted(key for key in LONG - seen if key.partition("::")[0] in modules)
+    if stale and not chosen:
+        raise pytest.UsageError(f"conftest.LONG names tests that do not exist: {stale}")
 
 
 # (generation, module) of the last runtime use_runtime made
