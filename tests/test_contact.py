@@ -285,8 +285,8 @@ def test_displacement_bounds_keep_any_moves_inside_them_crossing_free(f64):
     sim.set_state(positions=bsc.resample(x40, n), velocities=bsc.resample(v40, n))
     x = sim.positions()
     assert count_crossings(x, scene.triangles) == 0
-    bounds = DisplacementBounds(sim.model.contact.broad, sim.model.inv_mass)
-    bounds.detect(sim.state.x)
+    bounds = DisplacementBounds(sim.model.inv_mass)
+    sim.model.contact.detect_bounds(bounds, sim.state.x)
     radius = bounds.radius.to_numpy()
     # graph distance >= 3 from each particle, by breadth-first rings of the mesh edges
     topo = contact_topology(scene)

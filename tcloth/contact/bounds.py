@@ -15,47 +15,44 @@ reach (thickness + skin) at its build, and so every pair not listed is at y at l
 reach less the list's relative motion since (``BroadPhase.unlisted_distance``). A particle
 in no listed pair gets that floor as its d_v.
 
-A solver detects at the step's start, clamps each move to its ball (``clamp``), and
-detects again at the current state after an iteration that clamped any: the states it
+A solver detects at the step's start (``ContactStage.detect_bounds``), clamps each move
+to its ball (``clamp``), and detects again at the current state after an iteration that
+clamped any: the states it
 detects at are each reached from the last by moves inside the balls, so the step's
 motion, as the polyline through them, crosses nothing. The stage's guard still checks
 the straight path from the step's start to its end. A detection whose floor has fallen
 below half the list's reach (particles moved relative to each other by more than half
-of it since the build) builds the list again at the current state first, so that a fast
-cloth is not held to balls that shrink to nothing.
+of it since the build) has the stage build the list again at the current state first, so
+that a fast cloth is not held to balls that shrink to nothing.
 """
 import taichi as ti
 
 from .. import runtime
 from ..runtime import serial
-from .broad import gap
+from .candidates import gap
 
 GAMMA = 0.4     # the fraction of d_v a particle may move (OGC's gamma_p, below 1/2)
 
 
 @ti.data_oriented
 class DisplacementBounds:
-    """Each particle's ball (``origin``, ``radius``) for one model's proximity list."""
+    """Each particle's ball (``origin``, ``radius``). The contact stage detects them
+    (``ContactStage.detect_bounds``), which builds its proximity list again where needed."""
 
-    def __init__(self, broad, inv_mass, gamma=GAMMA):
+    def __init__(self, inv_mass, gamma=GAMMA):
         n, real = inv_mass.shape[0], runtime.real()
-        self.broad, self.inv_mass, self.gamma = broad, inv_mass, gamma
+        self.inv_mass, self.gamma = inv_mass, gamma
         self.origin = ti.Vector.field(3, real, shape=n)
         self.radius = ti.field(real, shape=n)
         self.clamped = ti.field(ti.i32, shape=())
         self.detections = 0
 
-    def detect(self, x):
-        """The balls at x (which must be crossing-free). Returns whether it built the
-        proximity list again (its rows changed: what a solver keeps per row is stale)."""
-        floor = self.broad.unlisted_distance(x)
-        rebuilt = floor < 0.5 * float(self.broad.reach[None])
-        if rebuilt:
-            self.broad.build(x, self.broad.skin)
-            floor = self.broad.unlisted_distance(x)
-        self._detect(self.broad.candidates, self.broad.count, x, floor)
+    def detect(self, cl, count, x, floor):
+        """The balls at x (which must be crossing-free) from the pairs of list cl (count
+        rows) and ``floor``, a lower bound on the distance at x of every pair it leaves
+        out."""
+        self._detect(cl, count, x, floor)
         self.detections += 1
-        return rebuilt
 
     @ti.kernel
     def _detect(self, cl: ti.template(), count: ti.i32, x: ti.template(), floor: float):

@@ -1,10 +1,6 @@
-"""The self-contact broad phase: which point-triangle and edge-edge pairs can touch.
-
-A contact joins four particles x_k with weights alpha_k so that the gap between the two
-closest points is g = sum_k alpha_k x_k (``proximity.py``): point-triangle (a particle
-against a cloth triangle, alpha = (1, -w_a, -w_b, -w_c)) and edge-edge (two cloth edges or
-rope segments, alpha = (1 - s, s, -(1 - u), -u)). Pairs that touch by construction are
-left out (``topology.py``).
+"""The self-contact broad phase: which point-triangle and edge-edge pairs can touch
+(their gap: ``candidates.gap``). Pairs that touch by construction are left out
+(``topology.py``).
 
 ``BroadPhase`` keeps a candidate list: every pair whose gap was within thickness + skin at
 the positions x_ref of its last build. It runs the candidate search (``search.py``) on
@@ -30,66 +26,12 @@ import taichi as ti
 
 from .. import runtime
 from ..runtime import serial_count
+from .candidates import ContactList, gap
 from .hashgrid import PointGrid, blocks_for
-from ..geometry.proximity import contact_weights
 from .search import CandidateSearch
 
 # particles per block of the displacement test's reduction
 DISPLACEMENT_BLOCK = 1024
-
-
-@ti.func
-def gap(ids, kind, x):
-    """(alpha, g) of a contact at positions x."""
-    alpha = contact_weights(kind, x[ids[0]], x[ids[1]], x[ids[2]], x[ids[3]])
-    g = ti.Vector.zero(float, 3)
-    for k in ti.static(range(4)):
-        g += alpha[k] * x[ids[k]]
-    return alpha, g
-
-
-@ti.data_oriented
-class ContactList:
-    """Candidate contacts (ids (4,), kind and whether they repel, per row) of capacity
-    ``capacity``, and (with
-    ``lagged``) the values the contact law keeps per row for backward Euler (lagged normal
-    force, normal and weights; the Hessian's weights, penalty and dissipation blocks)."""
-
-    def __init__(self, table, inv_mass, capacity, lagged=True):
-        real = runtime.real()
-        self.table, self.inv_mass = table, inv_mass
-        self.capacity = capacity
-        self.ids = ti.Vector.field(4, ti.i32, shape=capacity)
-        self.kind = ti.field(ti.i32, shape=capacity)
-        # 0 for a pair that touches by construction (mesh neighbours across its sides):
-        # no penalty, but the guard keeps it from crossing
-        self.repels = ti.field(ti.u8, shape=capacity)
-        # the guard's separating plane per row at a step's start (``guard.planes``)
-        self.plane_n = ti.Vector.field(3, real, shape=capacity)
-        self.plane_delta = ti.field(real, shape=capacity)
-        # the vertex pairs the projection's Jacobi passes moved (``projection.py``)
-        self.touched = ti.field(ti.i32, shape=capacity)
-        if not lagged:
-            return
-        self.lag_fn = ti.field(real, shape=capacity)
-        self.lag_n = ti.Vector.field(3, real, shape=capacity)
-        self.lag_alpha = ti.Vector.field(4, real, shape=capacity)
-        self.alpha = ti.Vector.field(4, real, shape=capacity)
-        self.penalty = ti.Matrix.field(3, 3, real, shape=capacity)
-        self.damping = ti.Matrix.field(3, 3, real, shape=capacity)
-
-    @ti.func
-    def gap(self, ids, kind, x):
-        """(alpha, g) of a contact at positions x."""
-        return gap(ids, kind, x)
-
-    @ti.func
-    def inverse_mass(self, ids, alpha):
-        """sum_k alpha_k^2 / m_k: the contact's inverse effective mass."""
-        w = 0.0
-        for k in ti.static(range(4)):
-            w += alpha[k] * alpha[k] * self.inv_mass[ids[k]]
-        return w
 
 
 @ti.kernel

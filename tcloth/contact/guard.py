@@ -48,7 +48,7 @@ import taichi as ti
 
 from ..runtime import jacobi_apply, jacobi_zero, serial
 from ..geometry.shapes import SHAPES
-from .broad import gap
+from .candidates import gap
 from .search import POINT_TRIANGLE
 
 # the (first side, second side) vertex pairs of a point-triangle and an edge-edge contact

@@ -17,10 +17,14 @@ colliders, and updated only at named points, all called by the ``Simulator``:
     on their separating planes, searched once for the predicted motion and again only
     where an iterate leaves what was searched (``stats["solve_searches"]``); the guard
     takes them at the step's end where they still hold its motion.
-So the proximity list always covers the current state (a rebuild at most once a step),
-and the self-contact term (explicit forces, backward Euler's potential and Hessian,
-projective's projection) and the diagnostics read it; nothing rebuilds it inside a solve
-or an ``energy()``. A step's force evaluations away from its start (Runge-Kutta stages,
+  - ``detect_bounds(bounds, x)``: called by a solver with displacement bounds (VBD's
+    ``bounds=True``) at a step's start and after an iteration that clamped a move: the
+    bounds from the proximity list, which it builds again at x where it has grown stale
+    for them (the one rebuild inside a solve, and the stage's own).
+So the proximity list covers the current state (a rebuild at most once a step, but for
+``detect_bounds``), and the self-contact term (explicit forces, backward Euler's
+potential and Hessian, projective's projection) and the diagnostics read it; only the
+stage builds it, at these points, and never inside an ``energy()``. A step's force evaluations away from its start (Runge-Kutta stages,
 Newton iterates) see the pairs near the start; what they miss, the guard catches.
 
 ``stats`` (``Simulator.contact_stats``): see ``STATS``.
@@ -160,6 +164,20 @@ class ContactStage:
         held = (self.broad.covers(x0, x) if cl is self.broad.candidates
                 else self.swept.holds(x0, x))
         return (cl, count) if held else self.begin_solve(x0, x)
+
+    def detect_bounds(self, bounds, x):
+        """A solver's displacement bounds (``bounds.DisplacementBounds``, VBD's
+        ``bounds=True``) detected at x, from the proximity list, built again at x first
+        where particles moved relative to each other by more than half its reach since
+        its build (the balls would shrink towards nothing). Returns whether it built the
+        list (its rows changed: what a solver keeps per row is stale)."""
+        floor = self.broad.unlisted_distance(x)
+        rebuilt = floor < 0.5 * float(self.broad.reach[None])
+        if rebuilt:
+            self.broad.build(x, self.broad.skin)
+            floor = self.broad.unlisted_distance(x)
+        bounds.detect(self.broad.candidates, self.broad.count, x, floor)
+        return rebuilt
 
     @property
     def hold(self):

@@ -27,7 +27,7 @@ a particle farther.
 import taichi as ti
 
 from ..runtime import serial_count
-from .broad import ContactList
+from .candidates import ContactList
 from .hashgrid import BoxGrid
 from .search import CandidateSearch
 

@@ -137,7 +137,7 @@ class VBD(ForceCache, Integrator):
         stage = model.contact
         # mesh colliders: their planes as a penalty after the sweeps (``hold.py``)
         self.hold_stage = stage if self.potential.hold is not None else None
-        self.bounds = (DisplacementBounds(stage.broad, model.inv_mass)
+        self.bounds = (DisplacementBounds(model.inv_mass)
                        if opt["bounds"] and stage is not None and stage.broad is not None
                        else None)
         self.bounded = self.bounds is not None
@@ -199,7 +199,7 @@ class VBD(ForceCache, Integrator):
             guess = "gravity"
         self._guess(x, state_in.f, h, GUESSES.index(guess))
         if self.bounds is not None:
-            self.bounds.detect(state_in.x)
+            model.contact.detect_bounds(self.bounds, state_in.x)
             self._clamp(x)
         planes = self.stage.begin_solve(state_in.x, x) if self.stage else None
         pushed = False
@@ -217,7 +217,7 @@ class VBD(ForceCache, Integrator):
                 planes = self.stage.follow_solve(state_in.x, x)
                 pushed = keep_apart(*planes, x, self.potential.inv_mass, self.dx, self.hits) > 0
             if self.bounds is not None and self.bounds.any_clamped() and it < opt["iterations"]:
-                if self.bounds.detect(x):
+                if model.contact.detect_bounds(self.bounds, x):
                     for term in self.pair_terms:        # the list's rows changed
                         term.begin_step(state_in.x, state_in.t)
         if self.hold_stage is not None and self.hold_stage.begin_hold(state_in.x, x,

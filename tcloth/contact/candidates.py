@@ -1,0 +1,75 @@
+"""The candidate list: the rows every consumer of the contact set reads (``ContactList``),
+and a contact's gap at given positions (``gap``).
+
+A row is a point-triangle or edge-edge pair (four particle ids and the kind) and whether
+it repels (0 for a pair that touches by construction: no penalty, but the guard keeps it
+from crossing). Two searches fill such lists, and only the contact stage
+(``stage.py``) runs them: the proximity list (``broad.py``) and a step's swept-box
+candidates (``swept.py``). Consumers keep their columns per row beside the ids: the
+guard's separating planes (``guard.planes``) and the projection's marks
+(``projection.py``), and, on the proximity list, the values the contact law lags for
+backward Euler (``terms/self_contact.py``).
+
+A contact joins four particles x_k with weights alpha_k so that the gap between the two
+closest points is g = sum_k alpha_k x_k (``geometry/proximity.py``): point-triangle (a
+particle against a cloth triangle, alpha = (1, -w_a, -w_b, -w_c)) and edge-edge (two
+cloth edges or rope segments, alpha = (1 - s, s, -(1 - u), -u)).
+"""
+import taichi as ti
+
+from .. import runtime
+from ..geometry.proximity import contact_weights
+
+
+@ti.func
+def gap(ids, kind, x):
+    """(alpha, g) of a contact at positions x."""
+    alpha = contact_weights(kind, x[ids[0]], x[ids[1]], x[ids[2]], x[ids[3]])
+    g = ti.Vector.zero(float, 3)
+    for k in ti.static(range(4)):
+        g += alpha[k] * x[ids[k]]
+    return alpha, g
+
+
+@ti.data_oriented
+class ContactList:
+    """Candidate contacts (ids (4,), kind and whether they repel, per row) of capacity
+    ``capacity``, and (with
+    ``lagged``) the values the contact law keeps per row for backward Euler (lagged normal
+    force, normal and weights; the Hessian's weights, penalty and dissipation blocks)."""
+
+    def __init__(self, table, inv_mass, capacity, lagged=True):
+        real = runtime.real()
+        self.table, self.inv_mass = table, inv_mass
+        self.capacity = capacity
+        self.ids = ti.Vector.field(4, ti.i32, shape=capacity)
+        self.kind = ti.field(ti.i32, shape=capacity)
+        # 0 for a pair that touches by construction (mesh neighbours across its sides):
+        # no penalty, but the guard keeps it from crossing
+        self.repels = ti.field(ti.u8, shape=capacity)
+        # the guard's separating plane per row at a step's start (``guard.planes``)
+        self.plane_n = ti.Vector.field(3, real, shape=capacity)
+        self.plane_delta = ti.field(real, shape=capacity)
+        # the vertex pairs the projection's Jacobi passes moved (``projection.py``)
+        self.touched = ti.field(ti.i32, shape=capacity)
+        if not lagged:
+            return
+        self.lag_fn = ti.field(real, shape=capacity)
+        self.lag_n = ti.Vector.field(3, real, shape=capacity)
+        self.lag_alpha = ti.Vector.field(4, real, shape=capacity)
+        self.alpha = ti.Vector.field(4, real, shape=capacity)
+        self.penalty = ti.Matrix.field(3, 3, real, shape=capacity)
+        self.damping = ti.Matrix.field(3, 3, real, shape=capacity)
+
+    @ti.func
+    def gap(self, ids, kind, x):
+        """(alpha, g) of a contact at positions x."""
+        return gap(ids, kind, x)
+
+    @ti.func
+    def inverse_mass(self, ids, alpha):
+        """sum_k alpha_k^2 / m_k: the contact's inverse effective mass."""
+        w = 0.0
+        for k in ti.static(range(4)):
+            w += alpha[k] * alpha[k] * self.inv_mass[ids[k]]
+        return w
