@@ -226,10 +226,10 @@ class ContactStage:
             changed = self._sweep(x0, x1, v1, t0, dt, True)
         else:
             cut = self._sweep(x0, x1, v1, t0, dt, True)
-            if self.x_swept is not None:
-                self.x_swept.copy_from(x1)
             cl, count, covered = self._step_candidates(x0, x1)
             if cut or guard.violations(cl, count, x1):
+                if self.x_swept is not None:     # x1 as the first sweep left it
+                    self.x_swept.copy_from(x1)
                 changed = cut + self._resolve(cl, count, x0, x1, v1, t0, dt)
             if changed or not covered:
                 self._cover(x1)
