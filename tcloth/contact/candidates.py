@@ -5,10 +5,9 @@ A row is a point-triangle or edge-edge pair (four particle ids and the kind) and
 it repels (0 for a pair that touches by construction: no penalty, but the guard keeps it
 from crossing). Two searches fill such lists, and only the contact stage
 (``stage.py``) runs them: the proximity list (``broad.py``) and a step's swept-box
-candidates (``swept.py``). Consumers keep their columns per row beside the ids: the
-guard's separating planes (``guard.planes``) and the projection's marks
-(``projection.py``), and, on the proximity list, the values the contact law lags for
-backward Euler (``terms/self_contact.py``).
+candidates (``swept.py``). The guard's columns per row sit beside the ids (its
+separating planes, ``guard.planes``; the projection's marks, ``projection.py``); the
+contact law keeps its own for backward Euler (``terms/self_contact.Lagged``).
 
 A contact joins four particles x_k with weights alpha_k so that the gap between the two
 closest points is g = sum_k alpha_k x_k (``geometry/proximity.py``): point-triangle (a
@@ -34,11 +33,10 @@ def gap(ids, kind, x):
 @ti.data_oriented
 class ContactList:
     """Candidate contacts (ids (4,), kind and whether they repel, per row) of capacity
-    ``capacity``, and (with
-    ``lagged``) the values the contact law keeps per row for backward Euler (lagged normal
-    force, normal and weights; the Hessian's weights, penalty and dissipation blocks)."""
+    ``capacity``, with the guard's columns (its planes; the projection's marks). The
+    contact law keeps its own per row (``terms.self_contact.Lagged``)."""
 
-    def __init__(self, table, inv_mass, capacity, lagged=True):
+    def __init__(self, table, inv_mass, capacity):
         real = runtime.real()
         self.table, self.inv_mass = table, inv_mass
         self.capacity = capacity
@@ -52,14 +50,6 @@ class ContactList:
         self.plane_delta = ti.field(real, shape=capacity)
         # the vertex pairs the projection's Jacobi passes moved (``projection.py``)
         self.touched = ti.field(ti.i32, shape=capacity)
-        if not lagged:
-            return
-        self.lag_fn = ti.field(real, shape=capacity)
-        self.lag_n = ti.Vector.field(3, real, shape=capacity)
-        self.lag_alpha = ti.Vector.field(4, real, shape=capacity)
-        self.alpha = ti.Vector.field(4, real, shape=capacity)
-        self.penalty = ti.Matrix.field(3, 3, real, shape=capacity)
-        self.damping = ti.Matrix.field(3, 3, real, shape=capacity)
 
     @ti.func
     def gap(self, ids, kind, x):

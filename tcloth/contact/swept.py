@@ -50,7 +50,7 @@ class SweptSearch(CandidateSearch):
                          _box_grids(table, 16 * (table.point_count + table.edge_count)))
 
     def _list(self, capacity):
-        return ContactList(self.table, self.inv_mass, capacity, lagged=False)
+        return ContactList(self.table, self.inv_mass, capacity)
 
     def _regrid(self, entries):
         self.grids = _box_grids(self.table, entries)

@@ -120,8 +120,25 @@ def _active(cl: ti.template(), count: ti.i32, x: ti.template()) -> ti.types.vect
 
 
 # -- backward Euler --------------------------------------------------------------------------
+@ti.data_oriented
+class Lagged:
+    """What the contact law keeps per row of the candidate list for backward Euler: the
+    lagged normal force, normal and weights at the step's start, and the Hessian's
+    weights, penalty and dissipation blocks (``capacity`` rows)."""
+
+    def __init__(self, capacity):
+        real = runtime.real()
+        self.capacity = capacity
+        self.fn = ti.field(real, shape=capacity)
+        self.n = ti.Vector.field(3, real, shape=capacity)
+        self.alpha0 = ti.Vector.field(4, real, shape=capacity)
+        self.alpha = ti.Vector.field(4, real, shape=capacity)
+        self.penalty = ti.Matrix.field(3, 3, real, shape=capacity)
+        self.damping = ti.Matrix.field(3, 3, real, shape=capacity)
+
+
 @ti.kernel
-def _lag(cl: ti.template(), count: ti.i32, x0: ti.template()):
+def _lag(cl: ti.template(), lag: ti.template(), count: ti.i32, x0: ti.template()):
     """Each candidate's normal force, normal and weights at the step's start."""
     prm = ti.static(cl.table.params)
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
@@ -131,24 +148,24 @@ def _lag(cl: ti.template(), count: ti.i32, x0: ti.template()):
         fn = 0.0
         if cl.repels[c] and d > 0.0 and d < prm[0]:
             fn = prm[1] * (prm[0] - d)
-        cl.lag_fn[c] = fn
-        cl.lag_n[c] = _normal(g, d)
-        cl.lag_alpha[c] = alpha
+        lag.fn[c] = fn
+        lag.n[c] = _normal(g, d)
+        lag.alpha0[c] = alpha
 
 
 @ti.func
-def _dissipation(cl, c, x, x0, h):
+def _dissipation(cl, lag, c, x, x0, h):
     """(energy, gradient, Hessian) in the relative motion sum_k alpha0_k x_k of contact c's
     normal damping and friction as convex potentials of the end velocity (the colliders'
     ``add_dissipation`` between two moving sides; no damping where every particle of the
     contact is pinned)."""
     prm = ti.static(cl.table.params)
-    ids, fn0 = cl.ids[c], cl.lag_fn[c]
+    ids, fn0 = cl.ids[c], lag.fn[c]
     e = 0.0
     g = ti.Vector.zero(float, 3)
     block = ti.Matrix.zero(float, 3, 3)
     if fn0 > 0.0:
-        alpha0 = cl.lag_alpha[c]
+        alpha0 = lag.alpha0[c]
         w = cl.inverse_mass(ids, alpha0)
         v = ti.Vector.zero(float, 3)
         for j in ti.static(range(4)):
@@ -156,12 +173,13 @@ def _dissipation(cl, c, x, x0, h):
         cd = 0.0
         if w > 0.0:
             cd = 2.0 * prm[3] * ti.sqrt(prm[1] / w)
-        e, g, block = add_dissipation(e, g, block, v, cl.lag_n[c], fn0, cd, prm[2], prm[4], h)
+        e, g, block = add_dissipation(e, g, block, v, lag.n[c], fn0, cd, prm[2], prm[4], h)
     return e, g, block
 
 
 @ti.kernel
-def _incremental(cl: ti.template(), count: ti.i32, x: ti.template(), x0: ti.template(),
+def _incremental(cl: ti.template(), lag: ti.template(), count: ti.i32, x: ti.template(),
+                 x0: ti.template(),
                  h: float, with_grad: ti.template(), acc_out: ti.template(),
                  grad_out: ti.template()):
     """acc_out[0], acc_out[1] += the contacts' part of backward Euler's incremental
@@ -180,9 +198,9 @@ def _incremental(cl: ti.template(), count: ti.i32, x: ti.template(), x0: ti.temp
                 grad = -prm[1] * depth * _normal(g, d)
                 for j in ti.static(range(4)):
                     grad_out[ids[j]] += alpha[j] * grad
-        e_d, g_d, _ = _dissipation(cl, c, x, x0, h)
+        e_d, g_d, _ = _dissipation(cl, lag, c, x, x0, h)
         if ti.static(with_grad):
-            alpha0 = cl.lag_alpha[c]
+            alpha0 = lag.alpha0[c]
             for j in ti.static(range(4)):
                 grad_out[ids[j]] += alpha0[j] * g_d
         acc_out[0] += ti.cast(e + e_d, acc_out.dtype)
@@ -190,8 +208,8 @@ def _incremental(cl: ti.template(), count: ti.i32, x: ti.template(), x0: ti.temp
 
 
 @ti.kernel
-def _blocks(cl: ti.template(), count: ti.i32, x: ti.template(), x0: ti.template(),
-            h: float, diag: ti.template()):
+def _blocks(cl: ti.template(), lag: ti.template(), count: ti.i32, x: ti.template(),
+            x0: ti.template(), h: float, diag: ti.template()):
     """diag = each particle's diagonal blocks of the contacts' Hessian: alpha_k^2 times
     the penalty's k n n^T (without the curvature term) and the dissipation's block."""
     prm = ti.static(cl.table.params)
@@ -207,18 +225,18 @@ def _blocks(cl: ti.template(), count: ti.i32, x: ti.template(), x0: ti.template(
         if cl.repels[c] and d < prm[0]:
             n = _normal(g, d)
             penalty = prm[1] * n.outer_product(n)
-        _, _, block = _dissipation(cl, c, x, x0, h)
-        alpha0 = cl.lag_alpha[c]
-        cl.alpha[c] = alpha
-        cl.penalty[c] = penalty
-        cl.damping[c] = block
+        _, _, block = _dissipation(cl, lag, c, x, x0, h)
+        alpha0 = lag.alpha0[c]
+        lag.alpha[c] = alpha
+        lag.penalty[c] = penalty
+        lag.damping[c] = block
         for j in ti.static(range(4)):
             diag[ids[j]] += alpha[j] * alpha[j] * penalty + alpha0[j] * alpha0[j] * block
 
 
 @ti.kernel
-def _couplings(cl: ti.template(), count: ti.i32, v: ti.template(), out: ti.template(),
-               first: ti.template()):
+def _couplings(cl: ti.template(), lag: ti.template(), count: ti.i32, v: ti.template(),
+               out: ti.template(), first: ti.template()):
     """out += (= when ``first``) the contacts' Hessian without its diagonal blocks times
     v: sum over contacts of alpha_j P (u - alpha_j v_j) + alpha0_j B (u0 - alpha0_j v_j) at
     each of its particles j, u = sum_k alpha_k v_k (u0 with alpha0), P and B the penalty
@@ -229,7 +247,7 @@ def _couplings(cl: ti.template(), count: ti.i32, v: ti.template(), out: ti.templ
             out[p] = ti.Vector.zero(float, 3)
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
-        ids, a, a0 = cl.ids[c], cl.alpha[c], cl.lag_alpha[c]
+        ids, a, a0 = cl.ids[c], lag.alpha[c], lag.alpha0[c]
         u = ti.Vector.zero(float, 3)
         u0 = ti.Vector.zero(float, 3)
         for j in ti.static(range(4)):
@@ -237,8 +255,8 @@ def _couplings(cl: ti.template(), count: ti.i32, v: ti.template(), out: ti.templ
             u0 += a0[j] * v[ids[j]]
         for j in ti.static(range(4)):
             vj = v[ids[j]]
-            out[ids[j]] += (a[j] * (cl.penalty[c] @ (u - a[j] * vj))
-                            + a0[j] * (cl.damping[c] @ (u0 - a0[j] * vj)))
+            out[ids[j]] += (a[j] * (lag.penalty[c] @ (u - a[j] * vj))
+                            + a0[j] * (lag.damping[c] @ (u0 - a0[j] * vj)))
 
 
 # -- projective dynamics ---------------------------------------------------------------------
@@ -305,6 +323,7 @@ class SelfContact(Term):
         self.stage = model.contact
         self.inv_mass = model.inv_mass
         self._scratch = {}
+        self.lag = None             # ``Lagged``, as long as the stage's list at least
 
     def _field(self, key, make):
         if key not in self._scratch:
@@ -326,16 +345,21 @@ class SelfContact(Term):
     def begin_step(self, x0, t0):
         """The lagged normal forces, normals and weights at the step's start x0."""
         self._field("diag", lambda: ti.Matrix.field(3, 3, runtime.real(), shape=x0.shape[0]))
-        _lag(self.stage.candidates, self.stage.count, x0)
+        cl = self.stage.candidates
+        if self.lag is None or self.lag.capacity < cl.capacity:    # the list grew
+            self.lag = Lagged(cl.capacity)
+        _lag(cl, self.lag, self.stage.count, x0)
 
     def add_incremental(self, x, x0, h, with_grad, acc, grad):
         """acc[0] += the contacts' part of E at x (acc[1] its magnitude); with_grad:
         grad += its gradient."""
-        _incremental(self.stage.candidates, self.stage.count, x, x0, h, with_grad, acc, grad)
+        _incremental(self.stage.candidates, self.lag, self.stage.count, x, x0, h, with_grad,
+                     acc, grad)
 
     def prepare_blocks(self, x, x0, h):
         """Each particle's diagonal contact block at x, read by ``diagonal_block``."""
-        _blocks(self.stage.candidates, self.stage.count, x, x0, h, self._scratch["diag"])
+        _blocks(self.stage.candidates, self.lag, self.stage.count, x, x0, h,
+                self._scratch["diag"])
 
     @ti.func
     def diagonal_block(self, p):
@@ -344,7 +368,7 @@ class SelfContact(Term):
     def add_product(self, v, out, first):
         """out += (= when ``first``) the couplings between the contacts' particles (their
         Hessian at the last ``prepare_blocks`` without its diagonal blocks) times v."""
-        _couplings(self.stage.candidates, self.stage.count, v, out, first)
+        _couplings(self.stage.candidates, self.lag, self.stage.count, v, out, first)
 
     # -- projective dynamics -----------------------------------------------------------------
     def project(self, x, v, t):
