@@ -2,6 +2,7 @@ import os
 
 import numpy as np
 import pytest
+import taichi as ti
 
 import tcloth
 from tcloth.app.script import load_script
@@ -146,6 +147,15 @@ def pytest_collection_modifyitems(config, items):
 
 # (generation, module) of the last runtime use_runtime made
 _made = None
+# Taichi's CPU runtime crashes (a segmentation fault) when a program holds 512 field
+# trees; a simulator makes 14 to 20. A module's program is made again past this many.
+TREES = 384
+
+
+def _trees():
+    """The field trees of the current Taichi program (0 where it has none)."""
+    prog = ti.lang.impl.get_runtime().prog
+    return prog.get_snode_tree_size() if prog is not None else 0
 
 
 def use_runtime(precision, module):
@@ -154,11 +164,13 @@ def use_runtime(precision, module):
     a test called tcloth.init itself, or where the runtime was made for another module.
     A module's tests share their compiled kernels and the simulators their fixtures keep;
     a new module starts a new program (a long-lived one would gather every earlier
-    module's fields: Taichi's CPU runtime holds a bounded number of field trees)."""
+    module's fields: Taichi's CPU runtime holds a bounded number of field trees), and so
+    does a module whose program holds more than TREES (the contact module's slow set on
+    one worker crashed there)."""
     global _made
     rt = tcloth.runtime
     if (_made != (rt.generation(), module) or rt.precision() != precision
-            or not rt.cpu() or rt.serial_below() != rt.SERIAL_BELOW):
+            or not rt.cpu() or rt.serial_below() != rt.SERIAL_BELOW or _trees() > TREES):
         tcloth.init(arch="cpu", precision=precision, serial_below=rt.SERIAL_BELOW)
         _made = (rt.generation(), module)
 

@@ -182,7 +182,8 @@ def test_the_frame_rate_solvers_keep_the_planes_inside_their_iterations(f32, int
     assert with_planes["blew_up"] is None
     assert with_planes["crossings_max"] == 0 and with_planes["order_kept"], with_planes
     monkeypatch.setattr(stage_module.ContactStage, "follow_solve",
-                        lambda self, x0, x: (self.solve_list[0], 0))
+                        lambda self, x0, x: (self.solve_list[0],
+                                             self.planes_of(self.solve_list[0]), 0))
     without = run()
     assert without["blew_up"] is None and without["crossings_max"] == 0
     share = 0.05 if integrator == "xpbd" else 0.8

@@ -5,9 +5,10 @@ A row is a point-triangle or edge-edge pair (four particle ids and the kind) and
 it repels (0 for a pair that touches by construction: no penalty, but the guard keeps it
 from crossing). Two searches fill such lists, and only the contact stage
 (``stage.py``) runs them: the proximity list (``broad.py``) and a step's swept-box
-candidates (``swept.py``). The guard's columns per row sit beside the ids (its
-separating planes, ``guard.planes``; the projection's marks, ``projection.py``); the
-contact law keeps its own for backward Euler (``terms/self_contact.Lagged``).
+candidates (``swept.py``). Its consumers keep their columns per row themselves: the
+guard's separating planes and the projection's marks (``guard.Planes``, which the stage
+keeps beside each list), the contact law's lagged values for backward Euler
+(``terms/self_contact.Lagged``).
 
 A contact joins four particles x_k with weights alpha_k so that the gap between the two
 closest points is g = sum_k alpha_k x_k (``geometry/proximity.py``): point-triangle (a
@@ -33,8 +34,9 @@ def gap(ids, kind, x):
 @ti.data_oriented
 class ContactList:
     """Candidate contacts (ids (4,), kind and whether they repel, per row) of capacity
-    ``capacity``, with the guard's columns (its planes; the projection's marks). The
-    contact law keeps its own per row (``terms.self_contact.Lagged``)."""
+    ``capacity``. Consumers keep their own columns per row: the guard's planes
+    (``guard.Planes``, beside each of the stage's lists) and the contact law's lagged
+    values (``terms.self_contact.Lagged``)."""
 
     def __init__(self, table, inv_mass, capacity):
         real = runtime.real()
@@ -45,11 +47,6 @@ class ContactList:
         # 0 for a pair that touches by construction (mesh neighbours across its sides):
         # no penalty, but the guard keeps it from crossing
         self.repels = ti.field(ti.u8, shape=capacity)
-        # the guard's separating plane per row at a step's start (``guard.planes``)
-        self.plane_n = ti.Vector.field(3, real, shape=capacity)
-        self.plane_delta = ti.field(real, shape=capacity)
-        # the vertex pairs the projection's Jacobi passes moved (``projection.py``)
-        self.touched = ti.field(ti.i32, shape=capacity)
 
     @ti.func
     def gap(self, ids, kind, x):

@@ -46,6 +46,7 @@ are left as they are.
 """
 import taichi as ti
 
+from .. import runtime
 from ..runtime import jacobi_apply, jacobi_zero, serial
 from ..geometry.shapes import SHAPES
 from .candidates import gap
@@ -88,11 +89,26 @@ def _relative_path(ids, pairs: ti.template(), x0, x1):
     return most
 
 
+@ti.data_oriented
+class Planes:
+    """The guard's columns for the rows of one candidate list (``capacity`` rows): each
+    row's separating plane at a step's start (``planes``: unit normal ``n``, ``delta``)
+    and the vertex pairs the projection's Jacobi passes moved (``touched``,
+    ``projection.py``). The stage keeps one beside each of its lists."""
+
+    def __init__(self, capacity):
+        real = runtime.real()
+        self.capacity = capacity
+        self.n = ti.Vector.field(3, real, shape=capacity)
+        self.delta = ti.field(real, shape=capacity)
+        self.touched = ti.field(ti.i32, shape=capacity)
+
+
 @ti.kernel
-def planes(cl: ti.template(), count: ti.i32, x0: ti.template(), x1: ti.template(),
-           thickness: float, reach: float):
-    """Each candidate's unit normal and delta at the step's start x0 into ``cl.plane_n``
-    and ``cl.plane_delta``, for ``project``, ``violations`` and ``truncate`` (the closest
+def planes(cl: ti.template(), pl: ti.template(), count: ti.i32, x0: ti.template(),
+           x1: ti.template(), thickness: float, reach: float):
+    """Each candidate's unit normal and delta at the step's start x0 into ``pl.n`` and
+    ``pl.delta`` (a ``Planes``), for ``project``, ``violations`` and ``truncate`` (the closest
     points cost more than the sweeps' checks). delta is 0 where it has no normal, and
     FAR_APART where its gap at x0 less the longest relative displacement of its vertex
     pairs from x0 to x1 stays above ``reach``: the gap of a point and a triangle (of
@@ -109,10 +125,10 @@ def planes(cl: ti.template(), count: ti.i32, x0: ti.template(), x1: ti.template(
             closing = _relative_path(ids, POINT_TRIANGLE_PAIRS, x0, x1)
         else:
             closing = _relative_path(ids, EDGE_EDGE_PAIRS, x0, x1)
-        cl.plane_n[c] = n
-        cl.plane_delta[c] = 0.0
+        pl.n[c] = n
+        pl.delta[c] = 0.0
         if d0 > LEAST_GAP:
-            cl.plane_delta[c] = delta if d0 - closing <= reach else FAR_APART
+            pl.delta[c] = delta if d0 - closing <= reach else FAR_APART
 
 
 @ti.func
@@ -134,8 +150,8 @@ def _separate(ids, a: ti.template(), b: ti.template(), n, delta, x, inv_mass, dx
 
 
 @ti.kernel
-def keep_apart(cl: ti.template(), count: ti.i32, x: ti.template(), inv_mass: ti.template(),
-               dx: ti.template(), hits: ti.template()) -> ti.i32:
+def keep_apart(cl: ti.template(), pl: ti.template(), count: ti.i32, x: ti.template(),
+               inv_mass: ti.template(), dx: ti.template(), hits: ti.template()) -> ti.i32:
     """One pass of the candidates' planes (``planes``) inside a solver's iterations: every
     vertex pair closer along its normal than delta is moved apart as
     ``projection.project`` moves it, all pairs at once (Jacobi, in parallel), each vertex
@@ -145,7 +161,7 @@ def keep_apart(cl: ti.template(), count: ti.i32, x: ti.template(), inv_mass: ti.
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
         ids, kind = cl.ids[c], cl.kind[c]
-        n, delta = cl.plane_n[c], cl.plane_delta[c]
+        n, delta = pl.n[c], pl.delta[c]
         if delta > 0.0:
             if kind == POINT_TRIANGLE:
                 for a, b in ti.static(POINT_TRIANGLE_PAIRS):
@@ -158,14 +174,15 @@ def keep_apart(cl: ti.template(), count: ti.i32, x: ti.template(), inv_mass: ti.
 
 
 @ti.kernel
-def violations(cl: ti.template(), count: ti.i32, x1: ti.template()) -> ti.i32:
+def violations(cl: ti.template(), pl: ti.template(), count: ti.i32,
+               x1: ti.template()) -> ti.i32:
     """How many candidates have a vertex pair closer along their normal than delta
     (their ``planes``)."""
     bad = 0
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
         ids, kind = cl.ids[c], cl.kind[c]
-        n, delta = cl.plane_n[c], cl.plane_delta[c]
+        n, delta = pl.n[c], pl.delta[c]
         if delta > 0.0:
             worst = 0.0
             if kind == POINT_TRIANGLE:
@@ -190,8 +207,9 @@ def _cut(x0, x1, n, plane, side, inv_mass, t_out, p):
 
 
 @ti.kernel
-def truncate(cl: ti.template(), count: ti.i32, x0: ti.template(), x1: ti.template(),
-             v1: ti.template(), inv_mass: ti.template(), t_out: ti.template()) -> ti.i32:
+def truncate(cl: ti.template(), pl: ti.template(), count: ti.i32, x0: ti.template(),
+             x1: ti.template(), v1: ti.template(), inv_mass: ti.template(),
+             t_out: ti.template()) -> ti.i32:
     """The fail-safe (module docstring): every vertex kept on its side of the dividing
     plane of every candidate with a normal (``planes``). Returns how many vertices were
     cut short."""
@@ -201,8 +219,8 @@ def truncate(cl: ti.template(), count: ti.i32, x0: ti.template(), x1: ti.templat
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
         ids, kind = cl.ids[c], cl.kind[c]
-        if cl.plane_delta[c] != 0.0:
-            n = cl.plane_n[c]
+        if pl.delta[c] != 0.0:
+            n = pl.n[c]
             first = 1 if kind == POINT_TRIANGLE else 2
             # the sides' extents along n at x0, and how fast each approaches the other
             low_a, high_b = 1e30, -1e30

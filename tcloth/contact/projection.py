@@ -121,8 +121,8 @@ def _correct_now(ids, a: ti.template(), b: ti.template(), n, delta, x1, v1, inv_
 
 
 @ti.kernel
-def _gauss_seidel(cl: ti.template(), count: ti.i32, x1: ti.template(), v1: ti.template(),
-                  inv_mass: ti.template(), held: ti.template(),
+def _gauss_seidel(cl: ti.template(), pl: ti.template(), count: ti.i32, x1: ti.template(),
+                  v1: ti.template(), inv_mass: ti.template(), held: ti.template(),
                   sweeps: ti.i32) -> ti.types.vector(2, ti.i32):
     """Serial sweeps of ``_correct_now`` over the candidates until one corrects nothing,
     at most ``sweeps``: (corrections of the first sweep, the sweeps run)."""
@@ -133,7 +133,7 @@ def _gauss_seidel(cl: ti.template(), count: ti.i32, x1: ti.template(), v1: ti.te
         corrected = 0
         for c in range(count):
             ids, kind = cl.ids[c], cl.kind[c]
-            n, delta = cl.plane_n[c], cl.plane_delta[c]
+            n, delta = pl.n[c], pl.delta[c]
             if delta > 0.0:
                 if kind == POINT_TRIANGLE:
                     for a, b in ti.static(POINT_TRIANGLE_PAIRS):
@@ -152,9 +152,10 @@ def _gauss_seidel(cl: ti.template(), count: ti.i32, x1: ti.template(), v1: ti.te
 
 
 @ti.kernel
-def _project_pass(cl: ti.template(), count: ti.i32, x1: ti.template(), v1: ti.template(),
-                  inv_mass: ti.template(), held: ti.template(), hits: ti.template(),
-                  dx: ti.template(), velocity: ti.template(), first: ti.template()) -> ti.i32:
+def _project_pass(cl: ti.template(), pl: ti.template(), count: ti.i32, x1: ti.template(),
+                  v1: ti.template(), inv_mass: ti.template(), held: ti.template(),
+                  hits: ti.template(), dx: ti.template(), velocity: ti.template(),
+                  first: ti.template()) -> ti.i32:
     """One Jacobi pass of ``project`` on x1 (with ``velocity``: on v1): every vertex pair
     that needs a correction counted, then corrected (``_correct``) from the same x1 and
     v1, all candidates at once; the corrections. ``first``: the rows' ``touched`` bits
@@ -166,9 +167,9 @@ def _project_pass(cl: ti.template(), count: ti.i32, x1: ti.template(), v1: ti.te
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
         if ti.static(first):
-            cl.touched[c] = 0
+            pl.touched[c] = 0
         ids, kind = cl.ids[c], cl.kind[c]
-        n, delta, touched = cl.plane_n[c], cl.plane_delta[c], cl.touched[c]
+        n, delta, touched = pl.n[c], pl.delta[c], pl.touched[c]
         if delta > 0.0:
             if kind == POINT_TRIANGLE:
                 for a, b in ti.static(POINT_TRIANGLE_PAIRS):
@@ -182,7 +183,7 @@ def _project_pass(cl: ti.template(), count: ti.i32, x1: ti.template(), v1: ti.te
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
         ids, kind = cl.ids[c], cl.kind[c]
-        n, delta, touched = cl.plane_n[c], cl.plane_delta[c], cl.touched[c]
+        n, delta, touched = pl.n[c], pl.delta[c], pl.touched[c]
         if delta > 0.0:
             if kind == POINT_TRIANGLE:
                 for a, b in ti.static(POINT_TRIANGLE_PAIRS):
@@ -194,7 +195,7 @@ def _project_pass(cl: ti.template(), count: ti.i32, x1: ti.template(), v1: ti.te
                     done, touched = _correct(ids, a, b, n, delta, x1, v1, inv_mass, held,
                                              hits, dx, touched, velocity)
                     corrected += done
-            cl.touched[c] = touched
+            pl.touched[c] = touched
     ti.loop_config(serialize=ti.static(serial(x1)))
     for p in range(x1.shape[0]):
         if hits[p] > 0:
@@ -205,28 +206,29 @@ def _project_pass(cl: ti.template(), count: ti.i32, x1: ti.template(), v1: ti.te
     return corrected
 
 
-def project(cl, count, x1, v1, inv_mass, held, sweeps, work):
+def project(cl, pl, count, x1, v1, inv_mass, held, sweeps, work):
     """The candidates' projection (their ``planes``): sweeps until one corrects nothing,
     at most ``sweeps``. On CPUs (unless JACOBI) Gauss-Seidel on one thread
     (``_gauss_seidel``: a few sweeps where Jacobi's passes take many, and the same
     numbers whatever the threads); on GPUs (or with JACOBI) Jacobi passes in parallel
     (``_project_pass``): on the positions, then on the velocities of the pairs the
-    positions' passes moved (an inelastic contact, as Gauss-Seidel's). work: (hits, dx), a particle's count and sum.
-    Returns (the vertex pairs the first sweep corrected, the sweeps run); the last
-    corrected nothing when fewer than ``sweeps`` ran."""
+    positions' passes moved (an inelastic contact, as Gauss-Seidel's). pl: the list's
+    ``guard.Planes``; work: (hits, dx), a particle's count and sum. Returns (the vertex
+    pairs the first sweep corrected, the sweeps run); the last corrected nothing when
+    fewer than ``sweeps`` ran."""
     if JACOBI or not runtime.cpu():
         found = ran = 0
         while ran < sweeps:
-            corrected = int(_project_pass(cl, count, x1, v1, inv_mass, held, *work, False,
-                                      ran == 0))
+            corrected = int(_project_pass(cl, pl, count, x1, v1, inv_mass, held, *work,
+                                          False, ran == 0))
             found = found or corrected
             ran += 1
             if corrected == 0:
                 break
         if found:
             for _ in range(sweeps):
-                if not int(_project_pass(cl, count, x1, v1, inv_mass, held, *work, True,
-                                     False)):
+                if not int(_project_pass(cl, pl, count, x1, v1, inv_mass, held, *work,
+                                         True, False)):
                     break
         return found, ran
-    return (int(v) for v in _gauss_seidel(cl, count, x1, v1, inv_mass, held, sweeps))
+    return (int(v) for v in _gauss_seidel(cl, pl, count, x1, v1, inv_mass, held, sweeps))

@@ -24,8 +24,9 @@ colliders, and updated only at named points, all called by the ``Simulator``:
 So the proximity list covers the current state (a rebuild at most once a step, but for
 ``detect_bounds``), and the self-contact term (explicit forces, backward Euler's
 potential and Hessian, projective's projection) and the diagnostics read it; only the
-stage builds it, at these points, and never inside an ``energy()``. A step's force evaluations away from its start (Runge-Kutta stages,
-Newton iterates) see the pairs near the start; what they miss, the guard catches.
+stage builds it, at these points, and never inside an ``energy()``. A step's force
+evaluations away from its start (Runge-Kutta stages, Newton iterates) see the pairs near
+the start; what they miss, the guard catches.
 
 ``stats`` (``Simulator.contact_stats``): see ``STATS``.
 """
@@ -112,6 +113,7 @@ class ContactStage:
         self.stats = {key: 0 for key in STATS}
         self.stats["seconds"] = 0.0
         self.solve_list = None      # the list a solve reads (``begin_solve``), or None
+        self._planes = {}           # the guard's ``Planes`` beside each list, by its owner
         self.obstacle = None
         if self.colliders is not None and self.colliders.meshes is not None:
             self.obstacle = ObstaclePairs(model, primitives, max(
@@ -143,7 +145,8 @@ class ContactStage:
         thickness on a motion from x0 whose ends lie within SOLVE_MARGIN thicknesses of
         the boxes of x0 and x_pred (the proximity list where it covers that, else a
         swept search), with their separating planes at x0 (``guard.planes``: a pair
-        keeps n . (x_a - x_b) >= delta). Returns (list, rows); ``follow_solve`` keeps
+        keeps n . (x_a - x_b) >= delta). Returns (list, its planes, rows) as
+        ``guard.keep_apart`` takes them; ``follow_solve`` keeps
         them covering the iterates, and ``end_step`` checks the step with them where
         they still hold it."""
         margin = SOLVE_MARGIN * self.thickness
@@ -153,17 +156,26 @@ class ContactStage:
             self.stats["solve_searches"] += 1
             count = search_step(self.swept, x0, x_pred, self.thickness, margin)
             cl = self.swept.candidates
-        guard.planes(cl, count, x0, x_pred, self.thickness, FAR)
+        guard.planes(cl, self.planes_of(cl), count, x0, x_pred, self.thickness, FAR)
         self.solve_list = (cl, count)
-        return cl, count
+        return cl, self.planes_of(cl), count
 
     def follow_solve(self, x0, x):
-        """(list, rows) of ``begin_solve`` for the iterate x: the same while they hold the
-        motion x0 -> x, else searched again for it."""
+        """(list, its planes, rows) of ``begin_solve`` for the iterate x: the same while
+        they hold the motion x0 -> x, else searched again for it."""
         cl, count = self.solve_list
         held = (self.broad.covers(x0, x) if cl is self.broad.candidates
                 else self.swept.holds(x0, x))
-        return (cl, count) if held else self.begin_solve(x0, x)
+        return (cl, self.planes_of(cl), count) if held else self.begin_solve(x0, x)
+
+    def planes_of(self, cl):
+        """The guard's columns (``guard.Planes``) beside list cl, the proximity list or
+        the swept one, made again where the list grew."""
+        owner = "proximity" if cl is self.broad.candidates else "swept"
+        planes = self._planes.get(owner)
+        if planes is None or planes.capacity != cl.capacity:
+            planes = self._planes[owner] = guard.Planes(cl.capacity)
+        return planes
 
     def detect_bounds(self, bounds, x):
         """A solver's displacement bounds (``bounds.DisplacementBounds``, VBD's
@@ -227,7 +239,7 @@ class ContactStage:
         else:
             cut = self._sweep(x0, x1, v1, t0, dt, True)
             cl, count, covered = self._step_candidates(x0, x1)
-            if cut or guard.violations(cl, count, x1):
+            if cut or guard.violations(cl, self.planes_of(cl), count, x1):
                 if self.x_swept is not None:     # x1 as the first sweep left it
                     self.x_swept.copy_from(x1)
                 changed = cut + self._resolve(cl, count, x0, x1, v1, t0, dt)
@@ -264,10 +276,11 @@ class ContactStage:
                 cut = self._sweep_moves(x0, x1, v1, t0, dt)
                 changed += cut
                 cl, count = self._still_covering(cl, count, x0, x1)
-                if not cut and not guard.violations(cl, count, x1):
+                if not cut and not guard.violations(cl, self.planes_of(cl), count, x1):
                     break
-            corrected, sweeps = projection.project(cl, count, x1, v1, self.inv_mass,
-                                                   self.held, SWEEPS, self.work)
+            corrected, sweeps = projection.project(cl, self.planes_of(cl), count, x1, v1,
+                                                   self.inv_mass, self.held, SWEEPS,
+                                                   self.work)
             self.stats["guard_corrections"] += corrected
             self.stats["guard_sweeps"] += sweeps
             changed += corrected
@@ -275,9 +288,10 @@ class ContactStage:
             # the last round's projection can push a particle into a collider
             changed += self._sweep_moves(x0, x1, v1, t0, dt)
             cl, count = self._still_covering(cl, count, x0, x1)
-            if guard.violations(cl, count, x1):
+            if guard.violations(cl, self.planes_of(cl), count, x1):
                 self.stats["failsafe_steps"] += 1
-                cut = int(guard.truncate(cl, count, x0, x1, v1, self.inv_mass, self.cut))
+                cut = int(guard.truncate(cl, self.planes_of(cl), count, x0, x1, v1,
+                                         self.inv_mass, self.cut))
                 self.stats["failsafe_vertices"] += cut
                 changed += cut + self._sweep(x0, x1, v1, t0, dt, False)
         return changed
@@ -315,7 +329,8 @@ class ContactStage:
             if self.broad.covers(x0, x1):
                 return cl, count
         elif self.swept.holds(x0, x1):
-            guard.planes(cl, count, x0, x1, self.thickness, self.thickness)
+            guard.planes(cl, self.planes_of(cl), count, x0, x1, self.thickness,
+                         self.thickness)
             return cl, count
         cl, count, _ = self._step_candidates(x0, x1)
         return cl, count
@@ -347,7 +362,7 @@ class ContactStage:
                 count = search_step(self.swept, x0, x1, self.thickness,
                                     MARGIN * self.thickness)
             cl = self.swept.candidates        # after the search, which may grow the list
-        guard.planes(cl, count, x0, x1, self.thickness, reach)
+        guard.planes(cl, self.planes_of(cl), count, x0, x1, self.thickness, reach)
         return cl, count, covered
 
     # -- inside a batch of substeps (``sim/batch.py``; its scenes have no self-collision) -----
