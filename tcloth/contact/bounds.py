@@ -17,9 +17,8 @@ in no listed pair gets that floor as its d_v.
 
 A solver detects at the step's start (``ContactStage.detect_bounds``), clamps each move
 to its ball (``clamp``), and detects again at the current state after an iteration that
-clamped any: the states it
-detects at are each reached from the last by moves inside the balls, so the step's
-motion, as the polyline through them, crosses nothing. The stage's guard still checks
+clamped any: the states it detects at are each reached from the last by moves inside the
+balls, so the step's motion, as the polyline through them, crosses nothing. The stage's guard still checks
 the straight path from the step's start to its end. A detection whose floor has fallen
 below half the list's reach (particles moved relative to each other by more than half
 of it since the build) has the stage build the list again at the current state first, so
@@ -41,7 +40,7 @@ class DisplacementBounds:
 
     def __init__(self, inv_mass, gamma=GAMMA):
         n, real = inv_mass.shape[0], runtime.real()
-        self.inv_mass, self.gamma = inv_mass, gamma
+        self.gamma = gamma
         self.origin = ti.Vector.field(3, real, shape=n)
         self.radius = ti.field(real, shape=n)
         self.clamped = ti.field(ti.i32, shape=())

@@ -52,9 +52,9 @@ from ..geometry.shapes import SHAPES
 from .candidates import gap
 from .search import POINT_TRIANGLE
 
-# the (first side, second side) vertex pairs of a point-triangle and an edge-edge contact
-POINT_TRIANGLE_PAIRS = ((0, 1), (0, 2), (0, 3))
-EDGE_EDGE_PAIRS = ((0, 2), (0, 3), (1, 2), (1, 3))
+# the (first side, second side) vertex pairs of either kind of contact: a point-triangle
+# contact's (0, 1), (0, 2), (0, 3); an edge-edge contact's (0, 2), (0, 3), (1, 2), (1, 3)
+VERTEX_PAIRS = ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3))
 SLACK = 1e-3             # a violation below this fraction of delta is no violation
 KEEP = 0.9               # the fail-safe stops a vertex at this fraction of its way to a plane
 FLOOR = 0.25             # pairs end a step at least this fraction of the thickness apart
@@ -80,12 +80,22 @@ def _worst(ids, a: ti.template(), b: ti.template(), n, delta, x1):
 
 
 @ti.func
-def _relative_path(ids, pairs: ti.template(), x0, x1):
+def spans(kind, a: ti.template(), b: ti.template()):
+    """Whether vertices a and b (a pair of VERTEX_PAIRS) lie on the two sides of a contact
+    of ``kind``: the point and a triangle's vertex, or a vertex of each edge."""
+    return ti.select(kind == POINT_TRIANGLE, ti.static(int(a == 0)),
+                     ti.static(int(b >= 2))) == 1
+
+
+@ti.func
+def _relative_path(ids, kind, x0, x1):
     """The longest relative displacement from x0 to x1 of a vertex pair across a
     candidate's sides: along straight paths its gap closes by at most that much."""
     most = 0.0
-    for a, b in ti.static(pairs):
-        most = ti.max(most, ((x1[ids[a]] - x0[ids[a]]) - (x1[ids[b]] - x0[ids[b]])).norm())
+    for a, b in ti.static(VERTEX_PAIRS):
+        if spans(kind, a, b):
+            most = ti.max(most,
+                          ((x1[ids[a]] - x0[ids[a]]) - (x1[ids[b]] - x0[ids[b]])).norm())
     return most
 
 
@@ -120,11 +130,7 @@ def planes(cl: ti.template(), pl: ti.template(), count: ti.i32, x0: ti.template(
     for c in range(count):
         ids, kind = cl.ids[c], cl.kind[c]
         n, d0, delta = _normal_margin(ids, kind, x0, thickness)
-        closing = 0.0
-        if kind == POINT_TRIANGLE:
-            closing = _relative_path(ids, POINT_TRIANGLE_PAIRS, x0, x1)
-        else:
-            closing = _relative_path(ids, EDGE_EDGE_PAIRS, x0, x1)
+        closing = _relative_path(ids, kind, x0, x1)
         pl.n[c] = n
         pl.delta[c] = 0.0
         if d0 > LEAST_GAP:
@@ -163,11 +169,8 @@ def keep_apart(cl: ti.template(), pl: ti.template(), count: ti.i32, x: ti.templa
         ids, kind = cl.ids[c], cl.kind[c]
         n, delta = pl.n[c], pl.delta[c]
         if delta > 0.0:
-            if kind == POINT_TRIANGLE:
-                for a, b in ti.static(POINT_TRIANGLE_PAIRS):
-                    closer += _separate(ids, a, b, n, delta, x, inv_mass, dx, hits)
-            else:
-                for a, b in ti.static(EDGE_EDGE_PAIRS):
+            for a, b in ti.static(VERTEX_PAIRS):
+                if spans(kind, a, b):
                     closer += _separate(ids, a, b, n, delta, x, inv_mass, dx, hits)
     jacobi_apply(x, dx, hits)
     return closer
@@ -185,11 +188,8 @@ def violations(cl: ti.template(), pl: ti.template(), count: ti.i32,
         n, delta = pl.n[c], pl.delta[c]
         if delta > 0.0:
             worst = 0.0
-            if kind == POINT_TRIANGLE:
-                for a, b in ti.static(POINT_TRIANGLE_PAIRS):
-                    worst = ti.max(worst, _worst(ids, a, b, n, delta, x1))
-            else:
-                for a, b in ti.static(EDGE_EDGE_PAIRS):
+            for a, b in ti.static(VERTEX_PAIRS):
+                if spans(kind, a, b):
                     worst = ti.max(worst, _worst(ids, a, b, n, delta, x1))
             if worst > SLACK * delta:
                 bad += 1

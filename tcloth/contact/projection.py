@@ -16,8 +16,7 @@ import taichi as ti
 
 from .. import runtime
 from ..runtime import serial
-from .guard import EDGE_EDGE_PAIRS, POINT_TRIANGLE_PAIRS, SLACK
-from .search import POINT_TRIANGLE
+from .guard import SLACK, VERTEX_PAIRS, spans
 
 HELD_ALONG = 0.5         # a held vertex moves along a normal only if this much is left
 JACOBI = False           # the Jacobi passes on CPUs too (``project``)
@@ -135,12 +134,8 @@ def _gauss_seidel(cl: ti.template(), pl: ti.template(), count: ti.i32, x1: ti.te
             ids, kind = cl.ids[c], cl.kind[c]
             n, delta = pl.n[c], pl.delta[c]
             if delta > 0.0:
-                if kind == POINT_TRIANGLE:
-                    for a, b in ti.static(POINT_TRIANGLE_PAIRS):
-                        corrected += _correct_now(ids, a, b, n, delta, x1, v1, inv_mass,
-                                                  held)
-                else:
-                    for a, b in ti.static(EDGE_EDGE_PAIRS):
+                for a, b in ti.static(VERTEX_PAIRS):
+                    if spans(kind, a, b):
                         corrected += _correct_now(ids, a, b, n, delta, x1, v1, inv_mass,
                                                   held)
         if ran == 0:
@@ -171,12 +166,8 @@ def _project_pass(cl: ti.template(), pl: ti.template(), count: ti.i32, x1: ti.te
         ids, kind = cl.ids[c], cl.kind[c]
         n, delta, touched = pl.n[c], pl.delta[c], pl.touched[c]
         if delta > 0.0:
-            if kind == POINT_TRIANGLE:
-                for a, b in ti.static(POINT_TRIANGLE_PAIRS):
-                    _count(ids, a, b, n, delta, x1, v1, inv_mass, held, hits, touched,
-                           velocity)
-            else:
-                for a, b in ti.static(EDGE_EDGE_PAIRS):
+            for a, b in ti.static(VERTEX_PAIRS):
+                if spans(kind, a, b):
                     _count(ids, a, b, n, delta, x1, v1, inv_mass, held, hits, touched,
                            velocity)
     corrected = 0
@@ -185,13 +176,8 @@ def _project_pass(cl: ti.template(), pl: ti.template(), count: ti.i32, x1: ti.te
         ids, kind = cl.ids[c], cl.kind[c]
         n, delta, touched = pl.n[c], pl.delta[c], pl.touched[c]
         if delta > 0.0:
-            if kind == POINT_TRIANGLE:
-                for a, b in ti.static(POINT_TRIANGLE_PAIRS):
-                    done, touched = _correct(ids, a, b, n, delta, x1, v1, inv_mass, held,
-                                             hits, dx, touched, velocity)
-                    corrected += done
-            else:
-                for a, b in ti.static(EDGE_EDGE_PAIRS):
+            for a, b in ti.static(VERTEX_PAIRS):
+                if spans(kind, a, b):
                     done, touched = _correct(ids, a, b, n, delta, x1, v1, inv_mass, held,
                                              hits, dx, touched, velocity)
                     corrected += done

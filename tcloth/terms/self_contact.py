@@ -179,9 +179,8 @@ def _dissipation(cl, lag, c, x, x0, h):
 
 @ti.kernel
 def _incremental(cl: ti.template(), lag: ti.template(), count: ti.i32, x: ti.template(),
-                 x0: ti.template(),
-                 h: float, with_grad: ti.template(), acc_out: ti.template(),
-                 grad_out: ti.template()):
+                 x0: ti.template(), h: float, with_grad: ti.template(),
+                 acc_out: ti.template(), grad_out: ti.template()):
     """acc_out[0], acc_out[1] += the contacts' part of backward Euler's incremental
     potential; with_grad: grad_out += its gradient."""
     prm = ti.static(cl.table.params)
