@@ -16,6 +16,9 @@ SCENES = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "scenes"
 # and .ci/run run them too. The same physics keeps a quick representative in the short set
 # (a stress case per family, the cheapest resolution or parameter).
 LONG = {
+    "test_grad::test_every_parameters_gradient_matches_central_differences[backward_euler]",
+    "test_grad::test_a_backward_euler_steps_adjoint_is_its_jacobians_transpose",
+    "test_grad::test_the_adjoints_kernels_are_the_simulators_terms[backward_euler]",
     "test_contact::test_self_collision_does_not_hold_a_falling_cloth_back[xpbd]",
     "test_contact::test_self_collision_does_not_hold_a_falling_cloth_back[vbd]",
     "test_contact::test_self_collision_does_not_hold_a_falling_cloth_back[projective]",

@@ -14,14 +14,16 @@ from ..geometry.shapes import SHAPE_NAMES, SHAPES, shape_of
 from ..scene.meshcollider import step_pose, world_vertices
 
 
-def collider_struct():
-    """The Taichi struct of one collider, in the current precision."""
+def collider_struct(meshes=True):
+    """The Taichi struct of one collider, in the current precision; without ``meshes``
+    it has no mesh index (its members are all real, so its field may carry gradients)."""
     real = runtime.real()
     vec3 = ti.types.vector(3, real)
+    mesh = {"mesh": ti.i32} if meshes else {}
     return ti.types.struct(center=vec3, velocity=vec3, extent=vec3,
                            rotation=ti.types.matrix(3, 3, real), thickness=real,
                            stiffness=real, damping=real, friction=real, stick_velocity=real,
-                           spin=vec3, mesh=ti.i32)
+                           spin=vec3, **mesh)
 
 
 @dataclass(frozen=True)
@@ -50,17 +52,22 @@ class ColliderTable:
             (m/s), extent, rotation (box, cylinder, capsule, mesh; identity otherwise),
             thickness (m), stiffness (N/m), damping (ratio of critical), friction (mu),
             stick_velocity (m/s), spin (a mesh's angular velocity, rad/s), mesh (its index
-            in ``meshes``).
+            in ``meshes``; absent from a differentiable table).
         groups: tuple of ``Group``, one per shape the scene has.
         count: number of colliders; kinds: (count,) shape index per row (NumPy).
         meshes: the mesh colliders' ``MeshStore`` (None without); moving: the rows whose
             pose or vertices ``advance`` sets each step (keyframed, deforming).
+
+    differentiable: the table's ``data`` carries gradients (``tcloth.grad``); mesh colliders
+    cannot be in it.
     """
 
-    def __init__(self, colliders, off=()):
+    def __init__(self, colliders, off=(), differentiable=False):
         for c in colliders:
             if c["kind"] not in SHAPE_NAMES:
                 raise ValueError(f"unknown collider kind {c['kind']!r} (known: {SHAPE_NAMES})")
+            if differentiable and c["kind"] == "mesh":
+                raise ValueError("a differentiable collider table cannot hold mesh colliders")
         # rows sorted by shape; rows[k] is the scene index of row k
         self.rows = sorted(range(len(colliders)),
                            key=lambda i: SHAPE_NAMES.index(colliders[i]["kind"]))
@@ -70,7 +77,8 @@ class ColliderTable:
         self.groups = tuple(Group(s, int(np.searchsorted(self.kinds, s)),
                                   int((self.kinds == s).sum()))
                             for s in range(len(SHAPES)) if (self.kinds == s).any())
-        self.data = collider_struct().field(shape=max(self.count, 1))
+        self.data = collider_struct(not differentiable).field(shape=max(self.count, 1),
+                                                              needs_grad=differentiable)
         meshed = [colliders[i] for i in self.rows if colliders[i]["kind"] == "mesh"]
         self.mesh_rows = [k for k, i in enumerate(self.rows) if colliders[i]["kind"] == "mesh"]
         self.meshes = MeshStore(meshed) if meshed else None
@@ -109,8 +117,9 @@ class ColliderTable:
         values["stiffness"][np.isin(self.rows, list(off))] = 0.0
         self.bounds.from_numpy(np.array([max(_speed(c) for c in ordered), max(
             c["thickness"] for c in ordered)], dtype=npr))
-        values["mesh"] = np.zeros(self.count, np.int32)
-        values["mesh"][self.mesh_rows] = np.arange(len(self.mesh_rows))
+        if "mesh" in self.data.keys:
+            values["mesh"] = np.zeros(self.count, np.int32)
+            values["mesh"][self.mesh_rows] = np.arange(len(self.mesh_rows))
         self.data.from_numpy(values)
         self._step = None
 

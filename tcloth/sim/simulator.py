@@ -392,6 +392,18 @@ class Simulator:
         self.settings["colliders_off"] = sorted(off)
         self._parameters_changed()
 
+    def set_collider(self, index, friction=None, stiffness=None):
+        """Collider ``scene.colliders[index]``'s Coulomb friction mu >= 0 and/or penalty
+        stiffness k > 0 (N/m) from now on (None: unchanged)."""
+        index = _index("collider index", index, len(self.scene.colliders))
+        collider = self.scene.colliders[index]
+        if friction is not None:
+            collider["friction"] = as_scalar("friction", friction, minimum=0.0)
+        if stiffness is not None:
+            collider["stiffness"] = as_scalar("stiffness", stiffness, minimum=0.0,
+                                              strict=True)
+        self._parameters_changed()
+
     def set_strain_limiting(self, enabled):
         """Apply the scene's strain limit after each step (True) or not."""
         self.settings["strain_limiting"] = bool(enabled)

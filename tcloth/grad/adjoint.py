@@ -1,0 +1,157 @@
+"""The vector-Jacobian products of one step: Taichi's reverse mode over the terms' own
+``ti.func``s, on copies of the model's parameters that carry gradients.
+
+``StepAdjoint(model, implicit)`` holds those copies (gravity and drag, each spring's
+stiffness and damping, the colliders' table) and the step's inputs x, v (and, implicit,
+the end positions x1), all with gradients, and one differentiable kernel:
+
+  - explicit (symplectic Euler): the force f(x, v) of gravity and drag, the springs and
+    the colliders (``GravityDrag.force``, ``springs.spring_force``, ``Colliders.force``:
+    the functions the simulator's kernels call);
+  - implicit (backward Euler): the gradient g(x1; x, v) of the step's incremental potential
+    (``integrators/potential.py``) over the same terms: inertia M (x1 - x - h v) / h^2,
+    gravity and drag (``GravityDrag.incremental``) and the springs
+    (``springs.incremental``, with each spring's damping direction d0 taken at x, so that
+    its dependence on the step's start is differentiated too).
+
+``vjp(seed)`` runs the kernel's reverse mode with ``seed`` as the output's adjoint: the
+inputs' gradients (x.grad, v.grad, x1.grad) are set and the parameters' accumulate (a
+trajectory's sum over its steps). Which scenes it covers is ``unsupported(scene,
+implicit)``'s answer; the simulator's own term for a scene it covers is tested against
+this kernel to the last digit (tests/test_grad.py).
+"""
+from types import SimpleNamespace
+
+import numpy as np
+import taichi as ti
+
+from .. import runtime
+from ..model.collider_table import ColliderTable
+from ..features import FEATURES
+from ..terms import Colliders, GravityDrag
+from ..terms.springs import direction, incremental, spring_force
+
+
+def unsupported(scene, implicit):
+    """Why the adjoint cannot take a step of this scene (one line), or None. It covers
+    gravity, drag, springs and (explicit integrators) the analytic colliders at rest."""
+    features = [f.name for f in FEATURES if getattr(scene, f.name) is not None]
+    if features:
+        return f"{', '.join(features)} {'is' if len(features) == 1 else 'are'} not " \
+               "differentiated yet (the scene sets it)"
+    for i, c in enumerate(scene.colliders):
+        if implicit:
+            return ("backward Euler's adjoint does not take colliders yet (the scene has "
+                    f"collider {i}, a {c['kind']}); symplectic_euler's does")
+        if c["kind"] == "mesh":
+            return f"mesh colliders are not differentiated yet (collider {i})"
+        if np.any(np.asarray(c["velocity"]) != 0.0) or np.any(np.asarray(
+                c.get("spin", 0.0)) != 0.0):
+            return f"moving colliders are not differentiated yet (collider {i} moves)"
+    return None
+
+
+@ti.data_oriented
+class StepAdjoint:
+    """One step's differentiable kernel over the model's terms (see the module).
+
+    Attributes (fields with gradients): params (g_x, g_y, g_z, air_drag), drag (each
+    particle's drag coefficient), ks, kd (each spring's, in the model's spring order),
+    table (the colliders', or None), x, v, x1 (the step's inputs), out (its output: the
+    force, or the incremental potential's gradient).
+    """
+
+    def __init__(self, model, implicit):
+        real, n = runtime.real(), model.particle_count
+        self.model, self.implicit = model, implicit
+        self.count = model.spring_count
+        self.params = ti.field(real, shape=4, needs_grad=True)
+        self.drag = ti.field(real, shape=n, needs_grad=True)
+        self.ks, self.kd = (ti.field(real, shape=max(self.count, 1), needs_grad=True)
+                            for _ in range(2))
+        self.x, self.v, self.x1, self.out = (ti.Vector.field(3, real, shape=n, needs_grad=True)
+                                             for _ in range(4))
+        self.table = None
+        if model.colliders.count and not implicit:
+            self.table = ColliderTable(model.scene.colliders, differentiable=True)
+        view = SimpleNamespace(mass=model.mass, inv_mass=model.inv_mass, params=self.params,
+                               drag=self.drag, colliders=self.table, particle_count=n)
+        self.gravity = GravityDrag(view)
+        self.colliders = Colliders(view) if self.table is not None else None
+        self.has_colliders = self.colliders is not None
+        self.mass, self.pairs, self.rest = model.mass, model.spring_pairs, model.spring_rest
+        self.parameter_fields = [self.params, self.drag, self.ks, self.kd]
+
+    def load(self, colliders_off=()):
+        """Copy the model's current parameters (after its ``refresh``)."""
+        model = self.model
+        for mine, theirs in ((self.params, model.params), (self.drag, model.drag),
+                             (self.ks, model.spring_ks), (self.kd, model.spring_kd)):
+            mine.copy_from(theirs)
+        if self.table is not None:
+            self.table.upload(model.scene.colliders, colliders_off)
+
+    def zero_parameter_grads(self):
+        for field in self.parameter_fields:
+            field.grad.fill(0)
+        if self.table is not None:
+            for key in self.table.data.keys:
+                getattr(self.table.data.grad, key).fill(0)
+
+    def set_inputs(self, x, v, x1=None):
+        """The step's start (x, v) and, implicit, its end positions x1 (NumPy (n, 3))."""
+        npr = runtime.numpy_real()
+        self.x.from_numpy(x.astype(npr))
+        self.v.from_numpy(v.astype(npr))
+        if x1 is not None:
+            self.x1.from_numpy(x1.astype(npr))
+
+    def evaluate(self, h, t):
+        """The kernel's output at the inputs set: (n, 3) NumPy."""
+        if self.implicit:
+            self._gradient(h, t)
+        else:
+            self._forces(t)
+        return self.out.to_numpy()
+
+    def vjp(self, seed, h, t):
+        """Reverse mode with the output's adjoint ``seed`` ((n, 3) NumPy): returns the
+        inputs' gradients (x, v, x1; x1 None for an explicit step) as NumPy; the
+        parameters' gradients accumulate in their fields."""
+        for field in (self.x, self.v, self.x1, self.out):
+            field.grad.fill(0)
+        self.out.grad.from_numpy(seed.astype(runtime.numpy_real()))
+        if self.implicit:
+            self._gradient(h, t)
+            self._gradient.grad(h, t)
+            return self.x.grad.to_numpy(), self.v.grad.to_numpy(), self.x1.grad.to_numpy()
+        self._forces(t)
+        self._forces.grad(t)
+        return self.x.grad.to_numpy(), self.v.grad.to_numpy(), None
+
+    @ti.kernel
+    def _forces(self, t: float):
+        for p in range(self.x.shape[0]):
+            f = self.gravity.force(p, self.x, self.v, t)
+            if ti.static(self.has_colliders):
+                f += self.colliders.force(p, self.x, self.v, t)
+            self.out[p] = f
+        for s in range(self.count):
+            i, j = self.pairs[s][0], self.pairs[s][1]
+            fi = spring_force(self.x[i], self.x[j], self.v[i], self.v[j], self.ks[s],
+                              self.kd[s], self.rest[s])
+            self.out[i] += fi
+            self.out[j] -= fi
+
+    @ti.kernel
+    def _gradient(self, h: float, t: float):
+        for p in range(self.x.shape[0]):
+            _, _, g = self.gravity.incremental(p, self.x1, self.x, h, t)
+            self.out[p] = g + self.mass[p] / (h * h) * (self.x1[p] - self.x[p] - h * self.v[p])
+        for s in range(self.count):
+            i, j = self.pairs[s][0], self.pairs[s][1]
+            _, gi = incremental(self.x1[i], self.x1[j], self.x[i], self.x[j],
+                                direction(self.x[i], self.x[j]), self.ks[s], self.kd[s],
+                                self.rest[s], h)
+            self.out[i] += gi
+            self.out[j] -= gi

@@ -1,0 +1,353 @@
+"""Reverse-mode gradients of a loss over a simulated trajectory (``Trajectory``).
+
+The forward run is the simulator's own (``Simulator.step``), one step at a time, storing
+the state every ``checkpoint_every`` steps. The backward run walks the checkpoints' segments
+from the last: it runs the segment again from its checkpoint (the same steps, so the same
+states), then takes the steps' adjoints in reverse order, carrying the adjoints (x_bar,
+v_bar) of the positions and velocities and accumulating the parameters' gradients.
+
+A step's adjoint (``StepAdjoint`` gives the vector-Jacobian products of its kernel):
+
+  - symplectic Euler, v1 = v + h M^-1 f(x, v), x1 = x + h v1: with a = v1_bar + h x1_bar
+    (v1's whole adjoint) and the force's adjoint f_bar = h M^-1 a, x_bar = x1_bar + f_x^T
+    f_bar and v_bar = a + f_v^T f_bar; the parameters get f_theta^T f_bar. Pinned particles
+    (M^-1 = 0) move with their velocity;
+  - backward Euler, x1 solving g(x1; x, v) = 0 (g the incremental potential's gradient),
+    v1 = (x1 - x) / h: with r = x1_bar + v1_bar / h, the adjoint solve H lambda = r on the
+    free particles, H = dg/dx1 the step's Hessian, solved by the integrator's own CG and
+    preconditioner (multigrid on a single cloth grid) at the step's end; then x_bar =
+    -v1_bar / h - g_x^T lambda, v_bar = -g_v^T lambda, the parameters -g_theta^T lambda, and
+    the pinned particles' share of -g_x1^T lambda (their x1 = x + h v) passed back to their
+    x and v. This is the implicit function theorem's derivative of the converged step: the
+    forward Newton must converge (``newton_tol``) well below the accuracy wanted of the
+    gradient, and the adjoint CG (``adjoint_tol``) likewise (docs/grad.md measures both).
+
+Controls: ``controls`` (steps, pinned, 3) set the pinned particles' velocities before each
+step (they move x += h u during step n); their gradient is the adjoint of those velocities.
+"""
+import time
+
+import numpy as np
+import taichi as ti
+
+from .. import runtime
+from ..errors import SceneError
+from ..scene.scene import KIND_CODE
+from ..sim.simulator import Simulator
+from .adjoint import StepAdjoint, unsupported
+
+INTEGRATORS = ("symplectic_euler", "backward_euler")
+
+
+class Result:
+    """What ``Trajectory.gradient`` returns.
+
+    Attributes: loss (float); grad (dict name -> NumPy array, or float for a scalar
+    parameter); forward_seconds, backward_seconds (wall time of the forward run and of the
+    backward run, which includes running each segment again); memory_bytes (the
+    checkpoints and one segment's states, the memory the backward run keeps);
+    adjoint_cg_iterations (backward Euler: the adjoint solves' CG iterations in all);
+    adjoint_residual (the largest relative residual an adjoint solve ended with).
+    """
+
+    def __init__(self, loss, grad, **stats):
+        self.loss, self.grad = loss, grad
+        for key, value in stats.items():
+            setattr(self, key, value)
+
+    def __repr__(self):
+        return (f"Result(loss={self.loss:.6g}, grad={sorted(self.grad)}, "
+                f"forward_seconds={self.forward_seconds:.3g}, "
+                f"backward_seconds={self.backward_seconds:.3g}, "
+                f"memory_bytes={self.memory_bytes})")
+
+
+class Trajectory:
+    """``steps`` steps of ``scene`` with ``integrator`` ("symplectic_euler" or
+    "backward_euler") at ``dt``; ``options`` go to the integrator. Its parameters (``names``)
+    are read with ``value(name)`` and changed with ``set(name, value)`` (nothing is
+    compiled again); ``gradient(loss, wrt)`` runs the trajectory and returns the loss and
+    its gradient.
+
+    Parameters (names): "<kind>.stiffness" and "<kind>.damping" for each spring kind the
+    scene has (one value for the kind: its springs' common k_s, k_d); "gravity" (3,);
+    "air_drag" (the scene's c); "collider<i>.friction" and "collider<i>.stiffness" (scene
+    collider i; explicit integrators); "positions" and "velocities" (the initial state,
+    (n, 3)); "controls" (the pinned particles' velocities, (steps, pinned, 3)).
+
+    checkpoint_every: the states stored by the forward run (every k-th; default about
+    sqrt(steps), which keeps 2 sqrt(steps) states and runs each step twice); an attribute,
+    which may be changed between runs, as may the number of steps (``set_steps``).
+    adjoint_tol: the relative residual of backward Euler's adjoint solves.
+    """
+
+    def __init__(self, scene, steps, dt, integrator="symplectic_euler", checkpoint_every=None,
+                 adjoint_tol=1e-10, **options):
+        if integrator not in INTEGRATORS:
+            raise SceneError(f"integrator must be one of {INTEGRATORS} for gradients (got "
+                             f"{integrator!r})")
+        self.controls = None
+        self.set_steps(steps)
+        if checkpoint_every is None:
+            checkpoint_every = max(1, int(round(np.sqrt(self.steps))))
+        if isinstance(checkpoint_every, bool) or not isinstance(
+                checkpoint_every, (int, np.integer)) or checkpoint_every < 1:
+            raise SceneError(f"checkpoint_every must be an integer >= 1 (got "
+                             f"{checkpoint_every!r})")
+        self.checkpoint_every = int(checkpoint_every)
+        self.adjoint_tol = float(adjoint_tol)
+        self.implicit = integrator == "backward_euler"
+        why = unsupported(scene, self.implicit)
+        if why is not None:
+            raise SceneError(f"tcloth.grad: {why}")
+        self.sim = Simulator(scene, integrator=integrator, dt=dt, **options)
+        self.scene = scene
+        self.adjoint = StepAdjoint(self.sim.model, self.implicit)
+        self.adjoint.load()
+        self.pinned = np.flatnonzero(scene.pinned)
+        self.free = np.flatnonzero(~scene.pinned)
+        self.initial = {"positions": scene.positions.astype(np.float64),
+                        "velocities": scene.velocities.astype(np.float64)}
+        kinds = scene.springs["kind"][self.sim.model.spring_order]
+        self._kind_rows = {name: kinds == code for name, code in KIND_CODE.items()
+                           if (kinds == code).any()}
+        if self.implicit:
+            self._x_start, self._rhs = (ti.Vector.field(3, runtime.real(),
+                                                        shape=scene.num_particles)
+                                        for _ in range(2))
+
+    def set_steps(self, steps):
+        """Run ``steps`` steps from now on (the controls, where set, must have as many)."""
+        if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
+            raise SceneError(f"steps must be an integer >= 1 (got {steps!r})")
+        if self.controls is not None and len(self.controls) != steps:
+            raise SceneError(f"the controls hold {len(self.controls)} steps, not {steps}: "
+                             "set('controls', ...) to new ones or None first")
+        self.steps = int(steps)
+
+    # -- parameters ---------------------------------------------------------------------------
+    @property
+    def names(self):
+        """The parameters' names (see the class)."""
+        names = [f"{kind}.{what}" for kind in self._kind_rows
+                 for what in ("stiffness", "damping")]
+        names += ["gravity", "air_drag"]
+        if not self.implicit:
+            names += [f"collider{i}.{what}" for i in range(len(self.scene.colliders))
+                      for what in ("friction", "stiffness")]
+        return names + ["positions", "velocities", "controls"]
+
+    def _check_name(self, name):
+        if name not in self.names:
+            raise SceneError(f"no parameter {name!r} (this trajectory's: {self.names})")
+
+    def value(self, name):
+        """The parameter's current value (a float or a NumPy array)."""
+        self._check_name(name)
+        scene = self.scene
+        if name in self.initial:
+            return self.initial[name].copy()
+        if name == "controls":
+            return None if self.controls is None else self.controls.copy()
+        if name == "gravity":
+            return np.array(scene.gravity, dtype=np.float64)
+        if name == "air_drag":
+            return float(scene.air_drag)
+        head, what = name.split(".")
+        if head.startswith("collider"):
+            return float(scene.colliders[int(head[len("collider"):])][what])
+        key = "stiffness" if what == "stiffness" else "damping"
+        values = scene.springs[key][scene.springs["kind"] == KIND_CODE[head]]
+        if np.ptp(values) > 0.0:
+            raise SceneError(f"the {head} springs' {key} is not one value (it ranges over "
+                             f"{values.min():.6g} .. {values.max():.6g}): {name} needs one")
+        return float(values[0])
+
+    def set(self, name, value):
+        """Change a parameter (see the class) for the next ``gradient``."""
+        self._check_name(name)
+        n = self.scene.num_particles
+        if name in self.initial:
+            value = np.asarray(value, dtype=np.float64)
+            if value.shape != (n, 3) or not np.all(np.isfinite(value)):
+                raise SceneError(f"{name} must be finite with shape ({n}, 3) (got shape "
+                                 f"{value.shape})")
+            self.initial[name] = value.copy()
+            return
+        if name == "controls":
+            shape = (self.steps, len(self.pinned), 3)
+            value = None if value is None else np.asarray(value, dtype=np.float64)
+            if value is not None and (value.shape != shape or not np.all(np.isfinite(value))):
+                raise SceneError(f"controls must be finite with shape {shape} (got shape "
+                                 f"{value.shape})")
+            self.controls = None if value is None else value.copy()
+            return
+        sim = self.sim
+        if name == "gravity":
+            sim.set_gravity(value)
+        elif name == "air_drag":
+            sim.set_air_drag(value)
+        else:
+            head, what = name.split(".")
+            if head.startswith("collider"):
+                sim.set_collider(int(head[len("collider"):]), **{what: value})
+            else:
+                sim.set_springs(head, **{what: value})
+        self.adjoint.load(sim.settings["colliders_off"])
+
+    # -- the runs -----------------------------------------------------------------------------
+    def _start(self):
+        sim = self.sim
+        sim.reset()
+        sim.set_state(self.initial["positions"], self.initial["velocities"])
+
+    def _apply_control(self, n):
+        """The pinned particles' velocities of step n (before it), where controls are set."""
+        if self.controls is None or not len(self.pinned):
+            return
+        v = self.sim.velocities()
+        v[self.pinned] = self.controls[n]
+        self.sim.set_state(velocities=v)
+
+    def _state(self):
+        return self.sim.positions().astype(np.float64), self.sim.velocities().astype(np.float64)
+
+    def _run(self, start, stop, state):
+        """Steps start .. stop - 1 from ``state`` (the state at ``start``, before its
+        control): the states start .. stop, each after its control where it has one."""
+        sim = self.sim
+        sim.set_state(*state)
+        states = []
+        for n in range(start, stop):
+            self._apply_control(n)
+            states.append(self._state())
+            sim.step(1)
+        states.append(self._state())
+        return states
+
+    def forward(self, loss):
+        """The forward run alone: (loss value, the checkpoints {step: (x, v)})."""
+        self._start()
+        k, steps = self.checkpoint_every, self.steps
+        state = self._state()
+        checkpoints, value = {0: state}, 0.0
+        reads = set(loss.steps)
+        for start in range(0, steps, k):
+            stop = min(start + k, steps)
+            states = self._run(start, stop, state)
+            for m in range(start, stop + 1):
+                if m in reads and (m > start or m == 0):
+                    value += float(loss.evaluate(m, *states[m - start])[0])
+            state = states[-1]
+            checkpoints[stop] = state
+        return value, checkpoints
+
+    def gradient(self, loss, wrt=None):
+        """The loss (``tcloth.grad.Loss``) over the trajectory and its gradient with
+        respect to the parameters ``wrt`` (names; default all). Returns a ``Result``."""
+        wrt = list(self.names) if wrt is None else list(wrt)
+        for name in wrt:
+            self._check_name(name)
+        for m in loss.steps:
+            if not 0 <= m <= self.steps:
+                raise SceneError(f"the loss reads step {m}, outside 0 .. {self.steps}")
+        t0 = time.perf_counter()
+        value, checkpoints = self.forward(loss)
+        t1 = time.perf_counter()
+        n, h = self.scene.num_particles, self.sim.dt
+        adj = self.adjoint
+        adj.zero_parameter_grads()
+        x_bar, v_bar = np.zeros((n, 3)), np.zeros((n, 3))
+        controls_bar = np.zeros((self.steps, len(self.pinned), 3))
+        reads = set(loss.steps)
+        cg_iterations, worst = 0, 0.0
+        k = self.checkpoint_every
+        starts = list(range(0, self.steps, k))
+        segment = 0
+        for start in reversed(starts):
+            stop = min(start + k, self.steps)
+            states = self._run(start, stop, checkpoints[start])
+            segment = max(segment, len(states))
+            for m in range(stop - 1, start - 1, -1):
+                if m + 1 in reads:
+                    _, dx, dv = loss.evaluate(m + 1, *states[m + 1 - start])
+                    x_bar += dx
+                    if dv is not None:
+                        v_bar += dv
+                (x, v), (x1, _) = states[m - start], states[m + 1 - start]
+                if self.implicit:
+                    x_bar, v_bar, iters, residual = self._implicit_adjoint(
+                        x, v, x1, x_bar, v_bar, h, m)
+                    cg_iterations += iters
+                    worst = max(worst, residual)
+                else:
+                    x_bar, v_bar = self._explicit_adjoint(x, v, x_bar, v_bar, h, m)
+                if self.controls is not None and len(self.pinned):
+                    controls_bar[m] = v_bar[self.pinned]
+                    v_bar[self.pinned] = 0.0
+        if 0 in reads:
+            _, dx, dv = loss.evaluate(0, *checkpoints[0])
+            x_bar += dx
+            if dv is not None:
+                v_bar += dv
+        t2 = time.perf_counter()
+        grads = self._reduce(wrt, x_bar, v_bar, controls_bar)
+        state_bytes = 2 * n * 3 * np.dtype(runtime.numpy_real()).itemsize
+        return Result(value, grads, forward_seconds=t1 - t0, backward_seconds=t2 - t1,
+                      memory_bytes=(len(checkpoints) + segment) * state_bytes,
+                      adjoint_cg_iterations=cg_iterations, adjoint_residual=worst)
+
+    def _explicit_adjoint(self, x, v, x_bar, v_bar, h, m):
+        inv_mass = self.sim.model.inv_mass.to_numpy().astype(np.float64)
+        a = v_bar + h * x_bar
+        self.adjoint.set_inputs(x, v)
+        gx, gv, _ = self.adjoint.vjp(h * inv_mass[:, None] * a, h, self.sim.time_at(m))
+        return x_bar + gx, a + gv
+
+    def _implicit_adjoint(self, x, v, x1, x_bar, v_bar, h, m):
+        sim, adj = self.sim, self.adjoint
+        integ = sim.integrator
+        npr = runtime.numpy_real()
+        t0 = sim.time_at(m)
+        r = x_bar + v_bar / h
+        r[self.pinned] = 0.0
+        # the step's Hessian at its end, with its lagged quantities from its start
+        adj.set_inputs(x, v, x1)
+        integ.potential.begin(adj.x, adj.v, h, t0, self._x_start)
+        integ.hessian.assemble(adj.x1, h, t0 + h)
+        self._rhs.from_numpy((-r).astype(npr))      # solve(grad) solves H dx = -grad
+        iters, residual = integ.hessian.solve(self._rhs, self.adjoint_tol, 100 * len(x))
+        lam = integ.hessian.dx.to_numpy().astype(np.float64)
+        lam[self.pinned] = 0.0
+        gx, gv, gx1 = adj.vjp(-lam, h, t0 + h)
+        x_new = -v_bar / h + gx
+        v_new = gv.copy()
+        carried = x_bar[self.pinned] + v_bar[self.pinned] / h + gx1[self.pinned]
+        x_new[self.pinned] += carried
+        v_new[self.pinned] += h * carried
+        return x_new, v_new, int(iters), float(residual)
+
+    def _reduce(self, wrt, x_bar, v_bar, controls_bar):
+        adj, grads = self.adjoint, {}
+        count = self.sim.model.spring_count
+        for name in wrt:
+            if name == "positions":
+                grads[name] = x_bar.copy()
+            elif name == "velocities":
+                grads[name] = v_bar.copy()
+            elif name == "controls":
+                grads[name] = controls_bar.copy()
+            elif name == "gravity":
+                grads[name] = adj.params.grad.to_numpy()[:3].astype(np.float64)
+            elif name == "air_drag":
+                grads[name] = float(adj.drag.grad.to_numpy().sum())
+            else:
+                head, what = name.split(".")
+                if head.startswith("collider"):
+                    row = self.sim.model.colliders.rows.index(int(head[len("collider"):]))
+                    grads[name] = float(getattr(adj.table.data.grad, what).to_numpy()[row])
+                else:
+                    field = adj.ks if what == "stiffness" else adj.kd
+                    rows = self._kind_rows[head]
+                    grads[name] = float(field.grad.to_numpy()[:count][rows].sum())
+        return grads

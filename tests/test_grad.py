@@ -1,0 +1,209 @@
+"""Gradients through the simulation (tcloth.grad) against central finite differences of
+the simulator's own trajectories, in float64; one backward Euler step's adjoint against its
+Jacobian formed column by column; the adjoint's kernels against the simulator's terms."""
+import numpy as np
+import pytest
+
+import tcloth
+from tcloth import grad
+
+from conftest import use_runtime
+
+STEPS = 60
+
+
+def _cloth(collider):
+    """A 6 x 6 cloth held at two corners, over a sphere it touches (collider) or free."""
+    scene = tcloth.Scene(air_drag=0.02)
+    scene.add_cloth(resolution=(6, 6), size=(0.3, 0.3), center=(0.0, 0.105, 0.0),
+                    structural=(300.0, 0.5), shear=(100.0, 0.2), flexion=(50.0, 0.1),
+                    pinned=[(0, 0), (5, 0)])
+    if collider:
+        scene.add_sphere((0.0, 0.0, 0.0), 0.1, friction=0.3)
+    return scene
+
+
+def _trajectory(integrator, steps=STEPS, checkpoint_every=7):
+    collider = integrator == "symplectic_euler"
+    options = {"newton_tol": 1e-12, "cg_tol": 1e-10} if integrator == "backward_euler" else {}
+    scene = _cloth(collider)
+    trajectory = grad.Trajectory(scene, steps=steps, dt=2e-3, integrator=integrator,
+                                 checkpoint_every=checkpoint_every, **options)
+    rng = np.random.default_rng(1)
+    n = scene.num_particles
+    loss = grad.TargetPositions(scene.positions + 0.01 * rng.standard_normal((n, 3)),
+                                steps=[steps // 2, steps])
+    trajectory.set("controls", 0.05 * rng.standard_normal((steps, len(trajectory.pinned), 3)))
+    return trajectory, loss
+
+
+def _prepared(integrator):
+    use_runtime("f64", __name__)
+    trajectory, loss = _trajectory(integrator)
+    return trajectory, loss, trajectory.gradient(loss)
+
+
+@pytest.fixture(scope="module")
+def symplectic_euler():
+    """The module's symplectic Euler trajectory (on the sphere), its loss and gradient."""
+    return _prepared("symplectic_euler")
+
+
+@pytest.fixture(scope="module")
+def backward_euler():
+    """The module's backward Euler trajectory (no collider), its loss and gradient."""
+    return _prepared("backward_euler")
+
+
+@pytest.fixture(params=["symplectic_euler", "backward_euler"])
+def run(request):
+    return request.getfixturevalue(request.param)
+
+
+def _central(trajectory, loss, name, direction, step):
+    """The central difference of the loss along ``direction`` of parameter ``name``."""
+    value = trajectory.value(name)
+    results = []
+    for sign in (1.0, -1.0):
+        trajectory.set(name, value + sign * step * direction)
+        results.append(trajectory.forward(loss)[0])
+    trajectory.set(name, value)
+    return (results[0] - results[1]) / (2.0 * step)
+
+
+def test_every_parameters_gradient_matches_central_differences(f64, run):
+    """Each parameter kind over 60 steps with the pinned corners driven (and, with
+    symplectic Euler, four particles on a frictional sphere whose contact set the small
+    differences leave unchanged): the gradient's component (scalars) or its directional
+    derivative along a random direction (arrays) against central differences."""
+    trajectory, loss, result = run
+    rng = np.random.default_rng(2)
+    trajectory.forward(loss)
+    assert trajectory.sim.contact_stats().get("collider", 0) >= (
+        4 if trajectory.sim.model.colliders.count else 0)
+    for name in trajectory.names:
+        value = trajectory.value(name)
+        if np.isscalar(value):
+            direction, step = 1.0, 1e-4 * max(abs(value), 1.0)
+            adjoint = result.grad[name]
+        else:
+            direction, step = rng.standard_normal(value.shape), 1e-7
+            adjoint = float((result.grad[name] * direction).sum())
+        fd = _central(trajectory, loss, name, direction, step)
+        assert abs(adjoint - fd) <= 1e-5 * abs(fd), (name, adjoint, fd)
+
+
+def test_checkpoints_change_the_memory_not_the_gradient(f64, symplectic_euler):
+    """Every state stored against one checkpoint per 20 steps: the same gradient (the
+    segments run again step for step), a third of the memory."""
+    trajectory, loss, _ = symplectic_euler
+    kept = trajectory.checkpoint_every
+    results = []
+    try:
+        for every in (1, 20):
+            trajectory.checkpoint_every = every
+            results.append(trajectory.gradient(loss))
+    finally:
+        trajectory.checkpoint_every = kept
+    for name, value in results[0].grad.items():
+        np.testing.assert_array_equal(results[1].grad[name], value)
+    assert results[0].loss == results[1].loss
+    assert results[1].memory_bytes < results[0].memory_bytes / 2
+
+
+def test_a_backward_euler_steps_adjoint_is_its_jacobians_transpose(f64, backward_euler):
+    """One step of the module's cloth from a disturbed state: its Jacobian d(x1, v1)/d(x0,
+    v0) formed column by column by central differences of the simulator's step; J^T (w_x,
+    w_v) against the adjoint of the loss w_x . x1 + w_v . v1."""
+    trajectory, _, _ = backward_euler
+    sim, n = trajectory.sim, trajectory.scene.num_particles
+    rng = np.random.default_rng(3)
+    x0 = trajectory.value("positions") + 0.01 * rng.standard_normal((n, 3))
+    v0 = 0.3 * rng.standard_normal((n, 3))
+    wx, wv = rng.standard_normal((n, 3)), rng.standard_normal((n, 3))
+    loss = grad.Loss(1, lambda step, x, v: (float((wx * x).sum() + (wv * v).sum()), wx, wv))
+    kept = {name: trajectory.value(name) for name in ("positions", "velocities", "controls")}
+    try:
+        trajectory.set("controls", None)
+        trajectory.set_steps(1)
+        trajectory.set("positions", x0)
+        trajectory.set("velocities", v0)
+        result = trajectory.gradient(loss, wrt=["positions", "velocities"])
+
+        def step(state):
+            sim.set_state(state[:3 * n].reshape(n, 3), state[3 * n:].reshape(n, 3))
+            sim.step(1)
+            return np.concatenate([sim.positions().ravel(), sim.velocities().ravel()])
+
+        state = np.concatenate([x0.ravel(), v0.ravel()])
+        columns = []
+        for k in range(state.size):
+            e = np.zeros(state.size)
+            e[k] = 1e-6
+            columns.append((step(state + e) - step(state - e)) / 2e-6)
+    finally:
+        trajectory.set_steps(STEPS)
+        for name, value in kept.items():
+            trajectory.set(name, value)
+    expected = np.stack(columns, axis=1).T @ np.concatenate([wx.ravel(), wv.ravel()])
+    adjoint = np.concatenate([result.grad["positions"].ravel(),
+                              result.grad["velocities"].ravel()])
+    np.testing.assert_allclose(adjoint, expected, rtol=1e-6, atol=1e-6 * np.abs(expected).max())
+
+
+def test_the_adjoints_kernels_are_the_simulators_terms(f64, run):
+    """The explicit adjoint's force is the simulator's force; the implicit one's gradient
+    vanishes at the simulator's backward Euler step and its Jacobian (by differences) is
+    the integrator's Hessian."""
+    trajectory, _, _ = run
+    sim, adj = trajectory.sim, trajectory.adjoint
+    rng = np.random.default_rng(4)
+    n = sim.model.particle_count
+    x = trajectory.value("positions") + 0.003 * rng.standard_normal((n, 3))
+    v = 0.1 * rng.standard_normal((n, 3))
+    sim.set_state(x, v)
+    if not trajectory.implicit:
+        adj.set_inputs(x, v)
+        f = adj.evaluate(sim.dt, 0.0)
+        np.testing.assert_allclose(f, sim.forces(), rtol=0, atol=1e-12 * np.abs(f).max())
+        return
+    sim.step(1)
+    x1, h, free = sim.positions(), sim.dt, trajectory.free
+    adj.set_inputs(x, v, x1)
+    g = adj.evaluate(h, h)
+    inertia = adj.mass.to_numpy()[:, None] * (x1 - x - h * v) / h ** 2
+    assert np.abs(g[free]).max() < 1e-9 * np.abs(inertia[free]).max()
+    p = rng.standard_normal((n, 3))
+    p[trajectory.pinned] = 0.0
+    parts = []
+    for sign in (1.0, -1.0):
+        adj.set_inputs(x, v, x1 + sign * 1e-6 * p)
+        parts.append(adj.evaluate(h, h))
+    fd = (parts[0] - parts[1]) / 2e-6
+    integ = sim.integrator
+    adj.set_inputs(x, v, x1)
+    integ.potential.begin(adj.x, adj.v, h, 0.0, trajectory._x_start)
+    trajectory._rhs.from_numpy(p)
+    hp = integ.hessian_product(adj.x1, trajectory._rhs, h, h)
+    np.testing.assert_allclose(hp[free], fd[free], rtol=0, atol=1e-6 * np.abs(fd).max())
+
+
+@pytest.mark.parametrize("what", ["bending", "self_collision", "moving collider",
+                                  "collider in backward Euler", "integrator"])
+def test_what_it_does_not_differentiate_is_named(f64, what):
+    """Scenes and integrators the adjoint does not cover raise SceneError naming what."""
+    scene = _cloth(collider=False)
+    integrator = "symplectic_euler"
+    if what == "bending":
+        scene.set_bending(1e-3)
+    elif what == "self_collision":
+        scene.set_self_collision()
+    elif what == "moving collider":
+        scene.add_sphere((0.0, 0.0, 0.0), 0.1, velocity=(0.0, 0.1, 0.0))
+    elif what == "collider in backward Euler":
+        scene.add_sphere((0.0, 0.0, 0.0), 0.1)
+        integrator = "backward_euler"
+    else:
+        integrator = "xpbd"
+    with pytest.raises(tcloth.SceneError, match="bending|self_collision|moving|colliders|xpbd"):
+        grad.Trajectory(scene, steps=2, dt=1e-3, integrator=integrator)

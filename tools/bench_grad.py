@@ -1,0 +1,103 @@
+"""The cost of a gradient through the simulation (tcloth.grad) against the forward run:
+an n x n cloth held at two corners, --steps steps, a loss on its final positions, the
+gradient with respect to every parameter. Symplectic Euler (dt 1e-3) drapes the cloth on a
+sphere; backward Euler (dt 1/60, newton_tol and adjoint_tol --tol) has no collider (its
+adjoint takes none yet). Side by side in one run, medians of --repeats:
+
+  - forward: the simulator's steps alone (``Simulator.step(steps)``);
+  - trajectory: the same steps as the gradient's forward run takes them (one at a time,
+    each state copied out, every k-th kept);
+  - gradient: the forward run and the backward run (each segment run again, then the
+    steps' adjoints).
+
+Prints greppable lines ``grad.<integrator>.<n>x<n>.<metric>: value`` (seconds, the ratios
+gradient / forward and gradient / trajectory, the checkpoints' memory against storing every
+state) and writes <out>/grad_bench.csv.
+
+Usage: python tools/bench_grad.py [--sizes 32] [--steps 120] [--repeats 3] [--tol 1e-8]
+                                  [--precision f64] [--out docs] [--arch cpu]
+"""
+import argparse
+import os
+import time
+
+import numpy as np
+
+import tcloth
+from benchcsv import write_csv
+from tcloth import grad
+
+
+def cloth(n, collider):
+    scene = tcloth.Scene(air_drag=0.01)
+    scene.add_cloth(resolution=(n, n), size=(0.5, 0.5), center=(0.0, 0.3, 0.0), mass=0.1,
+                    structural=(2000.0, 0.5), shear=(500.0, 0.2), flexion=(200.0, 0.1),
+                    pinned=[(0, 0), (n - 1, 0)])
+    if collider:
+        scene.add_sphere((0.0, 0.1, 0.1), 0.12, friction=0.3)
+    return scene
+
+
+def measure(integrator, n, steps, repeats, tol):
+    implicit = integrator == "backward_euler"
+    dt = 1.0 / 60.0 if implicit else 1e-3
+    options = {"newton_tol": tol, "adjoint_tol": tol} if implicit else {}
+    scene = cloth(n, not implicit)
+    trajectory = grad.Trajectory(scene, steps=steps, dt=dt, integrator=integrator, **options)
+    target = scene.positions + np.array([0.0, -0.05, 0.0])
+    loss = grad.TargetPositions(target, steps=steps)
+    trajectory.gradient(loss)                               # compiles everything once
+    sim = trajectory.sim
+    times = {"forward": [], "trajectory": [], "gradient": []}
+    result = None
+    for _ in range(repeats):
+        sim.reset()
+        start = time.perf_counter()
+        sim.step(steps)
+        times["forward"].append(time.perf_counter() - start)
+        start = time.perf_counter()
+        trajectory.forward(loss)
+        times["trajectory"].append(time.perf_counter() - start)
+        start = time.perf_counter()
+        result = trajectory.gradient(loss)
+        times["gradient"].append(time.perf_counter() - start)
+    every = trajectory.checkpoint_every
+    trajectory.checkpoint_every = 1
+    stored = trajectory.gradient(loss).memory_bytes
+    trajectory.checkpoint_every = every
+    med = {key: float(np.median(value)) for key, value in times.items()}
+    return {"integrator": integrator, "n": n, "steps": steps, "dt": dt,
+            "forward_s": med["forward"], "trajectory_s": med["trajectory"],
+            "gradient_s": med["gradient"],
+            "ratio_forward": med["gradient"] / med["forward"],
+            "ratio_trajectory": med["gradient"] / med["trajectory"],
+            "checkpoint_every": every, "memory_bytes": result.memory_bytes,
+            "memory_every_state_bytes": stored,
+            "adjoint_cg_iterations": result.adjoint_cg_iterations,
+            "adjoint_residual": result.adjoint_residual}
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--sizes", default="32")
+    parser.add_argument("--steps", type=int, default=120)
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--tol", type=float, default=1e-8)
+    parser.add_argument("--precision", default="f64")
+    parser.add_argument("--out", default="docs")
+    parser.add_argument("--arch", default="cpu")
+    args = parser.parse_args()
+    tcloth.init(arch=args.arch, precision=args.precision)
+    rows = []
+    for n in (int(s) for s in args.sizes.split(",") if s):
+        for integrator in grad.INTEGRATORS:
+            row = measure(integrator, n, args.steps, args.repeats, args.tol)
+            rows.append(row)
+            for key, value in row.items():
+                if key not in ("integrator", "n"):
+                    print(f"grad.{integrator}.{n}x{n}.{key}: {value:.6g}")
+    write_csv(os.path.join(args.out, "grad_bench.csv"), rows)
+
+
+if __name__ == "__main__":
+    main()
