@@ -6,7 +6,7 @@ import os
 os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "False")
 
 # after the environment default above; importing features gives Scene its methods
-from . import features, moved  # noqa: E402,F401
+from . import features, grad, moved  # noqa: E402,F401
 from .app import cli  # noqa: E402
 from .errors import (ConvergenceWarning, DeviceWarning, InstabilityError,  # noqa: E402
                      MissingExtraError, SceneError, StaleSimulatorError)

@@ -111,6 +111,7 @@ LAYERS = [
     {"terms"},
     {"integrators"},
     {"sim"},
+    {"grad"},
     {"render"},
     {"viewer", "app", "__main__", "tcloth"},
 ]

@@ -10,9 +10,11 @@ the end positions x1), all with gradients, and one differentiable kernel:
     the functions the simulator's kernels call);
   - implicit (backward Euler): the gradient g(x1; x, v) of the step's incremental potential
     (``integrators/potential.py``) over the same terms: inertia M (x1 - x - h v) / h^2,
-    gravity and drag (``GravityDrag.incremental``) and the springs
-    (``springs.incremental``, with each spring's damping direction d0 taken at x, so that
-    its dependence on the step's start is differentiated too).
+    gravity and drag (``GravityDrag.incremental``), the springs (``springs.incremental``)
+    and the colliders (``colliders.step_contact``), with what the solver fixes at the
+    step's start (each spring's damping direction d0, each contact's plane and normal
+    force: ``colliders.plane_offset``, ``lagged_normal_force``) computed from x in the same
+    kernel, so that their dependence on the step's start is differentiated too.
 
 ``vjp(seed)`` runs the kernel's reverse mode with ``seed`` as the output's adjoint: the
 inputs' gradients (x.grad, v.grad, x1.grad) are set and the parameters' accumulate (a
@@ -29,20 +31,18 @@ from .. import runtime
 from ..model.collider_table import ColliderTable
 from ..features import FEATURES
 from ..terms import Colliders, GravityDrag
+from ..terms.colliders import lagged_normal_force, plane_offset, step_contact
 from ..terms.springs import direction, incremental, spring_force
 
 
 def unsupported(scene, implicit):
     """Why the adjoint cannot take a step of this scene (one line), or None. It covers
-    gravity, drag, springs and (explicit integrators) the analytic colliders at rest."""
+    gravity, drag, springs and the analytic colliders at rest."""
     features = [f.name for f in FEATURES if getattr(scene, f.name) is not None]
     if features:
         return f"{', '.join(features)} {'is' if len(features) == 1 else 'are'} not " \
                "differentiated yet (the scene sets it)"
     for i, c in enumerate(scene.colliders):
-        if implicit:
-            return ("backward Euler's adjoint does not take colliders yet (the scene has "
-                    f"collider {i}, a {c['kind']}); symplectic_euler's does")
         if c["kind"] == "mesh":
             return f"mesh colliders are not differentiated yet (collider {i})"
         if np.any(np.asarray(c["velocity"]) != 0.0) or np.any(np.asarray(
@@ -71,8 +71,11 @@ class StepAdjoint:
                             for _ in range(2))
         self.x, self.v, self.x1, self.out = (ti.Vector.field(3, real, shape=n, needs_grad=True)
                                              for _ in range(4))
+        # v again, without gradients: the planes' reach reads |v| (a test, with no
+        # derivative; |v|'s would be 0/0 at rest)
+        self.v_reach = ti.Vector.field(3, real, shape=n)
         self.table = None
-        if model.colliders.count and not implicit:
+        if model.colliders.count:
             self.table = ColliderTable(model.scene.colliders, differentiable=True)
         view = SimpleNamespace(mass=model.mass, inv_mass=model.inv_mass, params=self.params,
                                drag=self.drag, colliders=self.table, particle_count=n)
@@ -103,6 +106,7 @@ class StepAdjoint:
         npr = runtime.numpy_real()
         self.x.from_numpy(x.astype(npr))
         self.v.from_numpy(v.astype(npr))
+        self.v_reach.from_numpy(v.astype(npr))
         if x1 is not None:
             self.x1.from_numpy(x1.astype(npr))
 
@@ -143,10 +147,28 @@ class StepAdjoint:
             self.out[i] += fi
             self.out[j] -= fi
 
+    @ti.func
+    def _contact_body(self, col, c, x, p, phi, n, ctx):
+        """Particle p's contact with collider c in the step's gradient, its plane and
+        lagged normal force taken from the step's start x[p] (phi, n there) as
+        ``Colliders.begin_solve`` and ``begin_step`` take them."""
+        x1p, h, fall = ctx
+        free = self.model.inv_mass[p] > 0.0
+        gap = n.dot(x1p) - plane_offset(col, x[p], phi, n, self.v_reach[p], h, fall, free)
+        _, g, _ = step_contact(col, gap, n, x1p, x[p], h, self.mass[p],
+                               lagged_normal_force(col, phi, free), n)
+        return g
+
     @ti.kernel
     def _gradient(self, h: float, t: float):
         for p in range(self.x.shape[0]):
             _, _, g = self.gravity.incremental(p, self.x1, self.x, h, t)
+            if ti.static(self.has_colliders):
+                if self.model.inv_mass[p] > 0.0:
+                    fall = h * h * self.gravity.gravity().norm()
+                    g += self.table.for_each_contact(self.x, p, t - h, self._contact_body,
+                                                     ti.Vector.zero(float, 3),
+                                                     (self.x1[p], h, fall))
             self.out[p] = g + self.mass[p] / (h * h) * (self.x1[p] - self.x[p] - h * self.v[p])
         for s in range(self.count):
             i, j = self.pairs[s][0], self.pairs[s][1]

@@ -72,7 +72,7 @@ class Trajectory:
     Parameters (names): "<kind>.stiffness" and "<kind>.damping" for each spring kind the
     scene has (one value for the kind: its springs' common k_s, k_d); "gravity" (3,);
     "air_drag" (the scene's c); "collider<i>.friction" and "collider<i>.stiffness" (scene
-    collider i; explicit integrators); "positions" and "velocities" (the initial state,
+    collider i); "positions" and "velocities" (the initial state,
     (n, 3)); "controls" (the pinned particles' velocities, (steps, pinned, 3)).
 
     checkpoint_every: the states stored by the forward run (every k-th; default about
@@ -132,9 +132,8 @@ class Trajectory:
         names = [f"{kind}.{what}" for kind in self._kind_rows
                  for what in ("stiffness", "damping")]
         names += ["gravity", "air_drag"]
-        if not self.implicit:
-            names += [f"collider{i}.{what}" for i in range(len(self.scene.colliders))
-                      for what in ("friction", "stiffness")]
+        names += [f"collider{i}.{what}" for i in range(len(self.scene.colliders))
+                  for what in ("friction", "stiffness")]
         return names + ["positions", "velocities", "controls"]
 
     def _check_name(self, name):

@@ -78,6 +78,55 @@ def add_dissipation(e, g, block, v, n0, fn0, cd, mu, eps, h):
     return e, g, block
 
 
+@ti.func
+def plane_offset(col, x0p, phi, n, v0p, h, fall, free):
+    """Backward Euler's contact plane of a particle at x0p (signed distance phi, outward
+    normal n, velocity v0p) with a collider for a step of h (``Colliders.begin_solve``):
+    the offset b of the tangent plane n . x = b at its closest point, moved with the
+    collider over the step, where the particle can reach the collider within the step
+    (fall: h^2 |g|), else -1e30 (no plane)."""
+    b = -1e30
+    reach = h * (v0p.norm() + col.velocity.norm()) + fall + col.thickness
+    if col.stiffness > 0.0 and free and phi < col.thickness + reach:
+        b = n.dot(x0p - phi * n + h * col.velocity)
+    return b
+
+
+@ti.func
+def lagged_normal_force(col, phi, free):
+    """The penalty's normal force k (thickness - phi) at a step's start (0 where the
+    particle is pinned or not within the thickness): friction's bound in the step."""
+    fn = 0.0
+    if col.thickness - phi > 0.0 and free:
+        fn = col.stiffness * (col.thickness - phi)
+    return fn
+
+
+@ti.func
+def step_contact(col, gap, n, xp, x0p, h, m, fn0, n0):
+    """(energy, gradient, Hessian block) of one contact in backward Euler's incremental
+    potential at xp (mass m; x0p the step's start): penalty k/2 depth^2 against the
+    particle's plane of the step's start (depth = thickness - gap, gap its height above
+    the plane of normal n), its block k n n^T, normal damping and friction with the
+    start-of-step normal n0 and normal force fn0 as convex potentials of the end
+    velocity."""
+    depth = col.thickness - gap
+    e = 0.0
+    g = ti.Vector.zero(float, 3)
+    block = ti.Matrix.zero(float, 3, 3)
+    k = col.stiffness
+    if depth > 0.0:
+        e += 0.5 * k * depth * depth
+        g -= k * depth * n
+        block += k * n.outer_product(n)
+    if fn0 > 0.0:
+        cd = 2.0 * col.damping * ti.sqrt(k * m)
+        e, g, block = add_dissipation(e, g, block, (xp - x0p) / h - col.velocity,
+                                      n0, fn0, cd, col.friction,
+                                      col.stick_velocity, h)
+    return e, g, block
+
+
 @ti.data_oriented
 class Colliders(Term):
     """Penalty contact and Coulomb friction against the scene's colliders; skipped for
@@ -172,11 +221,7 @@ class Colliders(Term):
 
     @ti.func
     def _begin_body(self, col, c, x, p, phi, n, ctx):
-        depth = col.thickness - phi
-        fn = 0.0
-        if depth > 0.0 and self.inv_mass[p] > 0.0:
-            fn = col.stiffness * depth
-        self._lagged[0][p, c] = fn
+        self._lagged[0][p, c] = lagged_normal_force(col, phi, self.inv_mass[p] > 0.0)
         self._lagged[1][p, c] = n
         return 0
 
@@ -186,28 +231,11 @@ class Colliders(Term):
 
     @ti.func
     def _incremental_parts(self, col, c, gap, n, ctx):
-        """(energy, gradient, Hessian block) of one contact in the step's incremental
-        potential at x[p] (ctx: (x[p], x0[p], h, p)): penalty k/2 depth^2 against the
-        particle's plane of the step's start (``begin_solve``; depth = thickness - its
-        height above it), its block k n n^T, normal damping and friction with the
-        start-of-step normal and force as convex potentials of the end velocity."""
+        """``step_contact`` of particle p's contact with collider c (ctx: (x[p], x0[p], h,
+        p)), with the normal force and normal of the step's start (``begin_step``)."""
         xp, x0p, h, p = ctx
-        depth = col.thickness - gap
-        e = 0.0
-        g = ti.Vector.zero(float, 3)
-        block = ti.Matrix.zero(float, 3, 3)
-        k = col.stiffness
-        if depth > 0.0:
-            e += 0.5 * k * depth * depth
-            g -= k * depth * n
-            block += k * n.outer_product(n)
-        fn0 = self._lagged[0][p, c]
-        if fn0 > 0.0:
-            cd = 2.0 * col.damping * ti.sqrt(k * self.mass[p])
-            e, g, block = add_dissipation(e, g, block, (xp - x0p) / h - col.velocity,
-                                          self._lagged[1][p, c], fn0, cd, col.friction,
-                                          col.stick_velocity, h)
-        return e, g, block
+        return step_contact(col, gap, n, xp, x0p, h, self.mass[p], self._lagged[0][p, c],
+                            self._lagged[1][p, c])
 
     @ti.func
     def _incremental_body(self, col, c, gap, n, ctx):
@@ -270,11 +298,9 @@ class Colliders(Term):
     def _plane_body(self, col, c, x0, p, phi, n, ctx):
         v0, h, fall = ctx
         self._planes[0][p, c] = n
-        self._planes[1][p, c] = -1e30
+        self._planes[1][p, c] = plane_offset(col, x0[p], phi, n, v0, h, fall,
+                                             self.inv_mass[p] > 0.0)
         self._planes[2][p, c] = col.velocity
-        reach = h * (v0.norm() + col.velocity.norm()) + fall + col.thickness
-        if col.stiffness > 0.0 and self.inv_mass[p] > 0.0 and phi < col.thickness + reach:
-            self._planes[1][p, c] = n.dot(x0[p] - phi * n + h * col.velocity)
         return 0
 
     @ti.func
