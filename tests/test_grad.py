@@ -13,11 +13,16 @@ STEPS = 60
 
 
 def _cloth(collider):
-    """A 6 x 6 cloth held at two corners, over a sphere it touches (collider) or free."""
+    """A 6 x 6 cloth held at two corners, with hinge bending (warp and weft) and a gusty
+    wind (no lift: its |u| v_t has a kink where the wind turns along the cloth), over a
+    sphere it touches (collider) or free."""
     scene = tcloth.Scene(air_drag=0.02)
     scene.add_cloth(resolution=(6, 6), size=(0.3, 0.3), center=(0.0, 0.105, 0.0),
                     structural=(300.0, 0.5), shear=(100.0, 0.2), flexion=(50.0, 0.1),
                     pinned=[(0, 0), (5, 0)])
+    scene.set_bending((4e-4, 2e-4))
+    scene.set_wind(velocity=(1.0, 0.2, 2.0), drag=0.6, tangential=0.05,
+                   gust={"amplitude": (0.5, 0.0, 0.3), "frequency": 3.0})
     if collider:
         scene.add_sphere((0.0, 0.0, 0.0), 0.1, friction=0.3)
     return scene
@@ -82,7 +87,7 @@ def test_every_parameters_gradient_matches_central_differences(f64, run):
     for name in trajectory.names:
         value = trajectory.value(name)
         if np.isscalar(value):
-            direction, step = 1.0, 1e-4 * max(abs(value), 1.0)
+            direction, step = 1.0, 1e-4 * abs(value) if value else 1e-6
             adjoint = result.grad[name]
         else:
             direction, step = rng.standard_normal(value.shape), 1e-7
@@ -129,6 +134,7 @@ def test_a_backward_euler_steps_adjoint_is_its_jacobians_transpose(f64, backward
         result = trajectory.gradient(loss, wrt=["positions", "velocities"])
 
         def step(state):
+            sim.reset()                 # time 0, as the trajectory's step (a gust reads it)
             sim.set_state(state[:3 * n].reshape(n, 3), state[3 * n:].reshape(n, 3))
             sim.step(1)
             return np.concatenate([sim.positions().ravel(), sim.velocities().ravel()])
@@ -159,6 +165,7 @@ def test_the_adjoints_kernels_are_the_simulators_terms(f64, run):
     n = sim.model.particle_count
     x = trajectory.value("positions") + 0.003 * rng.standard_normal((n, 3))
     v = 0.1 * rng.standard_normal((n, 3))
+    sim.reset()                         # time 0 (the gust reads it)
     sim.set_state(x, v)
     if not trajectory.implicit:
         adj.set_inputs(x, v)
@@ -186,19 +193,21 @@ def test_the_adjoints_kernels_are_the_simulators_terms(f64, run):
     np.testing.assert_allclose(hp[free], fd[free], rtol=0, atol=1e-6 * np.abs(fd).max())
 
 
-@pytest.mark.parametrize("what", ["bending", "self_collision", "moving collider",
-                                  "integrator"])
+@pytest.mark.parametrize("what", ["membrane", "self_collision", "moving collider",
+                                  "callable gust", "integrator"])
 def test_what_it_does_not_differentiate_is_named(f64, what):
     """Scenes and integrators the adjoint does not cover raise SceneError naming what."""
     scene = _cloth(collider=False)
     integrator = "symplectic_euler"
-    if what == "bending":
-        scene.set_bending(1e-3)
+    if what == "membrane":
+        scene.set_membrane(stretch=100.0, shear=10.0)
+    elif what == "callable gust":
+        scene.set_wind(velocity=(1.0, 0.0, 0.0), gust=lambda t: (0.0, 0.0, 0.1 * t))
     elif what == "self_collision":
         scene.set_self_collision()
     elif what == "moving collider":
         scene.add_sphere((0.0, 0.0, 0.0), 0.1, velocity=(0.0, 0.1, 0.0))
     else:
         integrator = "xpbd"
-    with pytest.raises(tcloth.SceneError, match="bending|self_collision|moving|colliders|xpbd"):
+    with pytest.raises(tcloth.SceneError, match="membrane|self_collision|moving|gust|xpbd"):
         grad.Trajectory(scene, steps=2, dt=1e-3, integrator=integrator)

@@ -21,20 +21,39 @@ class BendingData:
         start, entries: each particle's (hinge, slot) pairs in CSR form
             (``graph.incidence``).
         diagonal: (particle_count,) each particle's sum of c^2 over its hinges.
+        unit, cloth, family: NumPy, per hinge: its weights at rigidity 1, its cloth's row
+            in the settings and its family (0 warp, 1 weft; a mesh cloth's are all 0), so
+            that c = sqrt(rigidity[cloth, family]) unit (``set_rigidity``).
     """
 
-    def __init__(self, ids, weights, n):
-        self.hinges, self.weights, self.start, self.entries = element_fields(ids, n, weights)
-        diagonal = np.bincount(ids.ravel(), weights=(weights ** 2).ravel(), minlength=n)
-        self.diagonal = ti.field(runtime.real(), shape=n)
-        self.diagonal.from_numpy(diagonal.astype(runtime.numpy_real()))
+    def __init__(self, ids, unit, cloth, family, rigidity, n):
+        self.ids, self.unit, self.cloth, self.family = ids, unit, cloth, family
         self.count = len(ids)
+        self.hinges, self.weights, self.start, self.entries = element_fields(
+            ids, n, self.scaled(rigidity))
+        self.diagonal = ti.field(runtime.real(), shape=n)
+        self.set_rigidity(rigidity)
+
+    def scaled(self, rigidity):
+        """The weights c ((H, 4) NumPy) at rigidities ``rigidity`` ((cloths, 2), N m)."""
+        return np.sqrt(np.asarray(rigidity, dtype=np.float64)[self.cloth, self.family])[
+            :, None] * self.unit
+
+    def set_rigidity(self, rigidity):
+        """The weights and the diagonal at rigidities ``rigidity`` ((cloths, 2), N m)."""
+        weights = self.scaled(rigidity)
+        n = self.diagonal.shape[0]
+        diagonal = np.bincount(self.ids.ravel(), weights=(weights ** 2).ravel(), minlength=n)
+        self.diagonal.from_numpy(diagonal.astype(runtime.numpy_real()))
+        if self.count:
+            self.weights.from_numpy(weights.astype(runtime.numpy_real()))
 
 
 class BendingFeature(Feature):
     """``Scene.set_bending``: the cloths with hinge bending, their rigidities and rest
-    positions; the model's ``BendingData``."""
-    name, method = "bending", "set_bending"
+    positions; the model's ``BendingData``; live (the rigidities: ``Simulator.set_bending``
+    changes them, the hinges stay)."""
+    name, method, live = "bending", "set_bending", True
 
     def set(self, scene, rigidity, cloths=None, rest_positions=None):
         """Give cloths a bending rigidity B (N m): a hinge energy on every interior edge
@@ -59,13 +78,28 @@ class BendingFeature(Feature):
         return {"rigidity": rigidities, "cloths": ids, "rest_positions": rest}
 
     def build(self, model, settings):
-        """The hinges of the chosen cloths at their rest positions (``BendingData``)."""
-        scene = model.scene
-        parts = [cloth_hinges(scene.cloths[k], settings["rest_positions"], b)
-                 for k, b in zip(settings["cloths"], settings["rigidity"])]
-        ids = np.concatenate([p[0] for p in parts]).astype(np.int64)
-        weights = np.concatenate([p[1] for p in parts])
-        return BendingData(ids, weights, model.particle_count)
+        """The hinges of the chosen cloths at their rest positions (``BendingData``): a
+        grid cloth's at unit warp and at unit weft rigidity (each hinge is of one), a mesh
+        cloth's at unit rigidity."""
+        scene, rest, parts = model.scene, settings["rest_positions"], []
+        for row, k in enumerate(settings["cloths"]):
+            cloth = scene.cloths[k]
+            if cloth.is_grid:
+                ids, warp = cloth_hinges(cloth, rest, (1.0, 0.0))
+                weft = cloth_hinges(cloth, rest, (0.0, 1.0))[1]
+                family = (np.abs(weft).sum(axis=1) > 0.0).astype(np.int64)
+                unit = warp + weft
+            else:
+                ids, unit = cloth_hinges(cloth, rest, (1.0, 1.0))
+                family = np.zeros(len(ids), dtype=np.int64)
+            parts.append((ids, unit, np.full(len(ids), row), family))
+        ids, unit, rows, family = (np.concatenate(z) for z in zip(*parts))
+        return BendingData(ids.astype(np.int64), unit, rows, family, settings["rigidity"],
+                           model.particle_count)
+
+    def refresh(self, data, settings):
+        """The hinges' weights at the settings' rigidities."""
+        data.set_rigidity(settings["rigidity"])
 
 
 BENDING = BendingFeature()

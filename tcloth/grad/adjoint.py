@@ -30,15 +30,21 @@ import taichi as ti
 from .. import runtime
 from ..model.collider_table import ColliderTable
 from ..features import FEATURES
-from ..terms import Colliders, GravityDrag
+from ..terms import Bending, Colliders, GravityDrag, Wind
 from ..terms.colliders import lagged_normal_force, plane_offset, step_contact
 from ..terms.springs import direction, incremental, spring_force
 
 
+COVERED = ("bending", "wind")      # the scene features the adjoint takes
+
+
 def unsupported(scene, implicit):
     """Why the adjoint cannot take a step of this scene (one line), or None. It covers
-    gravity, drag, springs and the analytic colliders at rest."""
-    features = [f.name for f in FEATURES if getattr(scene, f.name) is not None]
+    gravity, drag, springs, hinge bending, wind and the analytic colliders at rest."""
+    features = [f.name for f in FEATURES if getattr(scene, f.name) is not None
+                and f.name not in COVERED]
+    if scene.wind is not None and scene.wind["callable"] is not None:
+        return "a callable gust is not differentiated (give the wind a sinusoidal gust)"
     if features:
         return f"{', '.join(features)} {'is' if len(features) == 1 else 'are'} not " \
                "differentiated yet (the scene sets it)"
@@ -71,6 +77,9 @@ class StepAdjoint:
                             for _ in range(2))
         self.x, self.v, self.x1, self.out = (ti.Vector.field(3, real, shape=n, needs_grad=True)
                                              for _ in range(4))
+        # the kernels' time, read inside their loops (Taichi's reverse mode takes no
+        # statement outside a loop, and a ti.func's scalar argument is one)
+        self.clock = ti.field(real, shape=2)       # (the time t, the step's start t - h)
         # v again, without gradients: the planes' reach reads |v| (a test, with no
         # derivative; |v|'s would be 0/0 at rest)
         self.v_reach = ti.Vector.field(3, real, shape=n)
@@ -84,6 +93,24 @@ class StepAdjoint:
         self.has_colliders = self.colliders is not None
         self.mass, self.pairs, self.rest = model.mass, model.spring_pairs, model.spring_rest
         self.parameter_fields = [self.params, self.drag, self.ks, self.kd]
+        # hinge bending: the term on weights that carry gradients
+        self.hinge_count = model.bending.count if model.bending is not None else 0
+        if self.hinge_count:
+            data = model.bending
+            self.hinge_weights = ti.Vector.field(4, real, shape=data.weights.shape[0],
+                                                 needs_grad=True)
+            self.bending = Bending(SimpleNamespace(bending=SimpleNamespace(
+                hinges=data.hinges, weights=self.hinge_weights, start=data.start,
+                entries=data.entries, diagonal=data.diagonal)))
+            self.parameter_fields.append(self.hinge_weights)
+        # wind: the term on numbers that carry gradients
+        self.has_wind = model.wind is not None
+        if self.has_wind:
+            self.wind_params = ti.field(real, shape=model.wind.params.shape[0],
+                                        needs_grad=True)
+            self.wind = Wind(SimpleNamespace(wind=SimpleNamespace(
+                triangles=model.wind.triangles, params=self.wind_params)))
+            self.parameter_fields.append(self.wind_params)
 
     def load(self, colliders_off=()):
         """Copy the model's current parameters (after its ``refresh``)."""
@@ -93,6 +120,10 @@ class StepAdjoint:
             mine.copy_from(theirs)
         if self.table is not None:
             self.table.upload(model.scene.colliders, colliders_off)
+        if self.hinge_count:
+            self.hinge_weights.copy_from(model.bending.weights)
+        if self.has_wind:
+            self.wind_params.copy_from(model.wind.params)
 
     def zero_parameter_grads(self):
         for field in self.parameter_fields:
@@ -112,10 +143,11 @@ class StepAdjoint:
 
     def evaluate(self, h, t):
         """The kernel's output at the inputs set: (n, 3) NumPy."""
+        self._set_clock(t, h)
         if self.implicit:
-            self._gradient(h, t)
+            self._gradient(h)
         else:
-            self._forces(t)
+            self._forces()
         return self.out.to_numpy()
 
     def vjp(self, seed, h, t):
@@ -125,17 +157,24 @@ class StepAdjoint:
         for field in (self.x, self.v, self.x1, self.out):
             field.grad.fill(0)
         self.out.grad.from_numpy(seed.astype(runtime.numpy_real()))
+        self._set_clock(t, h)
         if self.implicit:
-            self._gradient(h, t)
-            self._gradient.grad(h, t)
+            self._gradient(h)
+            self._gradient.grad(h)
             return self.x.grad.to_numpy(), self.v.grad.to_numpy(), self.x1.grad.to_numpy()
-        self._forces(t)
-        self._forces.grad(t)
+        self._forces()
+        self._forces.grad()
         return self.x.grad.to_numpy(), self.v.grad.to_numpy(), None
 
+    def _set_clock(self, t, h):
+        """t: the time the kernel evaluates at (implicit: the step's end, t - h its start)."""
+        self.clock.from_numpy(np.array([t, t - h if self.implicit else t],
+                                       dtype=runtime.numpy_real()))
+
     @ti.kernel
-    def _forces(self, t: float):
+    def _forces(self):
         for p in range(self.x.shape[0]):
+            t = self.clock[0]
             f = self.gravity.force(p, self.x, self.v, t)
             if ti.static(self.has_colliders):
                 f += self.colliders.force(p, self.x, self.v, t)
@@ -146,6 +185,29 @@ class StepAdjoint:
                               self.kd[s], self.rest[s])
             self.out[i] += fi
             self.out[j] -= fi
+        self._hinges(self.x, -1.0)
+        self._wind(0, 1.0)
+
+    @ti.func
+    def _wind(self, when: ti.template(), sign: ti.template()):
+        """out += sign times the wind's force at (x, v), at the clock's time ``when`` (0:
+        t, 1: the step's start)."""
+        if ti.static(self.has_wind):
+            for k in range(self.wind.triangles.shape[0]):
+                wind = self.wind.velocity(self.clock[when])
+                force = self.wind.triangle_force(k, self.x, self.v, wind)
+                for q in ti.static(range(3)):
+                    self.out[self.wind.triangles[k][q]] += sign * force / 3.0
+
+    @ti.func
+    def _hinges(self, x, sign: ti.template()):
+        """out += sign c_i s on each hinge's vertex i (s = sum_i c_i x_i): the bending
+        energy's gradient (sign 1) or force (-1)."""
+        for k in range(self.hinge_count):
+            ids, c = self.bending.hinges[k], self.hinge_weights[k]
+            s = self.bending.hinge_vector(k, x)
+            for i in ti.static(range(4)):
+                self.out[ids[i]] += sign * c[i] * s
 
     @ti.func
     def _contact_body(self, col, c, x, p, phi, n, ctx):
@@ -160,8 +222,9 @@ class StepAdjoint:
         return g
 
     @ti.kernel
-    def _gradient(self, h: float, t: float):
+    def _gradient(self, h: float):
         for p in range(self.x.shape[0]):
+            t = self.clock[0]
             _, _, g = self.gravity.incremental(p, self.x1, self.x, h, t)
             if ti.static(self.has_colliders):
                 if self.model.inv_mass[p] > 0.0:
@@ -177,3 +240,5 @@ class StepAdjoint:
                                 self.rest[s], h)
             self.out[i] += gi
             self.out[j] -= gi
+        self._hinges(self.x1, 1.0)
+        self._wind(1, -1.0)      # lagged: the force at the step's start

@@ -70,8 +70,10 @@ class Trajectory:
     its gradient.
 
     Parameters (names): "<kind>.stiffness" and "<kind>.damping" for each spring kind the
-    scene has (one value for the kind: its springs' common k_s, k_d); "gravity" (3,);
-    "air_drag" (the scene's c); "collider<i>.friction" and "collider<i>.stiffness" (scene
+    scene has (one value for the kind: its springs' common k_s, k_d); "bending.warp" and
+    "bending.weft" (the hinge bending rigidities B of ``Scene.set_bending``, N m, one
+    value each over its cloths; a mesh cloth's is its warp); "gravity" (3,);
+    "air_drag" (the scene's c); "wind" (its mean velocity (3,), m/s); "collider<i>.friction" and "collider<i>.stiffness" (scene
     collider i); "positions" and "velocities" (the initial state,
     (n, 3)); "controls" (the pinned particles' velocities, (steps, pinned, 3)).
 
@@ -131,7 +133,11 @@ class Trajectory:
         """The parameters' names (see the class)."""
         names = [f"{kind}.{what}" for kind in self._kind_rows
                  for what in ("stiffness", "damping")]
+        if self.sim.model.bending is not None:
+            names += ["bending.warp", "bending.weft"]
         names += ["gravity", "air_drag"]
+        if self.sim.model.wind is not None:
+            names += ["wind"]
         names += [f"collider{i}.{what}" for i in range(len(self.scene.colliders))
                   for what in ("friction", "stiffness")]
         return names + ["positions", "velocities", "controls"]
@@ -152,14 +158,22 @@ class Trajectory:
             return np.array(scene.gravity, dtype=np.float64)
         if name == "air_drag":
             return float(scene.air_drag)
+        if name == "wind":
+            return np.array(scene.wind["velocity"], dtype=np.float64)
         head, what = name.split(".")
         if head.startswith("collider"):
             return float(scene.colliders[int(head[len("collider"):])][what])
-        key = "stiffness" if what == "stiffness" else "damping"
-        values = scene.springs[key][scene.springs["kind"] == KIND_CODE[head]]
+        if head == "bending":
+            values = np.asarray(scene.bending["rigidity"])[:, ("warp", "weft").index(what)]
+            return self._one(name, values)
+        return self._one(name, scene.springs[what][scene.springs["kind"] == KIND_CODE[head]])
+
+    @staticmethod
+    def _one(name, values):
+        """The one value of ``values`` (a parameter shared by springs or cloths)."""
         if np.ptp(values) > 0.0:
-            raise SceneError(f"the {head} springs' {key} is not one value (it ranges over "
-                             f"{values.min():.6g} .. {values.max():.6g}): {name} needs one")
+            raise SceneError(f"{name} is not one value in the scene (it ranges over "
+                             f"{values.min():.6g} .. {values.max():.6g}): it needs one")
         return float(values[0])
 
     def set(self, name, value):
@@ -186,20 +200,21 @@ class Trajectory:
             sim.set_gravity(value)
         elif name == "air_drag":
             sim.set_air_drag(value)
+        elif name == "wind":
+            sim.set_wind(value)
         else:
             head, what = name.split(".")
             if head.startswith("collider"):
                 sim.set_collider(int(head[len("collider"):]), **{what: value})
+            elif head == "bending":
+                rigidity = np.array(self.scene.bending["rigidity"], dtype=np.float64)
+                rigidity[:, ("warp", "weft").index(what)] = value
+                sim.set_bending(rigidity)
             else:
                 sim.set_springs(head, **{what: value})
         self.adjoint.load(sim.settings["colliders_off"])
 
     # -- the runs -----------------------------------------------------------------------------
-    def _start(self):
-        sim = self.sim
-        sim.reset()
-        sim.set_state(self.initial["positions"], self.initial["velocities"])
-
     def _apply_control(self, n):
         """The pinned particles' velocities of step n (before it), where controls are set."""
         if self.controls is None or not len(self.pinned):
@@ -215,6 +230,9 @@ class Trajectory:
         """Steps start .. stop - 1 from ``state`` (the state at ``start``, before its
         control): the states start .. stop, each after its control where it has one."""
         sim = self.sim
+        sim.reset()                     # the time of step ``start`` (a gust reads it)
+        sim.num_steps = start
+        sim.state.t = sim.time
         sim.set_state(*state)
         states = []
         for n in range(start, stop):
@@ -226,14 +244,15 @@ class Trajectory:
 
     def forward(self, loss):
         """The forward run alone: (loss value, the checkpoints {step: (x, v)})."""
-        self._start()
         k, steps = self.checkpoint_every, self.steps
-        state = self._state()
+        state = self.initial["positions"], self.initial["velocities"]
         checkpoints, value = {0: state}, 0.0
         reads = set(loss.steps)
         for start in range(0, steps, k):
             stop = min(start + k, steps)
             states = self._run(start, stop, state)
+            if start == 0:
+                checkpoints[0] = states[0]      # as the simulator holds it, after control 0
             for m in range(start, stop + 1):
                 if m in reads and (m > start or m == 0):
                     value += float(loss.evaluate(m, *states[m - start])[0])
@@ -326,6 +345,17 @@ class Trajectory:
         v_new[self.pinned] += h * carried
         return x_new, v_new, int(iters), float(residual)
 
+    def _bending_gradient(self, family):
+        """dL/dB of one family (0 warp, 1 weft) from the hinge weights' gradient: each
+        hinge's c = sqrt(B) unit, so dc/dB = c / (2 B)."""
+        data = self.sim.model.bending
+        rigidity = np.asarray(self.scene.bending["rigidity"], dtype=np.float64)
+        c = data.scaled(rigidity)
+        c_bar = self.adjoint.hinge_weights.grad.to_numpy()[:data.count].astype(np.float64)
+        b = rigidity[data.cloth, data.family]
+        mine = data.family == family
+        return float(((c_bar * c).sum(axis=1)[mine] / (2.0 * b[mine])).sum())
+
     def _reduce(self, wrt, x_bar, v_bar, controls_bar):
         adj, grads = self.adjoint, {}
         count = self.sim.model.spring_count
@@ -340,9 +370,13 @@ class Trajectory:
                 grads[name] = adj.params.grad.to_numpy()[:3].astype(np.float64)
             elif name == "air_drag":
                 grads[name] = float(adj.drag.grad.to_numpy().sum())
+            elif name == "wind":
+                grads[name] = adj.wind_params.grad.to_numpy()[:3].astype(np.float64)
             else:
                 head, what = name.split(".")
-                if head.startswith("collider"):
+                if head == "bending":
+                    grads[name] = self._bending_gradient(("warp", "weft").index(what))
+                elif head.startswith("collider"):
                     row = self.sim.model.colliders.rows.index(int(head[len("collider"):]))
                     grads[name] = float(getattr(adj.table.data.grad, what).to_numpy()[row])
                 else:

@@ -14,7 +14,7 @@ from ..model.model import Model
 from ..runtime import serial_count
 from ..scene.scene import Scene
 from ..terms.grab import GrabSpring
-from ..validate import as_int, as_points, as_scalar, as_vec3
+from ..validate import as_int, as_points, as_scalar, as_vec3, as_warp_weft_per
 
 def _integrator_class(name):
     if name not in INTEGRATORS:
@@ -94,11 +94,9 @@ class Simulator:
                              as_scalar("strain_bound", strain_bound, 0.0, strict=True))
         self.integrator_name = integrator
         off = sorted({_index("collider index", i, len(scene.colliders)) for i in colliders_off})
-        self.settings = {"grid_stencil": bool(grid_stencil),
-                         "position_bound": self.position_bound,
-                         "velocity_bound": self.velocity_bound,
-                         "strain_bound": self.strain_bound,
-                         "energy_bound": bool(energy_bound),
+        self.settings = {"grid_stencil": bool(grid_stencil), "position_bound":
+                         self.position_bound, "velocity_bound": self.velocity_bound,
+                         "strain_bound": self.strain_bound, "energy_bound": bool(energy_bound),
                          "strain_limiting": bool(strain_limiting), "colliders_off": off,
                          "grab": bool(grab), "batch": bool(batch)}
         self.model = Model(scene, grid_stencil=bool(grid_stencil), colliders_off=off,
@@ -392,16 +390,21 @@ class Simulator:
         self.settings["colliders_off"] = sorted(off)
         self._parameters_changed()
 
+    def set_bending(self, rigidity):
+        """Bending rigidity B (N m) of the bending cloths from now on: a number, a (warp,
+        weft) pair or one pair per cloth of ``Scene.set_bending`` (the hinges stay)."""
+        if self.model.bending is None:
+            raise SceneError("the scene has no bending (Scene.set_bending, before the Simulator)")
+        settings = self.scene.bending
+        settings["rigidity"] = as_warp_weft_per("rigidity", rigidity, len(settings["cloths"]))
+        self._parameters_changed()
+
     def set_collider(self, index, friction=None, stiffness=None):
-        """Collider ``scene.colliders[index]``'s Coulomb friction mu >= 0 and/or penalty
-        stiffness k > 0 (N/m) from now on (None: unchanged)."""
-        index = _index("collider index", index, len(self.scene.colliders))
-        collider = self.scene.colliders[index]
-        if friction is not None:
-            collider["friction"] = as_scalar("friction", friction, minimum=0.0)
-        if stiffness is not None:
-            collider["stiffness"] = as_scalar("stiffness", stiffness, minimum=0.0,
-                                              strict=True)
+        """Collider ``index``'s friction mu >= 0 and/or stiffness k > 0 (N/m) from now on."""
+        collider = self.scene.colliders[_index("index", index, len(self.scene.colliders))]
+        for key, value, strict in (("friction", friction, False), ("stiffness", stiffness, True)):
+            if value is not None:
+                collider[key] = as_scalar(key, value, minimum=0.0, strict=strict)
         self._parameters_changed()
 
     def set_strain_limiting(self, enabled):

@@ -45,27 +45,39 @@ class Wind(Term):
         return None
 
     @ti.func
-    def accumulate(self, x, v, t, f_out):
-        """Wejchert & Haumann quadratic wind on every triangle, a third to each particle.
-
-        params = (velocity (3), gust amplitude (3), frequency, phase, drag, lift,
-        tangential)."""
-        params, triangles = ti.static(self.params, self.triangles)
-        wind = ti.Vector([params[0], params[1], params[2]]) + ti.Vector(
+    def velocity(self, t):
+        """The wind's velocity at time t: the mean plus the sinusoidal gust. params =
+        (velocity (3), gust amplitude (3), frequency, phase, drag, lift, tangential)."""
+        params = ti.static(self.params)
+        return ti.Vector([params[0], params[1], params[2]]) + ti.Vector(
             [params[3], params[4], params[5]]) * ti.sin(2.0 * 3.141592653589793 * params[6] * t
                                                         + params[7])
-        ti.loop_config(serialize=ti.static(serial(triangles)))
-        for k in range(triangles.shape[0]):
-            a, b, c = triangles[k][0], triangles[k][1], triangles[k][2]
-            cross = (x[b] - x[a]).cross(x[c] - x[a])
-            twice_area = cross.norm()
-            if twice_area > 0.0:
-                n = cross / twice_area
-                area = 0.5 * twice_area
-                v_rel = wind - (v[a] + v[b] + v[c]) / 3.0
-                u = v_rel.dot(n)
-                vt = v_rel - u * n
-                force = area * (params[8] * u * abs(u) * n + params[10] * vt.norm() * vt
-                                + params[9] * abs(u) * vt)
-                for q in ti.static(range(3)):
-                    f_out[triangles[k][q]] += force / 3.0
+
+    @ti.func
+    def triangle_force(self, k, x, v, wind):
+        """The Wejchert & Haumann force on triangle k in the wind velocity ``wind`` (all of
+        it: a third goes to each particle)."""
+        params, triangles = ti.static(self.params, self.triangles)
+        a, b, c = triangles[k][0], triangles[k][1], triangles[k][2]
+        cross = (x[b] - x[a]).cross(x[c] - x[a])
+        twice_area = cross.norm()
+        force = ti.Vector.zero(float, 3)
+        if twice_area > 0.0:
+            n = cross / twice_area
+            area = 0.5 * twice_area
+            v_rel = wind - (v[a] + v[b] + v[c]) / 3.0
+            u = v_rel.dot(n)
+            vt = v_rel - u * n
+            force = area * (params[8] * u * abs(u) * n + params[10] * vt.norm() * vt
+                            + params[9] * abs(u) * vt)
+        return force
+
+    @ti.func
+    def accumulate(self, x, v, t, f_out):
+        """Wejchert & Haumann quadratic wind on every triangle, a third to each particle."""
+        wind = self.velocity(t)
+        ti.loop_config(serialize=ti.static(serial(self.triangles)))
+        for k in range(self.triangles.shape[0]):
+            force = self.triangle_force(k, x, v, wind)
+            for q in ti.static(range(3)):
+                f_out[self.triangles[k][q]] += force / 3.0
