@@ -51,7 +51,7 @@ class BendingData:
 
 class BendingFeature(Feature):
     """``Scene.set_bending``: the cloths with hinge bending, their rigidities and rest
-    positions; the model's ``BendingData``; live (the rigidities: ``Simulator.set_bending``
+    positions; the model's ``BendingData``; live (the rigidities: ``Simulator.set_feature``
     changes them, the hinges stay)."""
     name, method, live = "bending", "set_bending", True
 

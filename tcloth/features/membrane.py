@@ -2,6 +2,7 @@
 the energy: Baraff & Witkin's stretch and shear conditions)."""
 import numpy as np
 
+from .. import runtime
 from ..errors import SceneError
 from ..graph import element_fields
 from ..validate import as_per_item, as_warp_weft_per
@@ -44,18 +45,34 @@ class MembraneData:
         coefficients: (T,) vec4: (A C_u, A C_v, A G, beta), A the rest area.
         start, entries: each particle's (triangle, slot) pairs in CSR form
             (``graph.incidence``).
+        area, reduced, cloth: NumPy, per triangle: its rest area, an edge's reduced mass
+            (a third of the triangle's mass each, halved) and its cloth's row in the
+            settings, from which ``coefficients_for`` makes the coefficients.
     """
 
-    def __init__(self, ids, weights, coefficients, n):
+    def __init__(self, ids, weights, area, reduced, cloth, settings, n):
+        self.area, self.reduced, self.cloth = area, reduced, cloth
         (self.triangles, self.weights, self.coefficients, self.start,
-         self.entries) = element_fields(ids, n, weights, coefficients)
+         self.entries) = element_fields(ids, n, weights, self.coefficients_for(settings))
         self.count = len(ids)
+
+    def coefficients_for(self, settings):
+        """(T, 4) NumPy: each triangle's (A C_u, A C_v, A G, beta) at the settings' stretch,
+        shear and damping; beta = 2 zeta sqrt(m_reduced / max(C_u, C_v)), a ratio of
+        critical of an edge's two masses against the stiffer stretch."""
+        stretch = np.asarray(settings["stretch"], dtype=np.float64)[self.cloth]
+        shear = np.asarray(settings["shear"], dtype=np.float64)[self.cloth]
+        zeta = np.asarray(settings["damping"], dtype=np.float64)[self.cloth]
+        beta = 2.0 * zeta * np.sqrt(self.reduced / stretch.max(axis=1))
+        return np.stack([self.area * stretch[:, 0], self.area * stretch[:, 1],
+                         self.area * shear, beta], 1)
 
 
 class MembraneFeature(Feature):
     """``Scene.set_membrane``: the cloths with a triangle membrane, their stiffnesses and
-    rest positions; the model's ``MembraneData``."""
-    name, method = "membrane", "set_membrane"
+    rest positions; the model's ``MembraneData``; live (the stiffnesses and damping:
+    ``Simulator.set_feature``; the triangles stay)."""
+    name, method, live = "membrane", "set_membrane", True
 
     def set(self, scene, stretch, shear, damping=0.0, cloths=None, rest_positions=None):
         """Give cloths membrane elasticity on their triangles: stretch stiffness along warp
@@ -90,20 +107,22 @@ class MembraneFeature(Feature):
         positions (``MembraneData``)."""
         scene = model.scene
         rest, masses = settings["rest_positions"], scene.masses
-        ids, weights, coefficients = [], [], []
-        for k, (cu, cv), g, zeta in zip(settings["cloths"], settings["stretch"],
-                                        settings["shear"], settings["damping"]):
+        ids, weights, areas, reduced, rows = [], [], [], [], []
+        for row, k in enumerate(settings["cloths"]):
             tris = scene.cloths[k].triangles
             b, area = triangle_frames(tris, rest)
-            # an edge's two masses (each a third of the triangle's) against the stiffer
-            # stretch: beta = 2 zeta sqrt(m_reduced / k)
-            reduced = masses[tris].mean(axis=1) / 2.0
-            beta = 2.0 * zeta * np.sqrt(reduced / max(cu, cv))
             ids.append(tris)
             weights.append(b)
-            coefficients.append(np.stack([area * cu, area * cv, area * g, beta], 1))
-        return MembraneData(np.concatenate(ids), np.concatenate(weights),
-                            np.concatenate(coefficients), model.particle_count)
+            areas.append(area)
+            reduced.append(masses[tris].mean(axis=1) / 2.0)
+            rows.append(np.full(len(tris), row))
+        return MembraneData(*(np.concatenate(z) for z in (ids, weights, areas, reduced, rows)),
+                            settings, model.particle_count)
+
+    def refresh(self, data, settings):
+        """The triangles' coefficients at the settings' stiffnesses and damping."""
+        data.coefficients.from_numpy(
+            data.coefficients_for(settings).astype(runtime.numpy_real()))
 
 
 MEMBRANE = MembraneFeature()

@@ -30,17 +30,18 @@ import taichi as ti
 from .. import runtime
 from ..model.collider_table import ColliderTable
 from ..features import FEATURES
-from ..terms import Bending, Colliders, GravityDrag, Wind
+from ..terms import Bending, Colliders, GravityDrag, Membrane, Wind
 from ..terms.colliders import lagged_normal_force, plane_offset, step_contact
 from ..terms.springs import direction, incremental, spring_force
 
 
-COVERED = ("bending", "wind")      # the scene features the adjoint takes
+COVERED = ("bending", "membrane", "wind")      # the scene features the adjoint takes
 
 
 def unsupported(scene, implicit):
     """Why the adjoint cannot take a step of this scene (one line), or None. It covers
-    gravity, drag, springs, hinge bending, wind and the analytic colliders at rest."""
+    gravity, drag, springs, hinge bending, the membrane, wind and the analytic colliders
+    at rest."""
     features = [f.name for f in FEATURES if getattr(scene, f.name) is not None
                 and f.name not in COVERED]
     if scene.wind is not None and scene.wind["callable"] is not None:
@@ -79,7 +80,7 @@ class StepAdjoint:
                                              for _ in range(4))
         # the kernels' time, read inside their loops (Taichi's reverse mode takes no
         # statement outside a loop, and a ti.func's scalar argument is one)
-        self.clock = ti.field(real, shape=2)       # (the time t, the step's start t - h)
+        self.clock = ti.field(real, shape=3)       # (the time t, the step's start, h)
         # v again, without gradients: the planes' reach reads |v| (a test, with no
         # derivative; |v|'s would be 0/0 at rest)
         self.v_reach = ti.Vector.field(3, real, shape=n)
@@ -111,6 +112,16 @@ class StepAdjoint:
             self.wind = Wind(SimpleNamespace(wind=SimpleNamespace(
                 triangles=model.wind.triangles, params=self.wind_params)))
             self.parameter_fields.append(self.wind_params)
+        # the membrane: the term on coefficients that carry gradients
+        self.triangle_count = model.membrane.count if model.membrane is not None else 0
+        if self.triangle_count:
+            data = model.membrane
+            self.membrane_c = ti.Vector.field(4, real, shape=data.coefficients.shape[0],
+                                              needs_grad=True)
+            self.membrane = Membrane(SimpleNamespace(particle_count=n, membrane=SimpleNamespace(
+                triangles=data.triangles, weights=data.weights, coefficients=self.membrane_c,
+                start=data.start, entries=data.entries)))
+            self.parameter_fields.append(self.membrane_c)
 
     def load(self, colliders_off=()):
         """Copy the model's current parameters (after its ``refresh``)."""
@@ -124,6 +135,8 @@ class StepAdjoint:
             self.hinge_weights.copy_from(model.bending.weights)
         if self.has_wind:
             self.wind_params.copy_from(model.wind.params)
+        if self.triangle_count:
+            self.membrane_c.copy_from(model.membrane.coefficients)
 
     def zero_parameter_grads(self):
         for field in self.parameter_fields:
@@ -168,7 +181,7 @@ class StepAdjoint:
 
     def _set_clock(self, t, h):
         """t: the time the kernel evaluates at (implicit: the step's end, t - h its start)."""
-        self.clock.from_numpy(np.array([t, t - h if self.implicit else t],
+        self.clock.from_numpy(np.array([t, t - h if self.implicit else t, h],
                                        dtype=runtime.numpy_real()))
 
     @ti.kernel
@@ -187,6 +200,16 @@ class StepAdjoint:
             self.out[j] -= fi
         self._hinges(self.x, -1.0)
         self._wind(0, 1.0)
+        for e in range(self.triangle_count):
+            gu, gv = self.membrane.triangle_gradient(e, self.x, self.v)
+            self._gather_triangle(e, gu, gv, -1.0)
+
+    @ti.func
+    def _gather_triangle(self, e, gu, gv, sign: ti.template()):
+        """out += sign (b_iu g_u + b_iv g_v) on triangle e's corners i."""
+        ids, b = self.membrane.tris[e], self.membrane.b[e]
+        for i in ti.static(range(3)):
+            self.out[ids[i]] += sign * (b[i, 0] * gu + b[i, 1] * gv)
 
     @ti.func
     def _wind(self, when: ti.template(), sign: ti.template()):
@@ -242,3 +265,9 @@ class StepAdjoint:
             self.out[j] -= gi
         self._hinges(self.x1, 1.0)
         self._wind(1, -1.0)      # lagged: the force at the step's start
+        for e in range(self.triangle_count):
+            fu, fv = self.membrane.frame(e, self.x1)
+            f0u, f0v = self.membrane.frame(e, self.x)
+            _, gu, gv = self.membrane.incremental(fu, fv, f0u, f0v, self.membrane_c[e],
+                                                  self.clock[2])
+            self._gather_triangle(e, gu, gv, 1.0)

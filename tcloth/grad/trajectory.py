@@ -37,6 +37,9 @@ from ..sim.simulator import Simulator
 from .adjoint import StepAdjoint, unsupported
 
 INTEGRATORS = ("symplectic_euler", "backward_euler")
+# the membrane's parameters: name -> (its settings key, column)
+MEMBRANE = {"stretch_warp": ("stretch", 0), "stretch_weft": ("stretch", 1),
+            "shear": ("shear", None)}
 
 
 class Result:
@@ -70,9 +73,12 @@ class Trajectory:
     its gradient.
 
     Parameters (names): "<kind>.stiffness" and "<kind>.damping" for each spring kind the
-    scene has (one value for the kind: its springs' common k_s, k_d); "bending.warp" and
-    "bending.weft" (the hinge bending rigidities B of ``Scene.set_bending``, N m, one
-    value each over its cloths; a mesh cloth's is its warp); "gravity" (3,);
+    scene has (one value for the kind: its springs' common k_s, k_d); "bending" (the hinge
+    bending rigidities B of ``Scene.set_bending``, N m, (cloths, 2): (warp, weft) per
+    cloth; a mesh cloth's hinges take its warp, and its weft must equal it);
+    "membrane.stretch_warp",
+    "membrane.stretch_weft" and "membrane.shear" (``Scene.set_membrane``'s C_u, C_v, G,
+    N/m, one value each over its cloths); "gravity" (3,);
     "air_drag" (the scene's c); "wind" (its mean velocity (3,), m/s); "collider<i>.friction" and "collider<i>.stiffness" (scene
     collider i); "positions" and "velocities" (the initial state,
     (n, 3)); "controls" (the pinned particles' velocities, (steps, pinned, 3)).
@@ -134,7 +140,9 @@ class Trajectory:
         names = [f"{kind}.{what}" for kind in self._kind_rows
                  for what in ("stiffness", "damping")]
         if self.sim.model.bending is not None:
-            names += ["bending.warp", "bending.weft"]
+            names += ["bending"]
+        if self.sim.model.membrane is not None:
+            names += [f"membrane.{what}" for what in MEMBRANE]
         names += ["gravity", "air_drag"]
         if self.sim.model.wind is not None:
             names += ["wind"]
@@ -158,14 +166,17 @@ class Trajectory:
             return np.array(scene.gravity, dtype=np.float64)
         if name == "air_drag":
             return float(scene.air_drag)
+        if name == "bending":
+            return np.array(scene.bending["rigidity"], dtype=np.float64)
         if name == "wind":
             return np.array(scene.wind["velocity"], dtype=np.float64)
         head, what = name.split(".")
         if head.startswith("collider"):
             return float(scene.colliders[int(head[len("collider"):])][what])
-        if head == "bending":
-            values = np.asarray(scene.bending["rigidity"])[:, ("warp", "weft").index(what)]
-            return self._one(name, values)
+        if head == "membrane":
+            key, column = MEMBRANE[what]
+            values = np.asarray(scene.membrane[key])
+            return self._one(name, values if column is None else values[:, column])
         return self._one(name, scene.springs[what][scene.springs["kind"] == KIND_CODE[head]])
 
     @staticmethod
@@ -202,14 +213,17 @@ class Trajectory:
             sim.set_air_drag(value)
         elif name == "wind":
             sim.set_wind(value)
+        elif name == "bending":
+            sim.set_feature("bending", rigidity=value)
         else:
             head, what = name.split(".")
             if head.startswith("collider"):
                 sim.set_collider(int(head[len("collider"):]), **{what: value})
-            elif head == "bending":
-                rigidity = np.array(self.scene.bending["rigidity"], dtype=np.float64)
-                rigidity[:, ("warp", "weft").index(what)] = value
-                sim.set_bending(rigidity)
+            elif head == "membrane":
+                key, column = MEMBRANE[what]
+                values = np.array(self.scene.membrane[key], dtype=np.float64)
+                values[..., slice(None) if column is None else column] = value
+                sim.set_feature("membrane", **{key: values})
             else:
                 sim.set_springs(head, **{what: value})
         self.adjoint.load(sim.settings["colliders_off"])
@@ -345,16 +359,31 @@ class Trajectory:
         v_new[self.pinned] += h * carried
         return x_new, v_new, int(iters), float(residual)
 
-    def _bending_gradient(self, family):
-        """dL/dB of one family (0 warp, 1 weft) from the hinge weights' gradient: each
-        hinge's c = sqrt(B) unit, so dc/dB = c / (2 B)."""
+    def _bending_gradient(self):
+        """dL/dB, (cloths, 2) as the settings' rigidity, from the hinge weights'
+        gradient: each hinge's c = sqrt(B) unit, so dc/dB = c / (2 B)."""
         data = self.sim.model.bending
         rigidity = np.asarray(self.scene.bending["rigidity"], dtype=np.float64)
         c = data.scaled(rigidity)
         c_bar = self.adjoint.hinge_weights.grad.to_numpy()[:data.count].astype(np.float64)
-        b = rigidity[data.cloth, data.family]
-        mine = data.family == family
-        return float(((c_bar * c).sum(axis=1)[mine] / (2.0 * b[mine])).sum())
+        out = np.zeros_like(rigidity)
+        np.add.at(out, (data.cloth, data.family),
+                  (c_bar * c).sum(axis=1) / (2.0 * rigidity[data.cloth, data.family]))
+        return out
+
+    def _membrane_gradient(self, what):
+        """dL/d(a stretch or the shear) from the coefficients' gradient: each triangle's
+        (A C_u, A C_v, A G, beta), beta = 2 zeta sqrt(m / max(C_u, C_v))."""
+        data, settings = self.sim.model.membrane, self.scene.membrane
+        c_bar = self.adjoint.membrane_c.grad.to_numpy()[:data.count].astype(np.float64)
+        key, column = MEMBRANE[what]
+        if column is None:
+            return float((c_bar[:, 2] * data.area).sum())
+        stretch = np.asarray(settings["stretch"], dtype=np.float64)[data.cloth]
+        beta = data.coefficients_for(settings)[:, 3]
+        stiffer = stretch.argmax(axis=1) == column
+        dbeta = np.where(stiffer, -beta / (2.0 * stretch[:, column]), 0.0)
+        return float((c_bar[:, column] * data.area + c_bar[:, 3] * dbeta).sum())
 
     def _reduce(self, wrt, x_bar, v_bar, controls_bar):
         adj, grads = self.adjoint, {}
@@ -372,10 +401,12 @@ class Trajectory:
                 grads[name] = float(adj.drag.grad.to_numpy().sum())
             elif name == "wind":
                 grads[name] = adj.wind_params.grad.to_numpy()[:3].astype(np.float64)
+            elif name == "bending":
+                grads[name] = self._bending_gradient()
             else:
                 head, what = name.split(".")
-                if head == "bending":
-                    grads[name] = self._bending_gradient(("warp", "weft").index(what))
+                if head == "membrane":
+                    grads[name] = self._membrane_gradient(what)
                 elif head.startswith("collider"):
                     row = self.sim.model.colliders.rows.index(int(head[len("collider"):]))
                     grads[name] = float(getattr(adj.table.data.grad, what).to_numpy()[row])

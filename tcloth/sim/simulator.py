@@ -7,6 +7,7 @@ from .budget import EnergyBudget
 from .constraints import StrainLimiter
 from .diagnostics import Diagnostics
 from ..errors import SceneError
+from ..features import FEATURES
 from ..features.wind import wind_velocity
 from .instability import StepCheck
 from ..integrators import INTEGRATORS
@@ -14,7 +15,7 @@ from ..model.model import Model
 from ..runtime import serial_count
 from ..scene.scene import Scene
 from ..terms.grab import GrabSpring
-from ..validate import as_int, as_points, as_scalar, as_vec3, as_warp_weft_per
+from ..validate import as_int, as_points, as_scalar, as_vec3
 
 def _integrator_class(name):
     if name not in INTEGRATORS:
@@ -31,10 +32,8 @@ def _index(name, value, n):
 
 
 def _default_grab_stiffness(scene):
-    for k in (scene.mean_stiffness("structural"), scene.mean_stiffness()):
-        if k is not None:
-            return k
-    return 100.0
+    return next((k for k in (scene.mean_stiffness("structural"), scene.mean_stiffness())
+                 if k is not None), 100.0)
 
 
 class Simulator:
@@ -46,8 +45,8 @@ class Simulator:
             "symplectic_euler" (default), "verlet", "rk4" (explicit); "backward_euler",
             "projective" (implicit); "vbd", "xpbd" (real-time solvers).
         dt: time step, s, > 0.
-        grid_stencil: evaluate cloth springs with the per-particle grid stencil (default)
-            rather than the spring list; both give the same forces.
+        grid_stencil: the per-particle grid stencil for cloth springs (default), or the
+            spring list (False): the same forces.
         position_bound, velocity_bound: a step that leaves |x_k| <= position_bound (m,
             default 1e6) or |v_k| <= velocity_bound (m/s, default 1e8) in any coordinate
             raises InstabilityError, as does any non-finite value, and a step that leaves
@@ -73,12 +72,12 @@ class Simulator:
             results are the same numbers either way.
         **options: the integrator's own options.
 
-    Live changes (the viewer's controls) keep the state and recompile nothing, except a
-    new integrator: ``set_integrator``, ``set_dt``, ``set_gravity``, ``set_air_drag``,
-    ``set_air_damping``, ``set_springs``, ``set_wind``, ``set_collider_enabled``,
-    ``set_strain_limiting``, ``grab``/``release``. Scene values they change are changed
-    in ``scene`` too, and the switches are settings, so a checkpoint saved afterwards
-    continues the changed run.
+    Live changes (the viewer's controls, tcloth.grad) keep the state and recompile
+    nothing, except a new integrator: ``set_integrator``, ``set_dt``, ``set_gravity``,
+    ``set_air_drag``, ``set_air_damping``, ``set_springs``, ``set_wind``, ``set_feature``,
+    ``set_collider``, ``set_collider_enabled``, ``set_strain_limiting``,
+    ``grab``/``release``. Scene values they change are changed in ``scene`` too, and the
+    switches are settings, so a checkpoint saved afterwards continues the changed run.
     """
 
     def __init__(self, scene, integrator="symplectic_euler", dt=1e-3, grid_stencil=True,
@@ -390,21 +389,22 @@ class Simulator:
         self.settings["colliders_off"] = sorted(off)
         self._parameters_changed()
 
-    def set_bending(self, rigidity):
-        """Bending rigidity B (N m) of the bending cloths from now on: a number, a (warp,
-        weft) pair or one pair per cloth of ``Scene.set_bending`` (the hinges stay)."""
-        if self.model.bending is None:
-            raise SceneError("the scene has no bending (Scene.set_bending, before the Simulator)")
-        settings = self.scene.bending
-        settings["rigidity"] = as_warp_weft_per("rigidity", rigidity, len(settings["cloths"]))
+    def set_feature(self, name, **changes):
+        """A live scene feature's settings from now on: ``Scene.set_<name>``'s arguments
+        (bending's rigidity; the membrane's stretch, shear, damping); the rest stay."""
+        live = {f.name: f for f in FEATURES if f.live and getattr(self.model, f.name)}
+        if name not in live:
+            raise SceneError(f"no live feature {name!r} in this scene (it has {sorted(live)})")
+        method, saved = getattr(self.scene, live[name].method), live[name].saved
+        method(**{**saved(getattr(self.scene, name)), **changes})
         self._parameters_changed()
 
     def set_collider(self, index, friction=None, stiffness=None):
         """Collider ``index``'s friction mu >= 0 and/or stiffness k > 0 (N/m) from now on."""
         collider = self.scene.colliders[_index("index", index, len(self.scene.colliders))]
-        for key, value, strict in (("friction", friction, False), ("stiffness", stiffness, True)):
+        for key, value in (("friction", friction), ("stiffness", stiffness)):
             if value is not None:
-                collider[key] = as_scalar(key, value, minimum=0.0, strict=strict)
+                collider[key] = as_scalar(key, value, minimum=0.0, strict=key == "stiffness")
         self._parameters_changed()
 
     def set_strain_limiting(self, enabled):

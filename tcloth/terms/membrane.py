@@ -198,16 +198,22 @@ class Membrane(Term, ColouredConstraints):
         return g
 
     @ti.func
+    def triangle_gradient(self, e, x, v):
+        """(g_u, g_v): the gradient in (f_u, f_v) of triangle e's energy and damping at
+        positions x and velocities v (its corner i's force is -(b_iu g_u + b_iv g_v))."""
+        c = self.c[e]
+        fu, fv = self.frame(e, x)
+        du, dv = self.frame(e, v)
+        _, gu, gv = self.elastic(fu, fv, c)
+        hu, hv = _weighted(fu, fv, c[3] * _rates(fu, fv, du, dv), c)
+        return gu + hu, gv + hv
+
+    @ti.func
     def accumulate(self, x, v, t, f_out):
         """f_out -= the energy's gradient and the damping's, gathered per particle."""
         ti.loop_config(serialize=ti.static(serial(self.tris)))
         for e in range(self.tris.shape[0]):
-            c = self.c[e]
-            fu, fv = self.frame(e, x)
-            du, dv = self.frame(e, v)
-            _, gu, gv = self.elastic(fu, fv, c)
-            hu, hv = _weighted(fu, fv, c[3] * _rates(fu, fv, du, dv), c)
-            self.gu[e], self.gv[e] = gu + hu, gv + hv
+            self.gu[e], self.gv[e] = self.triangle_gradient(e, x, v)
         ti.loop_config(serialize=ti.static(serial(f_out)))
         for p in range(f_out.shape[0]):
             f_out[p] -= self.gather(p)
