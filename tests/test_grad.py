@@ -212,3 +212,44 @@ def test_what_it_does_not_differentiate_is_named(f64, what):
         integrator = "xpbd"
     with pytest.raises(tcloth.SceneError, match="attraction|self_collision|moving|gust|xpbd"):
         grad.Trajectory(scene, steps=2, dt=1e-3, integrator=integrator)
+
+
+def test_the_fabric_fits_measurements_have_their_gradients():
+    """tools/fit_fabric.py's measurements of a specimen scene (the strips' chord angles,
+    the drape coefficient inside the projected rim) against central differences of
+    positions (NumPy: no simulation)."""
+    import importlib.util
+    from pathlib import Path
+    path = Path(__file__).resolve().parents[1] / "tools" / "fit_fabric.py"
+    spec = importlib.util.spec_from_file_location("fit_fabric", path)
+    fit = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(fit)
+    specimens = fit.Specimens(tcloth.scene.fabric.preset("denim"), cells=8, rings=4)
+    rng = np.random.default_rng(5)
+    x = specimens.scene.positions + 0.01 * rng.standard_normal(
+        (specimens.scene.num_particles, 3))
+    direction = rng.standard_normal(x.shape)
+    angles, angle_grads = specimens.angles(x)
+    dc, dc_grad = specimens.drape(x)
+    plus, minus = x + 1e-7 * direction, x - 1e-7 * direction
+    fd = (specimens.measure(plus) - specimens.measure(minus)) / 2e-7
+    analytic = [float((g * direction).sum()) for g in angle_grads + [dc_grad]]
+    np.testing.assert_allclose(analytic, fd, rtol=1e-5, atol=1e-7)
+    assert np.all(np.isfinite(angles)) and 0.0 < dc < 1.5
+
+
+@pytest.mark.parametrize("integrator", ["symplectic_euler", "backward_euler"])
+def test_a_cloth_of_springs_alone(f64, integrator):
+    """A scene with none of the features (springs, gravity and drag only) compiles the
+    adjoint without them; its gravity gradient against central differences."""
+    scene = tcloth.Scene(air_drag=0.05)
+    scene.add_cloth(resolution=(4, 4), size=(0.2, 0.2), structural=(200.0, 0.3),
+                    shear=(50.0, 0.1), flexion=None)
+    trajectory = grad.Trajectory(scene, steps=10, dt=2e-3, integrator=integrator,
+                                 newton_tol=1e-12, cg_tol=1e-10) if integrator == \
+        "backward_euler" else grad.Trajectory(scene, steps=10, dt=2e-3)
+    loss = grad.TargetPositions(scene.positions - 0.01, steps=10)
+    result = trajectory.gradient(loss, wrt=["gravity"])
+    direction = np.array([0.3, -1.0, 0.2])
+    fd = _central(trajectory, loss, "gravity", direction, 1e-5)
+    assert abs(float(result.grad["gravity"] @ direction) - fd) <= 1e-6 * abs(fd)

@@ -200,9 +200,10 @@ class StepAdjoint:
             self.out[j] -= fi
         self._hinges(self.x, -1.0)
         self._wind(0, 1.0)
-        for e in range(self.triangle_count):
-            gu, gv = self.membrane.triangle_gradient(e, self.x, self.v)
-            self._gather_triangle(e, gu, gv, -1.0)
+        if ti.static(self.triangle_count):
+            for e in range(self.triangle_count):
+                gu, gv = self.membrane.triangle_gradient(e, self.x, self.v)
+                self._gather_triangle(e, gu, gv, -1.0)
 
     @ti.func
     def _gather_triangle(self, e, gu, gv, sign: ti.template()):
@@ -226,11 +227,12 @@ class StepAdjoint:
     def _hinges(self, x, sign: ti.template()):
         """out += sign c_i s on each hinge's vertex i (s = sum_i c_i x_i): the bending
         energy's gradient (sign 1) or force (-1)."""
-        for k in range(self.hinge_count):
-            ids, c = self.bending.hinges[k], self.hinge_weights[k]
-            s = self.bending.hinge_vector(k, x)
-            for i in ti.static(range(4)):
-                self.out[ids[i]] += sign * c[i] * s
+        if ti.static(self.hinge_count):
+            for k in range(self.hinge_count):
+                ids, c = self.bending.hinges[k], self.hinge_weights[k]
+                s = self.bending.hinge_vector(k, x)
+                for i in ti.static(range(4)):
+                    self.out[ids[i]] += sign * c[i] * s
 
     @ti.func
     def _contact_body(self, col, c, x, p, phi, n, ctx):
@@ -265,9 +267,10 @@ class StepAdjoint:
             self.out[j] -= gi
         self._hinges(self.x1, 1.0)
         self._wind(1, -1.0)      # lagged: the force at the step's start
-        for e in range(self.triangle_count):
-            fu, fv = self.membrane.frame(e, self.x1)
-            f0u, f0v = self.membrane.frame(e, self.x)
-            _, gu, gv = self.membrane.incremental(fu, fv, f0u, f0v, self.membrane_c[e],
-                                                  self.clock[2])
-            self._gather_triangle(e, gu, gv, 1.0)
+        if ti.static(self.triangle_count):
+            for e in range(self.triangle_count):
+                fu, fv = self.membrane.frame(e, self.x1)
+                f0u, f0v = self.membrane.frame(e, self.x)
+                _, gu, gv = self.membrane.incremental(fu, fv, f0u, f0v, self.membrane_c[e],
+                                                      self.clock[2])
+                self._gather_triangle(e, gu, gv, 1.0)
