@@ -109,6 +109,7 @@ class Trajectory:
         if why is not None:
             raise SceneError(f"tcloth.grad: {why}")
         self.sim = Simulator(scene, integrator=integrator, dt=dt, **options)
+        self._inv_mass = self.sim.model.inv_mass.to_numpy().astype(np.float64)
         self.scene = scene
         self.adjoint = StepAdjoint(self.sim.model, self.implicit)
         self.adjoint.load()
@@ -244,9 +245,8 @@ class Trajectory:
         """Steps start .. stop - 1 from ``state`` (the state at ``start``, before its
         control): the states start .. stop, each after its control where it has one."""
         sim = self.sim
-        sim.reset()                     # the time of step ``start`` (a gust reads it)
-        sim.num_steps = start
-        sim.state.t = sim.time
+        sim.num_steps = start           # the time of step ``start`` (a gust reads it): the
+        sim.state.t = sim.time          # simulator's clock counts from 0 at its reset
         sim.set_state(*state)
         states = []
         for n in range(start, stop):
@@ -330,10 +330,9 @@ class Trajectory:
                       adjoint_cg_iterations=cg_iterations, adjoint_residual=worst)
 
     def _explicit_adjoint(self, x, v, x_bar, v_bar, h, m):
-        inv_mass = self.sim.model.inv_mass.to_numpy().astype(np.float64)
         a = v_bar + h * x_bar
         self.adjoint.set_inputs(x, v)
-        gx, gv, _ = self.adjoint.vjp(h * inv_mass[:, None] * a, h, self.sim.time_at(m))
+        gx, gv, _ = self.adjoint.vjp(h * self._inv_mass[:, None] * a, h, self.sim.time_at(m))
         return x_bar + gx, a + gv
 
     def _implicit_adjoint(self, x, v, x1, x_bar, v_bar, h, m):
