@@ -18,8 +18,8 @@ the end positions x1), all with gradients, and one differentiable kernel:
 
 ``vjp(seed)`` runs the kernel's reverse mode with ``seed`` as the output's adjoint: the
 inputs' gradients (x.grad, v.grad, x1.grad) are set and the parameters' accumulate (a
-trajectory's sum over its steps). Which scenes it covers is ``unsupported(scene,
-implicit)``'s answer; the simulator's own term for a scene it covers is tested against
+trajectory's sum over its steps). Which scenes it covers is ``unsupported(scene)``'s
+answer; the simulator's own term for a scene it covers is tested against
 this kernel to the last digit (tests/test_grad.py).
 """
 from types import SimpleNamespace
@@ -38,7 +38,7 @@ from ..terms.springs import direction, incremental, spring_force
 COVERED = ("bending", "membrane", "wind")      # the scene features the adjoint takes
 
 
-def unsupported(scene, implicit):
+def unsupported(scene):
     """Why the adjoint cannot take a step of this scene (one line), or None. It covers
     gravity, drag, springs, hinge bending, the membrane, wind and the analytic colliders
     at rest."""

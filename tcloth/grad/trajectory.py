@@ -105,7 +105,7 @@ class Trajectory:
         self.checkpoint_every = int(checkpoint_every)
         self.adjoint_tol = float(adjoint_tol)
         self.implicit = integrator == "backward_euler"
-        why = unsupported(scene, self.implicit)
+        why = unsupported(scene)
         if why is not None:
             raise SceneError(f"tcloth.grad: {why}")
         self.sim = Simulator(scene, integrator=integrator, dt=dt, **options)
