@@ -5,7 +5,7 @@ import taichi as ti
 
 from .. import runtime
 from ..graph import element_fields
-from ..scene.hinges import cloth_hinges
+from ..scene.hinges import cloth_hinge_parts, cloth_hinges, hinge_weights
 from ..validate import as_warp_weft_per
 from .base import Feature, cloth_selection
 
@@ -21,13 +21,14 @@ class BendingData:
         start, entries: each particle's (hinge, slot) pairs in CSR form
             (``graph.incidence``).
         diagonal: (particle_count,) each particle's sum of c^2 over its hinges.
-        unit, cloth, family: NumPy, per hinge: its weights at rigidity 1, its cloth's row
-            in the settings and its family (0 warp, 1 weft; a mesh cloth's are all 0), so
-            that c = sqrt(rigidity[cloth, family]) unit (``set_rigidity``).
+        K, area, share, cloth, family: NumPy, per hinge (``scene.hinges.cloth_hinge_parts``;
+            cloth: its cloth's row in the settings), from which ``scaled`` makes c at
+            any rigidities: B_e = share * rigidity[cloth, family].
     """
 
-    def __init__(self, ids, unit, cloth, family, rigidity, n):
-        self.ids, self.unit, self.cloth, self.family = ids, unit, cloth, family
+    def __init__(self, ids, parts, rigidity, n):
+        self.ids = ids
+        self.K, self.area, self.share, self.cloth, self.family = parts
         self.count = len(ids)
         self.hinges, self.weights, self.start, self.entries = element_fields(
             ids, n, self.scaled(rigidity))
@@ -36,8 +37,8 @@ class BendingData:
 
     def scaled(self, rigidity):
         """The weights c ((H, 4) NumPy) at rigidities ``rigidity`` ((cloths, 2), N m)."""
-        return np.sqrt(np.asarray(rigidity, dtype=np.float64)[self.cloth, self.family])[
-            :, None] * self.unit
+        rigidity = np.asarray(rigidity, dtype=np.float64)[self.cloth, self.family]
+        return hinge_weights(self.K, self.area, self.share, rigidity)
 
     def set_rigidity(self, rigidity):
         """The weights and the diagonal at rigidities ``rigidity`` ((cloths, 2), N m)."""
@@ -78,24 +79,14 @@ class BendingFeature(Feature):
         return {"rigidity": rigidities, "cloths": ids, "rest_positions": rest}
 
     def build(self, model, settings):
-        """The hinges of the chosen cloths at their rest positions (``BendingData``): a
-        grid cloth's at unit warp and at unit weft rigidity (each hinge is of one), a mesh
-        cloth's at unit rigidity."""
+        """The hinges of the chosen cloths at their rest positions (``BendingData``)."""
         scene, rest, parts = model.scene, settings["rest_positions"], []
         for row, k in enumerate(settings["cloths"]):
-            cloth = scene.cloths[k]
-            if cloth.is_grid:
-                ids, warp = cloth_hinges(cloth, rest, (1.0, 0.0))
-                weft = cloth_hinges(cloth, rest, (0.0, 1.0))[1]
-                family = (np.abs(weft).sum(axis=1) > 0.0).astype(np.int64)
-                unit = warp + weft
-            else:
-                ids, unit = cloth_hinges(cloth, rest, (1.0, 1.0))
-                family = np.zeros(len(ids), dtype=np.int64)
-            parts.append((ids, unit, np.full(len(ids), row), family))
-        ids, unit, rows, family = (np.concatenate(z) for z in zip(*parts))
-        return BendingData(ids.astype(np.int64), unit, rows, family, settings["rigidity"],
-                           model.particle_count)
+            ids, K, area, family, share = cloth_hinge_parts(scene.cloths[k], rest)
+            parts.append((ids, K, area, share, np.full(len(ids), row), family))
+        ids, K, area, share, rows, family = (np.concatenate(z) for z in zip(*parts))
+        return BendingData(ids.astype(np.int64), (K, area, share, rows, family),
+                           settings["rigidity"], model.particle_count)
 
     def refresh(self, data, settings):
         """The hinges' weights at the settings' rigidities."""

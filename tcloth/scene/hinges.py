@@ -48,27 +48,38 @@ def check_flat(ids, fold):
                          f"{np.degrees(fold[h]):.3g} degrees at rest")
 
 
+def cloth_hinge_parts(cloth, rest):
+    """(ids (H,4), K (H,4), area (H,), family (H,), share (H,)) of one cloth's hinges at
+    rest positions ``rest`` (N,3): each hinge's rigidity is share * rigidity[family]
+    (family 0 warp, 1 weft; a grid's hinges take half of it, a mesh's all of its one)."""
+    ids, K, area, fold = hinge_table(cloth.triangles, rest)
+    check_flat(ids, fold)
+    if not cloth.is_grid:
+        return ids, K, area, np.zeros(len(ids), np.int64), np.ones(len(ids))
+    p = cloth.particles
+    a, b, c, d = p[:-1, :-1], p[:-1, 1:], p[1:, 1:], p[1:, :-1]
+    crossed = np.concatenate([np.stack([a, d, c], -1).reshape(-1, 3),
+                              np.stack([a, c, b], -1).reshape(-1, 3)])
+    ids, K, area = (np.concatenate(z) for z in zip(
+        (ids, K, area), hinge_table(crossed, rest)[:3]))
+    nx = cloth.resolution[0]
+    di = (ids[:, 1] - cloth.offset) % nx - (ids[:, 0] - cloth.offset) % nx
+    dj = (ids[:, 1] - cloth.offset) // nx - (ids[:, 0] - cloth.offset) // nx
+    leg = (di == 0) | (dj == 0)
+    return (ids[leg], K[leg], area[leg], (di[leg] != 0).astype(np.int64),
+            np.full(int(leg.sum()), 0.5))
+
+
+def hinge_weights(K, area, share, rigidity):
+    """The hinges' scaled weights c = sqrt(B_e / A_e) K, B_e = share * rigidity (H,)."""
+    return np.sqrt(share * rigidity / area)[:, None] * K
+
+
 def cloth_hinges(cloth, rest, rigidity):
     """(ids (H,4), c (H,4)): the hinges of one cloth and their scaled weights
     c = sqrt(B_e / A_e) K at rest positions ``rest`` (N,3); rigidity (warp, weft)."""
-    ids, K, area, fold = hinge_table(cloth.triangles, rest)
-    check_flat(ids, fold)
-    if cloth.is_grid:
-        p = cloth.particles
-        a, b, c, d = p[:-1, :-1], p[:-1, 1:], p[1:, 1:], p[1:, :-1]
-        crossed = np.concatenate([np.stack([a, d, c], -1).reshape(-1, 3),
-                                  np.stack([a, c, b], -1).reshape(-1, 3)])
-        ids, K, area = (np.concatenate(z) for z in zip(
-            (ids, K, area), hinge_table(crossed, rest)[:3]))
-        nx = cloth.resolution[0]
-        di = (ids[:, 1] - cloth.offset) % nx - (ids[:, 0] - cloth.offset) % nx
-        dj = (ids[:, 1] - cloth.offset) // nx - (ids[:, 0] - cloth.offset) // nx
-        leg = (di == 0) | (dj == 0)
-        ids, K, area = ids[leg], K[leg], area[leg]
-        B = 0.5 * np.where(di[leg] == 0, rigidity[0], rigidity[1])
-    elif rigidity[0] != rigidity[1]:
+    if not cloth.is_grid and rigidity[0] != rigidity[1]:
         raise SceneError(f"a (warp, weft) bending rigidity needs a grid cloth: a mesh cloth "
                          f"has no warp and weft (got {list(rigidity)})")
-    else:
-        B = np.full(len(ids), rigidity[0])
-    return ids, np.sqrt(B / area)[:, None] * K
+    ids, K, area, family, share = cloth_hinge_parts(cloth, rest)
+    return ids, hinge_weights(K, area, share, np.asarray(rigidity, np.float64)[family])
