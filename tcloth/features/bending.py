@@ -30,10 +30,10 @@ class BendingData:
         self.ids = ids
         self.K, self.area, self.share, self.cloth, self.family = parts
         self.count = len(ids)
-        self.hinges, self.weights, self.start, self.entries = element_fields(
-            ids, n, self.scaled(rigidity))
+        weights = self.scaled(rigidity)
+        self.hinges, self.weights, self.start, self.entries = element_fields(ids, n, weights)
         self.diagonal = ti.field(runtime.real(), shape=n)
-        self.set_rigidity(rigidity)
+        self._set_diagonal(weights)
 
     def scaled(self, rigidity):
         """The weights c ((H, 4) NumPy) at rigidities ``rigidity`` ((cloths, 2), N m)."""
@@ -43,11 +43,15 @@ class BendingData:
     def set_rigidity(self, rigidity):
         """The weights and the diagonal at rigidities ``rigidity`` ((cloths, 2), N m)."""
         weights = self.scaled(rigidity)
+        if self.count:
+            self.weights.from_numpy(weights.astype(runtime.numpy_real()))
+        self._set_diagonal(weights)
+
+    def _set_diagonal(self, weights):
+        """diagonal = each particle's sum of c^2 over its hinges, for the weights c."""
         n = self.diagonal.shape[0]
         diagonal = np.bincount(self.ids.ravel(), weights=(weights ** 2).ravel(), minlength=n)
         self.diagonal.from_numpy(diagonal.astype(runtime.numpy_real()))
-        if self.count:
-            self.weights.from_numpy(weights.astype(runtime.numpy_real()))
 
 
 class BendingFeature(Feature):

@@ -81,12 +81,13 @@ class StepAdjoint:
         # the kernels' time, read inside their loops (Taichi's reverse mode takes no
         # statement outside a loop, and a ti.func's scalar argument is one)
         self.clock = ti.field(real, shape=3)       # (the time t, the step's start, h)
-        # v again, without gradients: the planes' reach reads |v| (a test, with no
-        # derivative; |v|'s would be 0/0 at rest)
-        self.v_reach = ti.Vector.field(3, real, shape=n)
         self.table = None
         if model.colliders.count:
             self.table = ColliderTable(model.scene.colliders, differentiable=True)
+        # backward Euler's contact planes: v again, without gradients (their reach reads
+        # |v|, a test with no derivative; |v|'s would be 0/0 at rest)
+        self.v_reach = (ti.Vector.field(3, real, shape=n)
+                        if self.table is not None and implicit else None)
         view = SimpleNamespace(mass=model.mass, inv_mass=model.inv_mass, params=self.params,
                                drag=self.drag, colliders=self.table, particle_count=n)
         self.gravity = GravityDrag(view)
@@ -150,7 +151,8 @@ class StepAdjoint:
         npr = runtime.numpy_real()
         self.x.from_numpy(x.astype(npr))
         self.v.from_numpy(v.astype(npr))
-        self.v_reach.from_numpy(v.astype(npr))
+        if self.v_reach is not None:
+            self.v_reach.from_numpy(v.astype(npr))
         if x1 is not None:
             self.x1.from_numpy(x1.astype(npr))
 

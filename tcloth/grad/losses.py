@@ -8,6 +8,7 @@ and ``evaluate(step, x, v) -> (value, dL/dx, dL/dv or None)`` with x, v (n, 3) N
 import numpy as np
 
 from ..errors import SceneError
+from ..validate import as_int
 
 
 class Loss:
@@ -16,10 +17,9 @@ class Loss:
 
     def __init__(self, steps, function=None):
         steps = [steps] if np.isscalar(steps) else list(steps)
-        if not steps or any(isinstance(s, bool) or not isinstance(s, (int, np.integer))
-                            for s in steps):
-            raise SceneError(f"steps must be step numbers (ints) (got {steps!r})")
-        self.steps = tuple(int(s) for s in steps)
+        if not steps:
+            raise SceneError("steps must name at least one step (got none)")
+        self.steps = tuple(as_int(f"steps[{i}]", s, 0) for i, s in enumerate(steps))
         self.function = function
 
     def evaluate(self, step, x, v):

@@ -34,6 +34,7 @@ from .. import runtime
 from ..errors import SceneError
 from ..scene.scene import KIND_CODE
 from ..sim.simulator import Simulator
+from ..validate import as_int
 from .adjoint import StepAdjoint, unsupported
 
 INTEGRATORS = ("symplectic_euler", "backward_euler")
@@ -98,11 +99,7 @@ class Trajectory:
         self.set_steps(steps)
         if checkpoint_every is None:
             checkpoint_every = max(1, int(round(np.sqrt(self.steps))))
-        if isinstance(checkpoint_every, bool) or not isinstance(
-                checkpoint_every, (int, np.integer)) or checkpoint_every < 1:
-            raise SceneError(f"checkpoint_every must be an integer >= 1 (got "
-                             f"{checkpoint_every!r})")
-        self.checkpoint_every = int(checkpoint_every)
+        self.checkpoint_every = as_int("checkpoint_every", checkpoint_every, 1)
         self.adjoint_tol = float(adjoint_tol)
         self.implicit = integrator == "backward_euler"
         why = unsupported(scene)
@@ -127,12 +124,11 @@ class Trajectory:
 
     def set_steps(self, steps):
         """Run ``steps`` steps from now on (the controls, where set, must have as many)."""
-        if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
-            raise SceneError(f"steps must be an integer >= 1 (got {steps!r})")
+        steps = as_int("steps", steps, 1)
         if self.controls is not None and len(self.controls) != steps:
             raise SceneError(f"the controls hold {len(self.controls)} steps, not {steps}: "
                              "set('controls', ...) to new ones or None first")
-        self.steps = int(steps)
+        self.steps = steps
 
     # -- parameters ---------------------------------------------------------------------------
     @property
@@ -360,7 +356,7 @@ class Trajectory:
 
     def _bending_gradient(self):
         """dL/dB, (cloths, 2) as the settings' rigidity, from the hinge weights'
-        gradient: each hinge's c = sqrt(B) unit, so dc/dB = c / (2 B)."""
+        gradient: each hinge's c = sqrt(share B / A) K, so dc/dB = c / (2 B)."""
         data = self.sim.model.bending
         rigidity = np.asarray(self.scene.bending["rigidity"], dtype=np.float64)
         c = data.scaled(rigidity)
