@@ -8,7 +8,10 @@ import warnings
 import numpy as np
 import taichi as ti
 
+from . import frontend
 from .errors import DeviceWarning, SceneError, StaleSimulatorError
+
+frontend.install()
 
 _ARCHS = {
     "auto": lambda: None,
