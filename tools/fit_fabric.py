@@ -3,7 +3,7 @@ simulation, by gradient descent through the simulation (``tcloth.grad``, L-BFGS 
 SciPy on the parameters' logarithms).
 
 The measurements, as a textile lab takes them: Peirce's cantilever (a strip along the warp
-and one along the weft, each at two overhang lengths: the tip's chord angle) and Cusick's
+and one along the weft, each at two overhang lengths: the chord angle to the tip edge) and Cusick's
 drape (the drape coefficient of a 30 cm disc on an 18 cm support). They are simulated once
 with the true fabric (a preset), with 1 mm of Gaussian noise on every measured point; the
 fit starts from another preset and simulates the same specimens with its parameters.
@@ -55,7 +55,7 @@ class Specimens:
 
     def __init__(self, fabric, cells, rings):
         self.scene = scene = tcloth.Scene(air_drag=1e-4)
-        self.strips = []            # (cloth, family, clamp particles, tip particle)
+        self.strips = []            # (cloth, family, clamp particle, tip edge particles)
         for s, (length, family) in enumerate([(l, f) for f in (0, 1) for l in LENGTHS]):
             self.strips.append(self._strip(scene, fabric, length, family, cells,
                                            origin=(0.3 + 0.25 * s, 1.0, 0.0)))
@@ -89,21 +89,25 @@ class Specimens:
                                 fabric=strip, pinned=clamp)
         p = cloth.particles
         line = p[1, :] if family == 0 else p[:, 1]          # the strip's middle line
-        return len(scene.cloths) - 1, family, line[1], line[-1]
+        edge = p[:, -1] if family == 0 else p[-1, :]        # the tip's edge across the strip
+        return len(scene.cloths) - 1, family, line[1], np.asarray(edge)
 
     def angles(self, x):
-        """Each strip's tip chord angle below the horizontal, degrees, and its gradient."""
+        """Each strip's chord angle below the horizontal, from the clamp line's middle to
+        the middle of the tip's edge (the mean of its points), degrees, and its gradient."""
         values, grads = [], []
-        for _, family, clamp, tip in self.strips:
-            d = x[tip] - x[clamp]
+        for _, family, clamp, edge in self.strips:
+            d = x[edge].mean(axis=0) - x[clamp]
             axis = 0 if family == 0 else 2
             along = d[axis]
             angle = np.degrees(np.arctan2(-d[1], abs(along)))
             r2 = along * along + d[1] * d[1]
             g = np.zeros_like(x)
-            g[tip, 1] = -abs(along) / r2
-            g[tip, axis] = d[1] / r2 * np.sign(along)
-            g[clamp] = -g[tip]
+            g_tip = np.zeros(3)
+            g_tip[1] = -abs(along) / r2
+            g_tip[axis] = d[1] / r2 * np.sign(along)
+            g[edge] = g_tip / len(edge)
+            g[clamp] = -g_tip
             values.append(angle)
             grads.append(np.degrees(g))
         return np.array(values), grads
@@ -201,7 +205,10 @@ def main():
                            newton_iterations=NEWTON, newton_tol=1e-7, cg_tol=1e-5)
     sim.step(args.steps)
     rng = np.random.default_rng(args.seed)
-    shape = sim.positions() + NOISE * rng.standard_normal((sim.model.particle_count, 3))
+    # the noise on every point the clamps do not hold (the apparatus places those)
+    noise = NOISE * rng.standard_normal((sim.model.particle_count, 3))
+    noise[specimens.scene.pinned] = 0.0
+    shape = sim.positions() + noise
     measured = specimens.measure(shape)
     print(f"fit.measured.angles_deg: {', '.join(f'{a:.3f}' for a in measured[:4])}")
     print(f"fit.measured.drape_coefficient: {measured[4]:.4f}")
