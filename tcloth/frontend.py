@@ -14,8 +14,8 @@ comes. Two lookups repeat unchanged across those builds and are remembered here:
 
 The texts are Taichi's own, character for character (``tests/test_frontend.py``). What it
 saves: 3 % (symplectic Euler) to 23 % (backward Euler) of building a simulator, a fifth of
-tests/test_live.py's time (docs/benchmarks.md, "Taichi's frontend"). ``install`` is a no-op on another Taichi than 1.7 or where the
-names moved.
+tests/test_live.py's time (docs/benchmarks.md, "Taichi's frontend"). ``install`` is a
+no-op on another Taichi than 1.7 or where the names moved.
 """
 import functools
 
