@@ -8,7 +8,7 @@ with friction 0.4); backward Euler at dt = 1/60 (frame rate) for --steps steps, 
 folded in half across its middle row (--n is odd): the near half turned over onto the far
 half, the middle row the crease. (Folded between two rows, as an even --n would have it, the
 target puts the two rows on one line though springs 1/(n-1) of the towel long join them:
-a target no motion reaches, whose distance stays near 0.012 m^2 at n = 8.) The loss is
+a target no motion reaches: at n = 8 the descent stopped at 0.012 m^2.) The loss is
 the squared distance to the target at the last step. The descent starts from the motion a
 person would try first: each corner over a half circle about the middle line. Each corner's path is --knots
 stretches of constant velocity (piecewise linear), at most 0.8 m/s along each axis. Self-collision is not differentiated yet (docs/grad.md),
