@@ -3,10 +3,11 @@ simulation, by gradient descent through the simulation (``tcloth.grad``, L-BFGS 
 SciPy on the parameters' logarithms).
 
 The measurements, as a textile lab takes them: Peirce's cantilever (a strip along the warp
-and one along the weft, each at two overhang lengths: the chord angle to the tip edge) and Cusick's
-drape (the drape coefficient of a 30 cm disc on an 18 cm support). They are simulated once
-with the true fabric (a preset), with 1 mm of Gaussian noise on every measured point; the
-fit starts from another preset and simulates the same specimens with its parameters.
+and one along the weft, each at two overhang lengths: the chord angle to the tip edge) and
+Cusick's drape (the drape coefficient of a 30 cm disc on an 18 cm support). They are
+simulated once with the true fabric (a preset), with 1 mm of Gaussian noise on every point
+the clamps do not hold (the apparatus places those); the fit starts from another preset
+and simulates the same specimens with its parameters.
 
 One scene holds the five specimens, run by backward Euler at dt = 0.05 s (heavily damped:
 a static solve, as tools/cantilever.py) for --steps steps, and the loss compares the
@@ -43,11 +44,13 @@ from tcloth.scene.fabric import Fabric, preset
 DT = 0.05
 WIDTH, LENGTHS = 0.02, (0.03, 0.05)         # the strips: m (denim's chord angles 25-55 deg)
 RADIUS, SUPPORT, HEIGHT = 0.15, 0.09, 0.3   # the drape: m
-NOISE = 1e-3                                # m, on every measured point
+NOISE = 1e-3                                # m, on every unclamped point
 SCALE_ANGLE, SCALE_DC = 1.0, 0.01           # the loss's units: 1 degree, 0.01
-# Newton's cap: the first step from flat takes 29 (denim) to 51 (fleece) iterations at
-# --quick's size, and an unconverged step's derivative is not the adjoint's
-NEWTON = 200
+# backward Euler for the truth and the fit alike; Newton's cap: the first step from flat
+# takes 29 (denim) to 51 (fleece) iterations at --quick's size, and an unconverged step's
+# derivative is not the adjoint's
+SOLVER = dict(integrator="backward_euler", dt=DT, newton_iterations=200, newton_tol=1e-7,
+              cg_tol=1e-5)
 
 
 class Specimens:
@@ -198,11 +201,8 @@ def main():
     from scipy.optimize import minimize
     tcloth.init(arch="cpu", precision="f64")
     truth, start = preset(args.truth), preset(args.start)
-    options = dict(steps=args.steps, dt=DT, integrator="backward_euler",
-                   newton_iterations=NEWTON, newton_tol=1e-7, cg_tol=1e-5, adjoint_tol=1e-8)
     specimens = Specimens(truth, args.cells, args.rings)
-    sim = tcloth.Simulator(specimens.scene, integrator="backward_euler", dt=DT,
-                           newton_iterations=NEWTON, newton_tol=1e-7, cg_tol=1e-5)
+    sim = tcloth.Simulator(specimens.scene, **SOLVER)
     sim.step(args.steps)
     rng = np.random.default_rng(args.seed)
     # the noise on every point the clamps do not hold (the apparatus places those)
@@ -216,7 +216,8 @@ def main():
     fit_specimens = Specimens(Fabric(density=truth.density, stretch=truth.stretch,
                                      shear=start.shear, bending=start.bending),
                               args.cells, args.rings)
-    trajectory = grad.Trajectory(fit_specimens.scene, **options)
+    trajectory = grad.Trajectory(fit_specimens.scene, steps=args.steps, adjoint_tol=1e-8,
+                                 **SOLVER)
     fit = Fit(trajectory, fit_specimens, loss_for(fit_specimens, measured, args.steps))
     p0 = np.log([*start.bending, start.shear])
     began = time.perf_counter()
