@@ -18,6 +18,9 @@ SCENES = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "scenes"
 LONG = {
     "test_grad::test_every_parameters_gradient_matches_central_differences[backward_euler]",
     "test_grad::test_a_backward_euler_steps_adjoint_is_its_jacobians_transpose",
+    "test_grad::test_every_parameters_gradient_matches_central_differences[projective]",
+    "test_grad::test_a_projective_steps_adjoint_is_its_jacobians_transpose",
+    "test_grad::test_the_adjoints_kernels_are_the_simulators_terms[projective]",
     "test_grad::test_the_adjoints_kernels_are_the_simulators_terms[backward_euler]",
     "test_grad::test_a_cloth_of_springs_alone[backward_euler]",
     "test_grad::test_a_cloth_of_springs_alone[symplectic_euler]",

@@ -1,6 +1,7 @@
 """Gradients through the simulation (tcloth.grad) against central finite differences of
 the simulator's own trajectories, in float64; one backward Euler step's adjoint against its
-Jacobian formed column by column; the adjoint's kernels against the simulator's terms."""
+Jacobian formed column by column, one projective step's along random directions; the
+adjoint's kernels against the simulator's terms."""
 import numpy as np
 import pytest
 
@@ -10,6 +11,13 @@ from tcloth import grad
 from conftest import use_runtime
 
 STEPS = 60
+# the integrators' options: converged steps, whose derivative the adjoint gives
+OPTIONS = {"backward_euler": {"newton_tol": 1e-12, "cg_tol": 1e-10},
+           "projective": {"iterations": 100, "cg_tol": 1e-3}}
+# projective dynamics' window starts on the sphere: at a contact's onset its iterations
+# cycle between the particle's penalty on and off (step 21 of this cloth: residual 7e-2
+# after 100 iterations), so no converged step is there to differentiate
+LANDED = 25
 
 
 def _cloth(collider):
@@ -30,10 +38,14 @@ def _cloth(collider):
 
 
 def _trajectory(integrator, steps=STEPS, checkpoint_every=7):
-    options = {"newton_tol": 1e-12, "cg_tol": 1e-10} if integrator == "backward_euler" else {}
     scene = _cloth(collider=True)
     trajectory = grad.Trajectory(scene, steps=steps, dt=2e-3, integrator=integrator,
-                                 checkpoint_every=checkpoint_every, **options)
+                                 checkpoint_every=checkpoint_every,
+                                 **OPTIONS.get(integrator, {}))
+    if integrator == "projective":
+        trajectory.sim.step(LANDED)
+        trajectory.set("positions", trajectory.sim.positions())
+        trajectory.set("velocities", trajectory.sim.velocities())
     rng = np.random.default_rng(1)
     n = scene.num_particles
     loss = grad.TargetPositions(scene.positions + 0.01 * rng.standard_normal((n, 3)),
@@ -60,7 +72,13 @@ def backward_euler():
     return _prepared("backward_euler")
 
 
-@pytest.fixture(params=["symplectic_euler", "backward_euler"])
+@pytest.fixture(scope="module")
+def projective():
+    """The module's projective dynamics trajectory (from its landing on the sphere)."""
+    return _prepared("projective")
+
+
+@pytest.fixture(params=["symplectic_euler", "backward_euler", "projective"])
 def run(request):
     return request.getfixturevalue(request.param)
 
@@ -84,7 +102,8 @@ def test_every_parameters_gradient_matches_central_differences(f64, run):
     trajectory, loss, result = run
     rng = np.random.default_rng(2)
     trajectory.forward(loss)
-    assert trajectory.sim.contact_stats()["collider"] >= 4
+    assert trajectory.sim.contact_stats()["collider"] >= 3      # particles on the sphere
+    assert result.forward_residual < 1e-8           # projective: every step converged
     for name in trajectory.names:
         value = trajectory.value(name)
         if np.isscalar(value):
@@ -115,17 +134,13 @@ def test_checkpoints_change_the_memory_not_the_gradient(f64, symplectic_euler):
     assert results[1].memory_bytes < results[0].memory_bytes / 2
 
 
-def test_a_backward_euler_steps_adjoint_is_its_jacobians_transpose(f64, backward_euler):
-    """One step of the module's cloth from a disturbed state: its Jacobian d(x1, v1)/d(x0,
-    v0) formed column by column by central differences of the simulator's step; J^T (w_x,
-    w_v) against the adjoint of the loss w_x . x1 + w_v . v1."""
-    trajectory, _, _ = backward_euler
+def _one_step(trajectory, x0, v0, directions, step, rng):
+    """One step of the trajectory's simulator from (x0, v0): the adjoint of the loss
+    w . (x1, v1) (w random) along each column d of ``directions`` (D^T J^T w) and the
+    central differences of the simulator's step along them ((J D)^T w), and the result."""
     sim, n = trajectory.sim, trajectory.scene.num_particles
-    rng = np.random.default_rng(3)
-    x0 = trajectory.value("positions") + 0.01 * rng.standard_normal((n, 3))
-    v0 = 0.3 * rng.standard_normal((n, 3))
     wx, wv = rng.standard_normal((n, 3)), rng.standard_normal((n, 3))
-    loss = grad.Loss(1, lambda step, x, v: (float((wx * x).sum() + (wv * v).sum()), wx, wv))
+    loss = grad.Loss(1, lambda _, x, v: (float((wx * x).sum() + (wv * v).sum()), wx, wv))
     kept = {name: trajectory.value(name) for name in ("positions", "velocities", "controls")}
     try:
         trajectory.set("controls", None)
@@ -134,32 +149,58 @@ def test_a_backward_euler_steps_adjoint_is_its_jacobians_transpose(f64, backward
         trajectory.set("velocities", v0)
         result = trajectory.gradient(loss, wrt=["positions", "velocities"])
 
-        def step(state):
+        def run(state):
             sim.reset()                 # time 0, as the trajectory's step (a gust reads it)
             sim.set_state(state[:3 * n].reshape(n, 3), state[3 * n:].reshape(n, 3))
             sim.step(1)
             return np.concatenate([sim.positions().ravel(), sim.velocities().ravel()])
 
         state = np.concatenate([x0.ravel(), v0.ravel()])
-        columns = []
-        for k in range(state.size):
-            e = np.zeros(state.size)
-            e[k] = 1e-6
-            columns.append((step(state + e) - step(state - e)) / 2e-6)
+        jd = np.stack([(run(state + step * d) - run(state - step * d)) / (2.0 * step)
+                       for d in directions.T], axis=1)
     finally:
         trajectory.set_steps(STEPS)
         for name, value in kept.items():
             trajectory.set(name, value)
-    expected = np.stack(columns, axis=1).T @ np.concatenate([wx.ravel(), wv.ravel()])
     adjoint = np.concatenate([result.grad["positions"].ravel(),
                               result.grad["velocities"].ravel()])
+    return directions.T @ adjoint, jd.T @ np.concatenate([wx.ravel(), wv.ravel()]), result
+
+
+def test_a_backward_euler_steps_adjoint_is_its_jacobians_transpose(f64, backward_euler):
+    """One step of the module's cloth from a disturbed state: its Jacobian d(x1, v1)/d(x0,
+    v0) formed column by column by central differences of the simulator's step; J^T (w_x,
+    w_v) against the adjoint of the loss w_x . x1 + w_v . v1."""
+    trajectory, _, _ = backward_euler
+    n = trajectory.scene.num_particles
+    rng = np.random.default_rng(3)
+    x0 = trajectory.value("positions") + 0.01 * rng.standard_normal((n, 3))
+    v0 = 0.3 * rng.standard_normal((n, 3))
+    adjoint, expected, _ = _one_step(trajectory, x0, v0, np.eye(6 * n), 1e-6, rng)
     np.testing.assert_allclose(adjoint, expected, rtol=1e-6, atol=1e-6 * np.abs(expected).max())
+
+
+def test_a_projective_steps_adjoint_is_its_jacobians_transpose(f64, projective):
+    """One projective step from a state on the sphere, disturbed: J^T (w_x, w_v) from the
+    adjoint against directional derivatives of the simulator's step J d by central
+    differences, along six random directions d."""
+    trajectory, _, _ = projective
+    n = trajectory.scene.num_particles
+    rng = np.random.default_rng(3)
+    x0 = trajectory.value("positions") + 0.002 * rng.standard_normal((n, 3))
+    v0 = trajectory.value("velocities") + 0.1 * rng.standard_normal((n, 3))
+    adjoint, expected, result = _one_step(trajectory, x0, v0,
+                                          rng.standard_normal((6 * n, 6)), 1e-7, rng)
+    assert result.forward_residual < 1e-9
+    np.testing.assert_allclose(adjoint, expected, rtol=1e-6)
 
 
 def test_the_adjoints_kernels_are_the_simulators_terms(f64, run):
     """The explicit adjoint's force is the simulator's force; the implicit one's gradient
     vanishes at the simulator's backward Euler step and its Jacobian (by differences) is
-    the integrator's Hessian."""
+    the integrator's Hessian; projective dynamics' residual vanishes at its step, its
+    friction kernel gives the step's velocities, and its reverse mode is the transpose of
+    its Jacobian by differences."""
     trajectory, _, _ = run
     sim, adj = trajectory.sim, trajectory.adjoint
     rng = np.random.default_rng(4)
@@ -179,6 +220,9 @@ def test_the_adjoints_kernels_are_the_simulators_terms(f64, run):
     g = adj.evaluate(h, h)
     inertia = adj.mass.to_numpy()[:, None] * (x1 - x - h * v) / h ** 2
     assert np.abs(g[free]).max() < 1e-9 * np.abs(inertia[free]).max()
+    if trajectory.projective:
+        assert sim.integrator.stats["residual"] < 1e-9
+        np.testing.assert_array_equal(adj.evaluate(h, h, friction=True), sim.velocities())
     p = rng.standard_normal((n, 3))
     p[trajectory.pinned] = 0.0
     parts = []
@@ -186,6 +230,15 @@ def test_the_adjoints_kernels_are_the_simulators_terms(f64, run):
         adj.set_inputs(x, v, x1 + sign * 1e-6 * p)
         parts.append(adj.evaluate(h, h))
     fd = (parts[0] - parts[1]) / 2e-6
+    if trajectory.projective:
+        w = rng.standard_normal((n, 3))
+        w[trajectory.pinned] = 0.0
+        adj.set_inputs(x, v, x1)
+        kept = adj.parameter_grads()
+        transposed = adj.vjp(w, h, h)[2]
+        adj.set_parameter_grads(kept)
+        assert abs((transposed * p).sum() - (w * fd).sum()) <= 1e-7 * abs((w * fd).sum())
+        return
     integ = sim.integrator
     adj.set_inputs(x, v, x1)
     integ.potential.begin(adj.x, adj.v, h, 0.0, trajectory._x_start)

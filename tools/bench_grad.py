@@ -2,8 +2,10 @@
 an n x n cloth held at two corners, --steps steps, a loss on its final positions, the
 gradient with respect to every parameter. The cloth starts on a sphere (mu 0.3) it drapes
 over; symplectic Euler at dt 2e-4, backward Euler at dt 1/60 (newton_tol and adjoint_tol
---tol, cg_tol 1e-6: the gradient of converged steps). Side by side in one run, medians of
---repeats:
+--tol, cg_tol 1e-6: the gradient of converged steps), projective dynamics at dt 1/60
+(--iterations local/global iterations a step, adjoint_tol --tol; the largest residual they
+leave, relative to the first, is reported: the gradient is the converged step's). Side by
+side in one run, medians of --repeats:
 
   - forward: the simulator's steps alone (``Simulator.step(steps)``);
   - trajectory: the same steps as the gradient's forward run takes them (one at a time,
@@ -16,6 +18,7 @@ gradient / forward and gradient / trajectory, the checkpoints' memory against st
 state) and writes <out>/grad_bench.csv.
 
 Usage: python tools/bench_grad.py [--sizes 32] [--steps 120] [--repeats 3] [--tol 1e-8]
+                                  [--iterations 100] [--integrators all]
                                   [--precision f64] [--out docs] [--arch cpu]
 """
 import argparse
@@ -39,10 +42,10 @@ def cloth(n, collider=True):
     return scene
 
 
-def measure(integrator, n, steps, repeats, tol):
-    implicit = integrator == "backward_euler"
-    dt = 1.0 / 60.0 if implicit else 2e-4
-    options = {"newton_tol": tol, "cg_tol": 1e-6, "adjoint_tol": tol} if implicit else {}
+def measure(integrator, n, steps, repeats, tol, iterations):
+    dt = 2e-4 if integrator == "symplectic_euler" else 1.0 / 60.0
+    options = {"backward_euler": {"newton_tol": tol, "cg_tol": 1e-6, "adjoint_tol": tol},
+               "projective": {"iterations": iterations, "adjoint_tol": tol}}.get(integrator, {})
     scene = cloth(n, True)
     trajectory = grad.Trajectory(scene, steps=steps, dt=dt, integrator=integrator, **options)
     target = scene.positions + np.array([0.0, -0.05, 0.0])
@@ -74,8 +77,9 @@ def measure(integrator, n, steps, repeats, tol):
             "ratio_trajectory": med["gradient"] / med["trajectory"],
             "checkpoint_every": every, "memory_bytes": result.memory_bytes,
             "memory_every_state_bytes": stored,
-            "adjoint_cg_iterations": result.adjoint_cg_iterations,
-            "adjoint_residual": result.adjoint_residual}
+            "adjoint_iterations": result.adjoint_iterations,
+            "adjoint_residual": result.adjoint_residual,
+            "forward_residual": result.forward_residual}
 
 
 def main():
@@ -84,6 +88,9 @@ def main():
     parser.add_argument("--steps", type=int, default=120)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--tol", type=float, default=1e-8)
+    parser.add_argument("--iterations", type=int, default=100,
+                        help="projective dynamics' iterations a step")
+    parser.add_argument("--integrators", default=",".join(grad.INTEGRATORS))
     parser.add_argument("--precision", default="f64")
     parser.add_argument("--out", default="docs")
     parser.add_argument("--arch", default="cpu")
@@ -91,8 +98,8 @@ def main():
     tcloth.init(arch=args.arch, precision=args.precision)
     rows = []
     for n in (int(s) for s in args.sizes.split(",") if s):
-        for integrator in grad.INTEGRATORS:
-            row = measure(integrator, n, args.steps, args.repeats, args.tol)
+        for integrator in args.integrators.split(","):
+            row = measure(integrator, n, args.steps, args.repeats, args.tol, args.iterations)
             rows.append(row)
             for key, value in row.items():
                 if key not in ("integrator", "n"):

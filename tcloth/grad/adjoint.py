@@ -1,7 +1,7 @@
 """The vector-Jacobian products of one step: Taichi's reverse mode over the terms' own
 ``ti.func``s, on copies of the model's parameters that carry gradients.
 
-``StepAdjoint(model, implicit)`` holds those copies (gravity and drag, each spring's
+``StepAdjoint(model, implicit, projective)`` holds those copies (gravity and drag, each spring's
 stiffness and damping, the colliders' table) and the step's inputs x, v (and, implicit,
 the end positions x1), all with gradients, and one differentiable kernel:
 
@@ -14,7 +14,14 @@ the end positions x1), all with gradients, and one differentiable kernel:
     and the colliders (``colliders.step_contact``), with what the solver fixes at the
     step's start (each spring's damping direction d0, each contact's plane and normal
     force: ``colliders.plane_offset``, ``lagged_normal_force``) computed from x in the same
-    kernel, so that their dependence on the step's start is differentiated too.
+    kernel, so that their dependence on the step's start is differentiated too;
+  - projective (implicit and projective): the force residual G(x1; x, v) whose zero is
+    projective dynamics' converged step (``integrators/projective.py``): M/h^2 (x1 - x -
+    h v) less the forces at (x1, v1 = (x1 - x) / h) (gravity and drag, the springs with
+    their axial damping along the current direction, hinges, membrane), the wind at the
+    step's start, and the colliders' penalty and normal damping against each particle's
+    plane of the step's start (``plane_contact_force``); and, in a second kernel, the
+    Coulomb friction the solver applies to v1 after its iterations (``coulomb_change``).
 
 ``vjp(seed)`` runs the kernel's reverse mode with ``seed`` as the output's adjoint: the
 inputs' gradients (x.grad, v.grad, x1.grad) are set and the parameters' accumulate (a
@@ -31,7 +38,8 @@ from .. import runtime
 from ..model.collider_table import ColliderTable
 from ..features import FEATURES
 from ..terms import Bending, Colliders, GravityDrag, Membrane, Wind
-from ..terms.colliders import lagged_normal_force, plane_offset, step_contact
+from ..terms.colliders import (coulomb_change, lagged_normal_force, plane_contact_force,
+                               plane_offset, step_contact)
 from ..terms.springs import direction, incremental, spring_force
 
 
@@ -68,16 +76,16 @@ class StepAdjoint:
     force, or the incremental potential's gradient).
     """
 
-    def __init__(self, model, implicit):
+    def __init__(self, model, implicit, projective=False):
         real, n = runtime.real(), model.particle_count
-        self.model, self.implicit = model, implicit
+        self.model, self.implicit, self.projective = model, implicit, projective
         self.count = model.spring_count
         self.params = ti.field(real, shape=4, needs_grad=True)
         self.drag = ti.field(real, shape=n, needs_grad=True)
         self.ks, self.kd = (ti.field(real, shape=max(self.count, 1), needs_grad=True)
                             for _ in range(2))
-        self.x, self.v, self.x1, self.out = (ti.Vector.field(3, real, shape=n, needs_grad=True)
-                                             for _ in range(4))
+        self.x, self.v, self.x1, self.v1, self.out = (
+            ti.Vector.field(3, real, shape=n, needs_grad=True) for _ in range(5))
         # the kernels' time, read inside their loops (Taichi's reverse mode takes no
         # statement outside a loop, and a ti.func's scalar argument is one)
         self.clock = ti.field(real, shape=3)       # (the time t, the step's start, h)
@@ -139,12 +147,24 @@ class StepAdjoint:
         if self.triangle_count:
             self.membrane_c.copy_from(model.membrane.coefficients)
 
-    def zero_parameter_grads(self):
-        for field in self.parameter_fields:
-            field.grad.fill(0)
+    def _gradient_fields(self):
+        fields = [field.grad for field in self.parameter_fields]
         if self.table is not None:
-            for key in self.table.data.keys:
-                getattr(self.table.data.grad, key).fill(0)
+            fields += [getattr(self.table.data.grad, key) for key in self.table.data.keys]
+        return fields
+
+    def zero_parameter_grads(self):
+        for field in self._gradient_fields():
+            field.fill(0)
+
+    def parameter_grads(self):
+        """The parameters' accumulated gradients (NumPy copies), for ``set_parameter_grads``
+        after products that are not to accumulate (an adjoint solve's)."""
+        return [field.to_numpy() for field in self._gradient_fields()]
+
+    def set_parameter_grads(self, saved):
+        for field, values in zip(self._gradient_fields(), saved):
+            field.from_numpy(values)
 
     def set_inputs(self, x, v, x1=None):
         """The step's start (x, v) and, implicit, its end positions x1 (NumPy (n, 3))."""
@@ -156,26 +176,36 @@ class StepAdjoint:
         if x1 is not None:
             self.x1.from_numpy(x1.astype(npr))
 
-    def evaluate(self, h, t):
-        """The kernel's output at the inputs set: (n, 3) NumPy."""
+    def _kernel(self, friction):
+        if friction:
+            return self._friction
+        if self.projective:
+            return self._residual
+        return self._gradient
+
+    def evaluate(self, h, t, friction=False):
+        """The kernel's output at the inputs set: (n, 3) NumPy. friction (projective):
+        the velocities after the friction that follows the solve, instead of the
+        residual."""
         self._set_clock(t, h)
         if self.implicit:
-            self._gradient(h)
+            self._kernel(friction)(h)
         else:
             self._forces()
         return self.out.to_numpy()
 
-    def vjp(self, seed, h, t):
+    def vjp(self, seed, h, t, friction=False):
         """Reverse mode with the output's adjoint ``seed`` ((n, 3) NumPy): returns the
         inputs' gradients (x, v, x1; x1 None for an explicit step) as NumPy; the
-        parameters' gradients accumulate in their fields."""
-        for field in (self.x, self.v, self.x1, self.out):
+        parameters' gradients accumulate in their fields. friction: as ``evaluate``'s."""
+        for field in (self.x, self.v, self.x1, self.v1, self.out):
             field.grad.fill(0)
         self.out.grad.from_numpy(seed.astype(runtime.numpy_real()))
         self._set_clock(t, h)
         if self.implicit:
-            self._gradient(h)
-            self._gradient.grad(h)
+            kernel = self._kernel(friction)
+            kernel(h)
+            kernel.grad(h)
             return self.x.grad.to_numpy(), self.v.grad.to_numpy(), self.x1.grad.to_numpy()
         self._forces()
         self._forces.grad()
@@ -237,16 +267,94 @@ class StepAdjoint:
                     self.out[ids[i]] += sign * c[i] * s
 
     @ti.func
+    def _gap(self, col, x, p, phi, n, x1p, h, fall):
+        """The height of x1p above particle p's contact plane with a collider, the plane
+        taken from the step's start x[p] (phi, n there) as ``Colliders.begin_solve``
+        takes it."""
+        free = self.model.inv_mass[p] > 0.0
+        return n.dot(x1p) - plane_offset(col, x[p], phi, n, self.v_reach[p], h, fall, free)
+
+    @ti.func
     def _contact_body(self, col, c, x, p, phi, n, ctx):
-        """Particle p's contact with collider c in the step's gradient, its plane and
-        lagged normal force taken from the step's start x[p] (phi, n there) as
-        ``Colliders.begin_solve`` and ``begin_step`` take them."""
+        """Particle p's contact with collider c in the step's gradient, its lagged normal
+        force from the step's start as ``begin_step`` takes it."""
         x1p, h, fall = ctx
         free = self.model.inv_mass[p] > 0.0
-        gap = n.dot(x1p) - plane_offset(col, x[p], phi, n, self.v_reach[p], h, fall, free)
-        _, g, _ = step_contact(col, gap, n, x1p, x[p], h, self.mass[p],
-                               lagged_normal_force(col, phi, free), n)
+        _, g, _ = step_contact(col, self._gap(col, x, p, phi, n, x1p, h, fall), n, x1p,
+                               x[p], h, self.mass[p], lagged_normal_force(col, phi, free), n)
         return g
+
+    @ti.func
+    def _push_body(self, col, c, x, p, phi, n, ctx):
+        """Projective dynamics' penalty and normal damping of particle p at (x1p, v1p)."""
+        x1p, v1p, h, fall = ctx
+        return plane_contact_force(col, self._gap(col, x, p, phi, n, x1p, h, fall), n, v1p,
+                                   self.mass[p])
+
+    @ti.func
+    def _coulomb_body(self, col, c, x, p, phi, n, ctx):
+        """Projective dynamics' friction after the solve (normal velocity change dvn)."""
+        x1p, v1p, h, fall, dvn = ctx
+        return coulomb_change(col, self._gap(col, x, p, phi, n, x1p, h, fall), n, v1p, dvn)
+
+    @ti.func
+    def _end_velocities(self):
+        """v1 = (x1 - x) / h (h read from the clock: a kernel's reverse mode takes no
+        statement outside its loops, and passing h to a function would be one)."""
+        for p in range(self.x.shape[0]):
+            self.v1[p] = (self.x1[p] - self.x[p]) / self.clock[2]
+
+    @ti.kernel
+    def _residual(self, h: float):
+        """Projective dynamics' force residual G(x1; x, v) (its negative: the backward
+        Euler gradient's sign), whose zero is the solver's converged step."""
+        self._end_velocities()
+        for p in range(self.x.shape[0]):
+            t = self.clock[0]
+            f = self.gravity.force(p, self.x1, self.v1, t)
+            if ti.static(self.has_colliders):
+                if self.model.inv_mass[p] > 0.0:
+                    fall = h * h * self.gravity.gravity().norm()
+                    f += self.table.for_each_contact(self.x, p, t - h, self._push_body,
+                                                     ti.Vector.zero(float, 3),
+                                                     (self.x1[p], self.v1[p], h, fall))
+            self.out[p] = self.mass[p] / (h * h) * (self.x1[p] - self.x[p] - h * self.v[p]) - f
+        for s in range(self.count):
+            i, j = self.pairs[s][0], self.pairs[s][1]
+            fi = spring_force(self.x1[i], self.x1[j], self.v1[i], self.v1[j], self.ks[s],
+                              self.kd[s], self.rest[s])
+            self.out[i] -= fi
+            self.out[j] += fi
+        self._hinges(self.x1, 1.0)
+        self._wind(1, -1.0)      # in Liu's y: the force at the step's start
+        if ti.static(self.triangle_count):
+            for e in range(self.triangle_count):
+                gu, gv = self.membrane.triangle_gradient(e, self.x1, self.v1)
+                self._gather_triangle(e, gu, gv, 1.0)
+
+    @ti.kernel
+    def _friction(self, h: float):
+        """The velocities after projective dynamics' friction (``Projective._friction``):
+        v1 = (x1 - x) / h and, at each contact a free particle touches, the approaching
+        normal velocity removed and the tangential cut by mu times the normal velocity
+        change h |f_n| / m the contact force gave."""
+        self._end_velocities()
+        for p in range(self.x.shape[0]):
+            t = self.clock[1]
+            vp = self.v1[p]
+            if ti.static(self.has_colliders):
+                if self.model.inv_mass[p] > 0.0:
+                    fall = h * h * self.gravity.gravity().norm()
+                    fn = self.table.for_each_contact(self.x, p, t, self._push_body,
+                                                     ti.Vector.zero(float, 3),
+                                                     (self.x1[p], vp, h, fall))
+                    dvn = 0.0
+                    if fn.dot(fn) > 0.0:      # (|f_n|'s derivative exists)
+                        dvn = h * fn.norm() * self.model.inv_mass[p]
+                    vp += self.table.for_each_contact(self.x, p, t, self._coulomb_body,
+                                                      ti.Vector.zero(float, 3),
+                                                      (self.x1[p], vp, h, fall, dvn))
+            self.out[p] = vp
 
     @ti.kernel
     def _gradient(self, h: float):

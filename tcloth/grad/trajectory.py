@@ -20,7 +20,19 @@ A step's adjoint (``StepAdjoint`` gives the vector-Jacobian products of its kern
     the pinned particles' share of -g_x1^T lambda (their x1 = x + h v) passed back to their
     x and v. This is the implicit function theorem's derivative of the converged step: the
     forward Newton must converge (``newton_tol``) well below the accuracy wanted of the
-    gradient, and the adjoint CG (``adjoint_tol``) likewise (docs/grad.md measures both).
+    gradient, and the adjoint CG (``adjoint_tol``) likewise (docs/grad.md measures both);
+  - projective dynamics, x1 solving G(x1; x, v) = 0 (its force residual; the iterations'
+    fixed point), v1 = F(x1; x, v) (the friction after the solve): F's vector-Jacobian
+    product with v1_bar first, then the adjoint solve G_x1^T lambda = r (r = x1_bar plus
+    F's share) on the free particles by flexible GMRES (``krylov.fgmres``; G_x1 is not
+    symmetric: the springs' damping acts along their current direction), preconditioned
+    by backward Euler's projected Hessian at the step's end (its CG to 1e-3: the same
+    stiffness but for the damping's direction terms and friction), its products G_x1^T
+    lambda by Taichi's reverse mode over G, at most 500 iterations; then x_bar, v_bar and
+    the parameters
+    as for backward Euler. The derivative of the converged step: the forward iterations
+    (``iterations``) must bring the residual (``stats["residual"]``; the largest is
+    ``Result.forward_residual``) well below the accuracy wanted.
 
 Controls: ``controls`` (steps, pinned, 3) set the pinned particles' velocities before each
 step (they move x += h u during step n); their gradient is the adjoint of those velocities.
@@ -33,11 +45,13 @@ import taichi as ti
 from .. import runtime
 from ..errors import SceneError
 from ..scene.scene import KIND_CODE
+from ..integrators.implicit import BackwardEuler
 from ..sim.simulator import Simulator
 from ..validate import as_int
 from .adjoint import StepAdjoint, unsupported
+from .krylov import fgmres
 
-INTEGRATORS = ("symplectic_euler", "backward_euler")
+INTEGRATORS = ("symplectic_euler", "backward_euler", "projective")
 # the membrane's parameters: name -> (its settings key, column)
 MEMBRANE = {"stretch_warp": ("stretch", 0), "stretch_weft": ("stretch", 1),
             "shear": ("shear", None)}
@@ -50,8 +64,11 @@ class Result:
     parameter); forward_seconds, backward_seconds (wall time of the forward run and of the
     backward run, which includes running each segment again); memory_bytes (the
     checkpoints and one segment's states, the memory the backward run keeps);
-    adjoint_cg_iterations (backward Euler: the adjoint solves' CG iterations in all);
-    adjoint_residual (the largest relative residual an adjoint solve ended with).
+    adjoint_iterations (the adjoint solves' iterations in all: CG's for backward Euler,
+    flexible GMRES's for projective dynamics); adjoint_residual (the largest relative
+    residual an adjoint solve ended with); forward_residual (projective dynamics: the
+    largest ``stats["residual"]`` of the forward run's steps, how far from its converged
+    step, whose derivative the gradient is, the solver stopped).
     """
 
     def __init__(self, loss, grad, **stats):
@@ -67,8 +84,8 @@ class Result:
 
 
 class Trajectory:
-    """``steps`` steps of ``scene`` with ``integrator`` ("symplectic_euler" or
-    "backward_euler") at ``dt``; ``options`` go to the integrator. Its parameters (``names``)
+    """``steps`` steps of ``scene`` with ``integrator`` ("symplectic_euler",
+    "backward_euler" or "projective") at ``dt``; ``options`` go to the integrator. Its parameters (``names``)
     are read with ``value(name)`` and changed with ``set(name, value)`` (nothing is
     compiled again); ``gradient(loss, wrt)`` runs the trajectory and returns the loss and
     its gradient.
@@ -87,7 +104,7 @@ class Trajectory:
     checkpoint_every: the states stored by the forward run (every k-th; default about
     sqrt(steps), which keeps 2 sqrt(steps) states and runs each step twice); an attribute,
     which may be changed between runs, as may the number of steps (``set_steps``).
-    adjoint_tol: the relative residual of backward Euler's adjoint solves.
+    adjoint_tol: the relative residual of the implicit integrators' adjoint solves.
     """
 
     def __init__(self, scene, steps, dt, integrator="symplectic_euler", checkpoint_every=None,
@@ -101,14 +118,16 @@ class Trajectory:
             checkpoint_every = max(1, int(round(np.sqrt(self.steps))))
         self.checkpoint_every = as_int("checkpoint_every", checkpoint_every, 1)
         self.adjoint_tol = float(adjoint_tol)
-        self.implicit = integrator == "backward_euler"
+        self.implicit = integrator in ("backward_euler", "projective")
+        self.projective = integrator == "projective"
+        self._forward_residual = 0.0
         why = unsupported(scene)
         if why is not None:
             raise SceneError(f"tcloth.grad: {why}")
         self.sim = Simulator(scene, integrator=integrator, dt=dt, **options)
         self._inv_mass = self.sim.model.inv_mass.to_numpy().astype(np.float64)
         self.scene = scene
-        self.adjoint = StepAdjoint(self.sim.model, self.implicit)
+        self.adjoint = StepAdjoint(self.sim.model, self.implicit, self.projective)
         self.adjoint.load()
         self.pinned = np.flatnonzero(scene.pinned)
         self.free = np.flatnonzero(~scene.pinned)
@@ -117,6 +136,9 @@ class Trajectory:
         kinds = scene.springs["kind"][self.sim.model.spring_order]
         self._kind_rows = {name: kinds == code for name, code in KIND_CODE.items()
                            if (kinds == code).any()}
+        if self.projective:
+            # projective's adjoint solves are preconditioned by backward Euler's Hessian
+            self._newton = BackwardEuler(self.sim.model, exact_hessian=False)
         if self.implicit:
             self._x_start, self._rhs = (ti.Vector.field(3, runtime.real(),
                                                         shape=scene.num_particles)
@@ -249,12 +271,16 @@ class Trajectory:
             self._apply_control(n)
             states.append(self._state())
             sim.step(1)
+            if self.projective:
+                self._forward_residual = max(self._forward_residual,
+                                             sim.integrator.stats["residual"])
         states.append(self._state())
         return states
 
     def forward(self, loss):
         """The forward run alone: (loss value, the checkpoints {step: (x, v)})."""
         k, steps = self.checkpoint_every, self.steps
+        self._forward_residual = 0.0
         state = self.initial["positions"], self.initial["velocities"]
         checkpoints, value = {0: state}, 0.0
         reads = set(loss.steps)
@@ -288,7 +314,7 @@ class Trajectory:
         x_bar, v_bar = np.zeros((n, 3)), np.zeros((n, 3))
         controls_bar = np.zeros((self.steps, len(self.pinned), 3))
         reads = set(loss.steps)
-        cg_iterations, worst = 0, 0.0
+        iterations, worst = 0, 0.0
         k = self.checkpoint_every
         starts = list(range(0, self.steps, k))
         segment = 0
@@ -304,9 +330,10 @@ class Trajectory:
                         v_bar += dv
                 (x, v), (x1, _) = states[m - start], states[m + 1 - start]
                 if self.implicit:
-                    x_bar, v_bar, iters, residual = self._implicit_adjoint(
-                        x, v, x1, x_bar, v_bar, h, m)
-                    cg_iterations += iters
+                    adjoint = (self._projective_adjoint if self.projective
+                               else self._implicit_adjoint)
+                    x_bar, v_bar, iters, residual = adjoint(x, v, x1, x_bar, v_bar, h, m)
+                    iterations += iters
                     worst = max(worst, residual)
                 else:
                     x_bar, v_bar = self._explicit_adjoint(x, v, x_bar, v_bar, h, m)
@@ -319,11 +346,13 @@ class Trajectory:
             if dv is not None:
                 v_bar += dv
         t2 = time.perf_counter()
+        forward_residual = self._forward_residual
         grads = self._reduce(wrt, x_bar, v_bar, controls_bar)
         state_bytes = 2 * n * 3 * np.dtype(runtime.numpy_real()).itemsize
         return Result(value, grads, forward_seconds=t1 - t0, backward_seconds=t2 - t1,
                       memory_bytes=(len(checkpoints) + segment) * state_bytes,
-                      adjoint_cg_iterations=cg_iterations, adjoint_residual=worst)
+                      adjoint_iterations=iterations, adjoint_residual=worst,
+                      forward_residual=forward_residual)
 
     def _explicit_adjoint(self, x, v, x_bar, v_bar, h, m):
         a = v_bar + h * x_bar
@@ -352,6 +381,46 @@ class Trajectory:
         carried = x_bar[self.pinned] + v_bar[self.pinned] / h + gx1[self.pinned]
         x_new[self.pinned] += carried
         v_new[self.pinned] += h * carried
+        return x_new, v_new, int(iters), float(residual)
+
+    def _projective_adjoint(self, x, v, x1, x_bar, v_bar, h, m):
+        adj, pinned, free = self.adjoint, self.pinned, self.free
+        t0 = self.sim.time_at(m)
+        t1 = t0 + h
+        adj.set_inputs(x, v, x1)
+        newton = self._newton
+        newton.potential.begin(adj.x, adj.v, h, t0, self._x_start)
+        newton.hessian.assemble(adj.x1, h, t1)
+        # v1 = F(x1; x, v), the friction after the solve
+        x_new, v_new, gx1 = adj.vjp(v_bar, h, t1, friction=True)
+        r = x_bar + gx1
+
+        def transposed(z):
+            """G_x1^T z on the free particles."""
+            seed = np.zeros_like(r)
+            seed[free] = z.reshape(-1, 3)
+            return adj.vjp(seed, h, t1)[2][free].ravel()
+
+        def precondition(z):
+            """H^-1 z roughly, H backward Euler's (projected) Hessian at the step's end."""
+            b = np.zeros_like(r)
+            b[free] = -z.reshape(-1, 3)             # solve(grad) solves H dx = -grad
+            self._rhs.from_numpy(b.astype(runtime.numpy_real()))
+            newton.hessian.solve(self._rhs, 1e-3, 200)
+            return newton.hessian.dx.to_numpy()[free].ravel().astype(np.float64)
+
+        kept = adj.parameter_grads()        # the solve's products accumulate nothing
+        lam_free, iters, residual = fgmres(transposed, precondition, r[free].ravel(),
+                                           self.adjoint_tol, max_iterations=500)
+        adj.set_parameter_grads(kept)
+        lam = np.zeros_like(r)
+        lam[free] = lam_free.reshape(-1, 3)
+        gx, gv, gx1 = adj.vjp(-lam, h, t1)
+        x_new = x_new + gx
+        v_new = v_new + gv
+        carried = r[pinned] + gx1[pinned]
+        x_new[pinned] += carried
+        v_new[pinned] += h * carried
         return x_new, v_new, int(iters), float(residual)
 
     def _bending_gradient(self):

@@ -127,6 +127,40 @@ def step_contact(col, gap, n, xp, x0p, h, m, fn0, n0):
     return e, g, block
 
 
+@ti.func
+def plane_contact_force(col, gap, n, vp, m):
+    """The penalty and normal damping of a particle (mass m, velocity vp) at height gap
+    above its contact plane of normal n (projective dynamics' contact, without friction):
+    max(k depth - c_d v_n, 0) n where depth = thickness - gap > 0."""
+    f = ti.Vector.zero(float, 3)
+    depth = col.thickness - gap
+    if depth > 0.0:
+        k = col.stiffness
+        cd = 2.0 * col.damping * ti.sqrt(k * m)
+        f = ti.max(k * depth - cd * (vp - col.velocity).dot(n), 0.0) * n
+    return f
+
+
+@ti.func
+def coulomb_change(col, gap, n, vp, dvn):
+    """The velocity change of a particle touching its contact plane (gap within the
+    thickness) after a solve that changed its normal velocity by dvn: its approaching
+    normal velocity removed, its tangential velocity cut by mu (dvn + that removal), at
+    most to rest (Coulomb's bound on the friction impulse)."""
+    change = ti.Vector.zero(float, 3)
+    if gap <= col.thickness * (1.0 + 1e-3):
+        v_rel = vp - col.velocity
+        vn = v_rel.dot(n)
+        vt = v_rel - vn * n
+        change = -ti.min(vn, 0.0) * n
+        s2 = vt.dot(vt)
+        if s2 > 0.0:        # (a sliding particle: the norm's derivative exists)
+            speed = ti.sqrt(s2)
+            cut = ti.min(col.friction * (dvn + ti.max(-vn, 0.0)), speed)
+            change -= cut * vt / speed
+    return change
+
+
 @ti.data_oriented
 class Colliders(Term):
     """Penalty contact and Coulomb friction against the scene's colliders; skipped for
@@ -319,13 +353,7 @@ class Colliders(Term):
     @ti.func
     def _plane_force_body(self, col, c, gap, n, ctx):
         vp, m = ctx
-        f = ti.Vector.zero(float, 3)
-        depth = col.thickness - gap
-        if depth > 0.0:
-            k = col.stiffness
-            cd = 2.0 * col.damping * ti.sqrt(k * m)
-            f = ti.max(k * depth - cd * (vp - col.velocity).dot(n), 0.0) * n
-        return f
+        return plane_contact_force(col, gap, n, vp, m)
 
     @ti.func
     def plane_force(self, p, x, v):
@@ -362,15 +390,7 @@ class Colliders(Term):
     @ti.func
     def _coulomb_body(self, col, c, gap, n, ctx):
         vp, dvn = ctx
-        change = ti.Vector.zero(float, 3)
-        if gap <= col.thickness * (1.0 + 1e-3):
-            v_rel = vp - col.velocity
-            vn = v_rel.dot(n)
-            vt = v_rel - vn * n
-            speed = vt.norm()
-            cut = ti.min(col.friction * (dvn + ti.max(-vn, 0.0)), speed)
-            change = -ti.min(vn, 0.0) * n - cut * vt / ti.max(speed, 1e-30)
-        return change
+        return coulomb_change(col, gap, n, vp, dvn)
 
     @ti.func
     def plane_coulomb(self, p, x, v, dvn):
