@@ -1,7 +1,8 @@
 """Flexible GMRES (Saad 1993, "A flexible inner-outer preconditioned GMRES algorithm"):
 the adjoint solve of a step whose Jacobian is not symmetric (projective dynamics' residual:
-the springs' damping along their current direction), with a preconditioner that may change
-from one application to the next (an inner CG stopped at a tolerance).
+the springs' damping along their current direction). The preconditioner is applied to each
+direction once and the results kept, so it may also be an inner iterative solve stopped at
+a tolerance, which changes from one application to the next.
 """
 import numpy as np
 

@@ -26,8 +26,9 @@ A step's adjoint (``StepAdjoint`` gives the vector-Jacobian products of its kern
     product with v1_bar first, then the adjoint solve G_x1^T lambda = r (r = x1_bar plus
     F's share) on the free particles by flexible GMRES (``krylov.fgmres``; G_x1 is not
     symmetric: the springs' damping acts along their current direction), preconditioned
-    by backward Euler's projected Hessian at the step's end (its CG to 1e-3: the same
-    stiffness but for the damping's direction terms and friction), its products G_x1^T
+    by backward Euler's projected Hessian at the step's end (one V-cycle of its multigrid,
+    or its block Jacobi off a grid: the same stiffness but for the damping's direction
+    terms and friction), its products G_x1^T
     lambda by Taichi's reverse mode over G, at most 500 iterations; then x_bar, v_bar and
     the parameters
     as for backward Euler. The derivative of the converged step: the forward iterations
@@ -402,11 +403,12 @@ class Trajectory:
             return adj.vjp(seed, h, t1)[2][free].ravel()
 
         def precondition(z):
-            """H^-1 z roughly, H backward Euler's (projected) Hessian at the step's end."""
+            """B z, B one V-cycle (or block Jacobi) of backward Euler's projected Hessian
+            at the step's end."""
             b = np.zeros_like(r)
-            b[free] = -z.reshape(-1, 3)             # solve(grad) solves H dx = -grad
+            b[free] = -z.reshape(-1, 3)
             self._rhs.from_numpy(b.astype(runtime.numpy_real()))
-            newton.hessian.solve(self._rhs, 1e-3, 200)
+            newton.hessian.descent(self._rhs)        # dx = -B grad
             return newton.hessian.dx.to_numpy()[free].ravel().astype(np.float64)
 
         kept = adj.parameter_grads()        # the solve's products accumulate nothing
