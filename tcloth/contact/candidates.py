@@ -17,7 +17,6 @@ cloth edges or rope segments, alpha = (1 - s, s, -(1 - u), -u)).
 """
 import taichi as ti
 
-from .. import runtime
 from ..geometry.proximity import contact_weights
 
 
@@ -39,7 +38,6 @@ class ContactList:
     values (``terms.self_contact.Lagged``)."""
 
     def __init__(self, table, inv_mass, capacity):
-        real = runtime.real()
         self.table, self.inv_mass = table, inv_mass
         self.capacity = capacity
         self.ids = ti.Vector.field(4, ti.i32, shape=capacity)
