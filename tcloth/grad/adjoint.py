@@ -1,9 +1,9 @@
 """The vector-Jacobian products of one step: Taichi's reverse mode over the terms' own
 ``ti.func``s, on copies of the model's parameters that carry gradients.
 
-``StepAdjoint(model, implicit, projective)`` holds those copies (gravity and drag, each spring's
-stiffness and damping, the colliders' table) and the step's inputs x, v (and, implicit,
-the end positions x1), all with gradients, and one differentiable kernel:
+``StepAdjoint(model, implicit, projective)`` holds those copies (gravity and drag, each
+spring's stiffness and damping, the colliders' table) and the step's inputs x, v (and,
+implicit, the end positions x1), all with gradients, and one differentiable kernel:
 
   - explicit (symplectic Euler): the force f(x, v) of gravity and drag, the springs and
     the colliders (``GravityDrag.force``, ``springs.spring_force``, ``Colliders.force``:

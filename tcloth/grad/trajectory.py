@@ -28,12 +28,11 @@ A step's adjoint (``StepAdjoint`` gives the vector-Jacobian products of its kern
     symmetric: the springs' damping acts along their current direction), preconditioned
     by backward Euler's projected Hessian at the step's end (one V-cycle of its multigrid,
     or its block Jacobi off a grid: the same stiffness but for the damping's direction
-    terms and friction), its products G_x1^T
-    lambda by Taichi's reverse mode over G, at most 500 iterations; then x_bar, v_bar and
-    the parameters
-    as for backward Euler. The derivative of the converged step: the forward iterations
-    (``iterations``) must bring the residual (``stats["residual"]``; the largest is
-    ``Result.forward_residual``) well below the accuracy wanted.
+    terms and friction), its products G_x1^T lambda by Taichi's reverse mode over G, at
+    most 500 iterations; then x_bar, v_bar and the parameters as for backward Euler. The
+    derivative of the converged step: the forward iterations (``iterations``) must bring
+    the residual (``stats["residual"]``; the largest is ``Result.forward_residual``) well
+    below the accuracy wanted.
 
 Controls: ``controls`` (steps, pinned, 3) set the pinned particles' velocities before each
 step (they move x += h u during step n); their gradient is the adjoint of those velocities.
@@ -45,8 +44,8 @@ import taichi as ti
 
 from .. import runtime
 from ..errors import SceneError
-from ..scene.scene import KIND_CODE
 from ..integrators.implicit import BackwardEuler
+from ..scene.scene import KIND_CODE
 from ..sim.simulator import Simulator
 from ..validate import as_int
 from .adjoint import StepAdjoint, unsupported
@@ -86,21 +85,21 @@ class Result:
 
 class Trajectory:
     """``steps`` steps of ``scene`` with ``integrator`` ("symplectic_euler",
-    "backward_euler" or "projective") at ``dt``; ``options`` go to the integrator. Its parameters (``names``)
-    are read with ``value(name)`` and changed with ``set(name, value)`` (nothing is
-    compiled again); ``gradient(loss, wrt)`` runs the trajectory and returns the loss and
-    its gradient.
+    "backward_euler" or "projective") at ``dt``; ``options`` go to the integrator. Its
+    parameters (``names``) are read with ``value(name)`` and changed with ``set(name,
+    value)`` (nothing is compiled again); ``gradient(loss, wrt)`` runs the trajectory and
+    returns the loss and its gradient.
 
     Parameters (names): "<kind>.stiffness" and "<kind>.damping" for each spring kind the
     scene has (one value for the kind: its springs' common k_s, k_d); "bending" (the hinge
-    bending rigidities B of ``Scene.set_bending``, N m, (cloths, 2): (warp, weft) per
-    cloth; a mesh cloth's hinges take its warp, and its weft must equal it);
-    "membrane.stretch_warp",
-    "membrane.stretch_weft" and "membrane.shear" (``Scene.set_membrane``'s C_u, C_v, G,
-    N/m, one value each over its cloths); "gravity" (3,);
-    "air_drag" (the scene's c); "wind" (its mean velocity (3,), m/s); "collider<i>.friction" and "collider<i>.stiffness" (scene
-    collider i); "positions" and "velocities" (the initial state,
-    (n, 3)); "controls" (the pinned particles' velocities, (steps, pinned, 3)).
+    bending rigidities B of ``Scene.set_bending``, N m, (cloths, 2): (warp, weft) per cloth;
+    a mesh cloth's hinges take its warp, and its weft must equal it);
+    "membrane.stretch_warp", "membrane.stretch_weft" and "membrane.shear"
+    (``Scene.set_membrane``'s C_u, C_v, G, N/m, one value each over its cloths); "gravity"
+    (3,); "air_drag" (the scene's c); "wind" (its mean velocity (3,), m/s);
+    "collider<i>.friction" and "collider<i>.stiffness" (scene collider i); "positions" and
+    "velocities" (the initial state, (n, 3)); "controls" (the pinned particles' velocities,
+    (steps, pinned, 3)).
 
     checkpoint_every: the states stored by the forward run (every k-th; default about
     sqrt(steps), which keeps 2 sqrt(steps) states and runs each step twice); an attribute,
@@ -347,13 +346,12 @@ class Trajectory:
             if dv is not None:
                 v_bar += dv
         t2 = time.perf_counter()
-        forward_residual = self._forward_residual
         grads = self._reduce(wrt, x_bar, v_bar, controls_bar)
         state_bytes = 2 * n * 3 * np.dtype(runtime.numpy_real()).itemsize
         return Result(value, grads, forward_seconds=t1 - t0, backward_seconds=t2 - t1,
                       memory_bytes=(len(checkpoints) + segment) * state_bytes,
                       adjoint_iterations=iterations, adjoint_residual=worst,
-                      forward_residual=forward_residual)
+                      forward_residual=self._forward_residual)
 
     def _explicit_adjoint(self, x, v, x_bar, v_bar, h, m):
         a = v_bar + h * x_bar
