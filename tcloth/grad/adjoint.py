@@ -211,6 +211,17 @@ class StepAdjoint:
         self._forces.grad()
         return self.x.grad.to_numpy(), self.v.grad.to_numpy(), None
 
+    def repeat_vjp(self, seed):
+        """x1's gradient alone for another seed, after a ``vjp`` or ``evaluate`` of the
+        residual at the same inputs and time (its values kept in the fields): the reverse
+        kernel only, without the forward one and the copies (an adjoint solve's
+        products). The parameters' gradients accumulate as in ``vjp``."""
+        self.out.grad.from_numpy(seed.astype(runtime.numpy_real()))
+        self.v1.grad.fill(0)
+        self.x1.grad.fill(0)
+        self._kernel(False).grad(self.clock[2])
+        return self.x1.grad.to_numpy()
+
     def _set_clock(self, t, h):
         """t: the time the kernel evaluates at (implicit: the step's end, t - h its start)."""
         self.clock.from_numpy(np.array([t, t - h if self.implicit else t, h],

@@ -394,11 +394,13 @@ class Trajectory:
         x_new, v_new, gx1 = adj.vjp(v_bar, h, t1, friction=True)
         r = x_bar + gx1
 
+        adj.evaluate(h, t1)                 # the residual's values, for repeat_vjp
+
         def transposed(z):
             """G_x1^T z on the free particles."""
             seed = np.zeros_like(r)
             seed[free] = z.reshape(-1, 3)
-            return adj.vjp(seed, h, t1)[2][free].ravel()
+            return adj.repeat_vjp(seed)[free].ravel()
 
         def precondition(z):
             """B z, B one V-cycle (or block Jacobi) of backward Euler's projected Hessian
