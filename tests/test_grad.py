@@ -234,9 +234,7 @@ def test_the_adjoints_kernels_are_the_simulators_terms(f64, run):
         w = rng.standard_normal((n, 3))
         w[trajectory.pinned] = 0.0
         adj.set_inputs(x, v, x1)
-        kept = adj.parameter_grads()
         transposed = adj.vjp(w, h, h)[2]
-        adj.set_parameter_grads(kept)
         assert abs((transposed * p).sum() - (w * fd).sum()) <= 1e-7 * abs((w * fd).sum())
         return
     integ = sim.integrator

@@ -211,15 +211,15 @@ class StepAdjoint:
         self._forces.grad()
         return self.x.grad.to_numpy(), self.v.grad.to_numpy(), None
 
-    def repeat_vjp(self, seed):
+    def repeat_vjp(self, seed, h):
         """x1's gradient alone for another seed, after a ``vjp`` or ``evaluate`` of the
-        residual at the same inputs and time (its values kept in the fields): the reverse
-        kernel only, without the forward one and the copies (an adjoint solve's
+        residual at the same inputs, h and time (its values kept in the fields): the
+        reverse kernel only, without the forward one and the copies (an adjoint solve's
         products). The parameters' gradients accumulate as in ``vjp``."""
         self.out.grad.from_numpy(seed.astype(runtime.numpy_real()))
         self.v1.grad.fill(0)
         self.x1.grad.fill(0)
-        self._kernel(False).grad(self.clock[2])
+        self._kernel(False).grad(h)
         return self.x1.grad.to_numpy()
 
     def _set_clock(self, t, h):

@@ -400,7 +400,7 @@ class Trajectory:
             """G_x1^T z on the free particles."""
             seed = np.zeros_like(r)
             seed[free] = z.reshape(-1, 3)
-            return adj.repeat_vjp(seed)[free].ravel()
+            return adj.repeat_vjp(seed, h)[free].ravel()
 
         def precondition(z):
             """B z, B one V-cycle (or block Jacobi) of backward Euler's projected Hessian
