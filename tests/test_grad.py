@@ -24,7 +24,7 @@ def _cloth(collider):
     """A 6 x 6 cloth held at two corners, with hinge bending (warp and weft), a membrane
     (stretch and shear) and a gusty wind (no lift: its |u| v_t has a kink where the wind turns along the cloth), over a
     sphere it touches (collider) or free."""
-    scene = tcloth.Scene(air_drag=0.02)
+    scene = tcloth.Scene(air_drag=0.02, air_damping=0.3)
     scene.add_cloth(resolution=(6, 6), size=(0.3, 0.3), center=(0.0, 0.105, 0.0),
                     structural=(300.0, 0.5), shear=(100.0, 0.2), flexion=(50.0, 0.1),
                     pinned=[(0, 0), (5, 0)])

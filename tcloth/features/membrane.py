@@ -45,16 +45,22 @@ class MembraneData:
         coefficients: (T,) vec4: (A C_u, A C_v, A G, beta), A the rest area.
         start, entries: each particle's (triangle, slot) pairs in CSR form
             (``graph.incidence``).
-        area, reduced, cloth: NumPy, per triangle: its rest area, an edge's reduced mass
-            (a third of the triangle's mass each, halved) and its cloth's row in the
-            settings, from which ``coefficients_for`` makes the coefficients.
+        ids, area, reduced, cloth: NumPy, per triangle: its particle ids, its rest area,
+            an edge's reduced mass (a third of the triangle's mass each, halved) and its
+            cloth's row in the settings, from which ``coefficients_for`` makes the
+            coefficients.
     """
 
     def __init__(self, ids, weights, area, reduced, cloth, settings, n):
-        self.area, self.reduced, self.cloth = area, reduced, cloth
+        self.ids, self.area, self.reduced, self.cloth = ids, area, reduced, cloth
         (self.triangles, self.weights, self.coefficients, self.start,
          self.entries) = element_fields(ids, n, weights, self.coefficients_for(settings))
         self.count = len(ids)
+
+    def masses_changed(self, masses):
+        """The particles' masses (N,) changed: the reduced masses the damping reads (the
+        coefficients follow at the next ``coefficients_for``)."""
+        self.reduced = reduced_masses(masses, self.ids)
 
     def coefficients_for(self, settings):
         """(T, 4) NumPy: each triangle's (A C_u, A C_v, A G, beta) at the settings' stretch,
@@ -66,6 +72,11 @@ class MembraneData:
         beta = 2.0 * zeta * np.sqrt(self.reduced / stretch.max(axis=1))
         return np.stack([self.area * stretch[:, 0], self.area * stretch[:, 1],
                          self.area * shear, beta], 1)
+
+
+def reduced_masses(masses, triangles):
+    """Each triangle's edge reduced mass: a third of its mass at each corner, halved."""
+    return masses[triangles].mean(axis=1) / 2.0
 
 
 class MembraneFeature(Feature):
@@ -114,7 +125,7 @@ class MembraneFeature(Feature):
             ids.append(tris)
             weights.append(b)
             areas.append(area)
-            reduced.append(masses[tris].mean(axis=1) / 2.0)
+            reduced.append(reduced_masses(masses, tris))
             rows.append(np.full(len(tris), row))
         return MembraneData(*(np.concatenate(z) for z in (ids, weights, areas, reduced, rows)),
                             settings, model.particle_count)

@@ -1,8 +1,8 @@
 """The vector-Jacobian products of one step: Taichi's reverse mode over the terms' own
 ``ti.func``s, on copies of the model's parameters that carry gradients.
 
-``StepAdjoint(model, implicit, projective)`` holds those copies (gravity and drag, each
-spring's stiffness and damping, the colliders' table) and the step's inputs x, v (and,
+``StepAdjoint(model, implicit, projective)`` holds those copies (gravity and drag, the
+masses, each spring's stiffness and damping, the colliders' table) and the step's inputs x, v (and,
 implicit, the end positions x1), all with gradients, and one differentiable kernel:
 
   - explicit (symplectic Euler): the force f(x, v) of gravity and drag, the springs and
@@ -71,7 +71,9 @@ class StepAdjoint:
     """One step's differentiable kernel over the model's terms (see the module).
 
     Attributes (fields with gradients): params (g_x, g_y, g_z, air_drag), drag (each
-    particle's drag coefficient), ks, kd (each spring's, in the model's spring order),
+    particle's drag coefficient), mass, inv_mass (each particle's; the gradient of a mass
+    is mass's plus inv_mass's times -1/m^2), ks, kd (each spring's, in the model's spring
+    order),
     table (the colliders', or None), x, v, x1 (the step's inputs), out (its output: the
     force, or the incremental potential's gradient).
     """
@@ -81,7 +83,8 @@ class StepAdjoint:
         self.model, self.implicit, self.projective = model, implicit, projective
         self.count = model.spring_count
         self.params = ti.field(real, shape=4, needs_grad=True)
-        self.drag = ti.field(real, shape=n, needs_grad=True)
+        self.drag, self.mass, self.inv_mass = (ti.field(real, shape=n, needs_grad=True)
+                                               for _ in range(3))
         self.ks, self.kd = (ti.field(real, shape=max(self.count, 1), needs_grad=True)
                             for _ in range(2))
         self.x, self.v, self.x1, self.v1, self.out = (
@@ -96,13 +99,14 @@ class StepAdjoint:
         # |v|, a test with no derivative; |v|'s would be 0/0 at rest)
         self.v_reach = (ti.Vector.field(3, real, shape=n)
                         if self.table is not None and implicit else None)
-        view = SimpleNamespace(mass=model.mass, inv_mass=model.inv_mass, params=self.params,
+        view = SimpleNamespace(mass=self.mass, inv_mass=self.inv_mass, params=self.params,
                                drag=self.drag, colliders=self.table, particle_count=n)
         self.gravity = GravityDrag(view)
         self.colliders = Colliders(view) if self.table is not None else None
         self.has_colliders = self.colliders is not None
-        self.mass, self.pairs, self.rest = model.mass, model.spring_pairs, model.spring_rest
-        self.parameter_fields = [self.params, self.drag, self.ks, self.kd]
+        self.pairs, self.rest = model.spring_pairs, model.spring_rest
+        self.parameter_fields = [self.params, self.drag, self.mass, self.inv_mass, self.ks,
+                                 self.kd]
         # hinge bending: the term on weights that carry gradients
         self.hinge_count = model.bending.count if model.bending is not None else 0
         if self.hinge_count:
@@ -136,6 +140,7 @@ class StepAdjoint:
         """Copy the model's current parameters (after its ``refresh``)."""
         model = self.model
         for mine, theirs in ((self.params, model.params), (self.drag, model.drag),
+                             (self.mass, model.mass), (self.inv_mass, model.inv_mass),
                              (self.ks, model.spring_ks), (self.kd, model.spring_kd)):
             mine.copy_from(theirs)
         if self.table is not None:
@@ -361,7 +366,7 @@ class StepAdjoint:
                                                      (self.x1[p], vp, h, fall))
                     dvn = 0.0
                     if fn.dot(fn) > 0.0:      # (|f_n|'s derivative exists)
-                        dvn = h * fn.norm() * self.model.inv_mass[p]
+                        dvn = h * fn.norm() * self.inv_mass[p]
                     vp += self.table.for_each_contact(self.x, p, t, self._coulomb_body,
                                                       ti.Vector.zero(float, 3),
                                                       (self.x1[p], vp, h, fall, dvn))

@@ -96,7 +96,10 @@ class Trajectory:
     a mesh cloth's hinges take its warp, and its weft must equal it);
     "membrane.stretch_warp", "membrane.stretch_weft" and "membrane.shear"
     (``Scene.set_membrane``'s C_u, C_v, G, N/m, one value each over its cloths); "gravity"
-    (3,); "air_drag" (the scene's c); "wind" (its mean velocity (3,), m/s);
+    (3,); "air_drag" (the scene's c); "masses" (each particle's, (n,), kg: a fabric's
+    density is their scale; ``Scene.set_masses``: the air damping, the membrane's and the
+    colliders' damping follow them, the springs' k_d stay); "wind" (its mean velocity
+    (3,), m/s);
     "collider<i>.friction" and "collider<i>.stiffness" (scene collider i); "positions" and
     "velocities" (the initial state, (n, 3)); "controls" (the pinned particles' velocities,
     (steps, pinned, 3)).
@@ -121,6 +124,7 @@ class Trajectory:
         self.implicit = integrator in ("backward_euler", "projective")
         self.projective = integrator == "projective"
         self._forward_residual = 0.0
+        self._mass_bar = None       # symplectic Euler's share of dL/dm, during a gradient
         why = unsupported(scene)
         if why is not None:
             raise SceneError(f"tcloth.grad: {why}")
@@ -162,7 +166,7 @@ class Trajectory:
             names += ["bending"]
         if self.sim.model.membrane is not None:
             names += [f"membrane.{what}" for what in MEMBRANE]
-        names += ["gravity", "air_drag"]
+        names += ["masses", "gravity", "air_drag"]
         if self.sim.model.wind is not None:
             names += ["wind"]
         names += [f"collider{i}.{what}" for i in range(len(self.scene.colliders))
@@ -185,6 +189,8 @@ class Trajectory:
             return np.array(scene.gravity, dtype=np.float64)
         if name == "air_drag":
             return float(scene.air_drag)
+        if name == "masses":
+            return scene.masses
         if name == "bending":
             return np.array(scene.bending["rigidity"], dtype=np.float64)
         if name == "wind":
@@ -230,6 +236,9 @@ class Trajectory:
             sim.set_gravity(value)
         elif name == "air_drag":
             sim.set_air_drag(value)
+        elif name == "masses":
+            sim.set_masses(value)
+            self._inv_mass = sim.model.inv_mass.to_numpy().astype(np.float64)
         elif name == "wind":
             sim.set_wind(value)
         elif name == "bending":
@@ -311,6 +320,7 @@ class Trajectory:
         n, h = self.scene.num_particles, self.sim.dt
         adj = self.adjoint
         adj.zero_parameter_grads()
+        self._mass_bar = np.zeros(n) if "masses" in wrt and not self.implicit else None
         x_bar, v_bar = np.zeros((n, 3)), np.zeros((n, 3))
         controls_bar = np.zeros((self.steps, len(self.pinned), 3))
         reads = set(loss.steps)
@@ -357,6 +367,9 @@ class Trajectory:
         a = v_bar + h * x_bar
         self.adjoint.set_inputs(x, v)
         gx, gv, _ = self.adjoint.vjp(h * self._inv_mass[:, None] * a, h, self.sim.time_at(m))
+        if self._mass_bar is not None:      # v1's M^-1: d(h f / m)/dm = -h f / m^2 at fixed f
+            f = self.adjoint.out.to_numpy().astype(np.float64)
+            self._mass_bar -= h * self._inv_mass ** 2 * (a * f).sum(axis=1)
         return x_bar + gx, a + gv
 
     def _implicit_adjoint(self, x, v, x1, x_bar, v_bar, h, m):
@@ -451,6 +464,23 @@ class Trajectory:
         dbeta = np.where(stiffer, -beta / (2.0 * stretch[:, column]), 0.0)
         return float((c_bar[:, column] * data.area + c_bar[:, 3] * dbeta).sum())
 
+    def _masses_gradient(self):
+        """dL/dm (n,): the mass fields' gradients (inv_mass's through -1/m^2), the drag's
+        through c_p = c + gamma m_p, the membrane's damping through beta = 2 zeta
+        sqrt(m_reduced / max(C_u, C_v)) (m_reduced a sixth of the triangle's corner
+        masses), and symplectic Euler's M^-1 (``_explicit_adjoint``)."""
+        adj, scene = self.adjoint, self.scene
+        out = (adj.mass.grad.to_numpy() - adj.inv_mass.grad.to_numpy() * self._inv_mass ** 2
+               + scene.air_damping * adj.drag.grad.to_numpy()).astype(np.float64)
+        data = self.sim.model.membrane
+        if data is not None:
+            c_bar = adj.membrane_c.grad.to_numpy()[:data.count, 3].astype(np.float64)
+            beta = data.coefficients_for(scene.membrane)[:, 3]
+            np.add.at(out, data.ids, (c_bar * beta / (12.0 * data.reduced))[:, None])
+        if self._mass_bar is not None:
+            out += self._mass_bar
+        return out
+
     def _reduce(self, wrt, x_bar, v_bar, controls_bar):
         adj, grads = self.adjoint, {}
         count = self.sim.model.spring_count
@@ -465,6 +495,8 @@ class Trajectory:
                 grads[name] = adj.params.grad.to_numpy()[:3].astype(np.float64)
             elif name == "air_drag":
                 grads[name] = float(adj.drag.grad.to_numpy().sum())
+            elif name == "masses":
+                grads[name] = self._masses_gradient()
             elif name == "wind":
                 grads[name] = adj.wind_params.grad.to_numpy()[:3].astype(np.float64)
             elif name == "bending":

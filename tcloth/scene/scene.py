@@ -139,6 +139,14 @@ class Scene:
         self.num_springs += m
         return sids
 
+    def set_masses(self, masses):
+        """Every particle's mass (N,), kg, > 0 (a number: the same for all). What the scene
+        gives per mass or as a ratio of critical follows it (the air damping, the
+        membrane's and the colliders' damping); the springs' k_d (N s/m) stay."""
+        masses = as_per_item("masses", masses, self.num_particles, minimum=0.0, strict=True)
+        ends = np.cumsum([len(part) for part in self._m])[:-1]
+        self._m = list(np.split(masses, ends))
+
     def set_spring_parameters(self, kind, stiffness=None, damping=None):
         """Set the stiffness k_s (N/m, >= 0) and/or damping k_d (N s/m, >= 0) of every spring
         of one kind, and the cloths' family parameters with them (None: unchanged)."""

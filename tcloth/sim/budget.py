@@ -64,12 +64,7 @@ class EnergyBudget:
         scene = model.scene
         self.model = model
         self.mass, self.params = model.mass, model.params
-        floors = [f.floor(getattr(scene, f.name), scene) for f in FEATURES
-                  if getattr(scene, f.name) is not None]
-        self.enabled = enabled and None not in floors
-        self.floor = sum(f for f in floors if f is not None)
-        free = ~np.asarray(scene.pinned, dtype=bool)
-        self.free_mass = float(scene.masses[free].sum())
+        self.enabled = enabled and None not in self._floors()
         springs = scene.springs
         pinned = np.asarray(scene.pinned, dtype=bool)
         self._pin_springs = pinned[springs["pairs"]].any(axis=1) if len(springs["pairs"]) \
@@ -103,15 +98,23 @@ class EnergyBudget:
                  float(np.linalg.norm(wind["velocity"]) + np.linalg.norm(wind["amplitude"])))
         return u, u_up, u_pin, w
 
+    def _floors(self):
+        """Each feature's lowest potential energy (None: unbounded below) at the scene's
+        current masses."""
+        scene = self.model.scene
+        return [f.floor(getattr(scene, f.name), scene) for f in FEATURES
+                if getattr(scene, f.name) is not None]
+
     def rebase(self, energy, positions, velocities, t, colliders_off=()):
         """A new baseline at time t from ``energy`` (``Simulator.energy()``'s dict), the
         state's (N,3) positions and velocities and the colliders switched off."""
         scene = self.model.scene
+        self.floor = sum(f for f in self._floors() if f is not None)
         s_b = energy["kinetic"] + energy["gravity"]
         p_b = energy["total"] - s_b
         g = float(np.linalg.norm(scene.gravity))
         size = float(np.linalg.norm(np.ptp(positions, axis=0)))
-        m = self.free_mass
+        m = float(scene.masses[~np.asarray(scene.pinned, dtype=bool)].sum())   # free mass
         u, u_up, u_pin, w = self._inflow_speeds(velocities, colliders_off)
         margin = energy["kinetic"] + max(p_b, 0.0) + m * g * size + 0.5 * m
         inflow = 2.0 * m * (u + w) ** 2

@@ -365,6 +365,13 @@ class Simulator:
         self.scene.air_damping = as_scalar("air_damping", air_damping, minimum=0.0)
         self._parameters_changed()
 
+    def set_masses(self, masses):
+        """Every particle's mass (N,), kg, > 0, from now on (``Scene.set_masses``: the air
+        damping, the membrane's and the colliders' damping follow it; the springs' k_d
+        stay)."""
+        self.scene.set_masses(masses)
+        self._parameters_changed()
+
     def set_springs(self, kind, stiffness=None, damping=None):
         """Stiffness k_s (N/m) and/or damping k_d (N s/m) of every spring of one kind
         ("structural", "shear", "flexion", "custom") from now on."""
