@@ -144,6 +144,7 @@ LONG = {
 # keeps its cheapest cases in the quick set.
 EXTENDED = {
     "test_grad::test_checkpoints_change_the_memory_not_the_gradient",
+    "test_grad::test_the_fabric_fit_recovers_a_known_fabric",
     "test_grad::test_the_adjoints_kernels_are_the_simulators_terms[symplectic_euler]",
     "test_pressure::test_winding_and_checkpoints",
     "test_multigrid::test_multigrid_preconditioned_cg_solves_in_a_few_iterations",
