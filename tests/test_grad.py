@@ -266,9 +266,10 @@ def test_what_it_does_not_differentiate_is_named(f64, what):
 
 
 def test_the_fabric_fits_measurements_have_their_gradients():
-    """tools/fit_fabric.py's measurements of a specimen scene (the strips' chord angles,
-    the drape coefficient inside the projected rim, the bias strip's extension) against
-    central differences of positions (NumPy: no simulation)."""
+    """tools/fit_fabric.py's measurements of a specimen scene (grad.ChordAngle on the
+    strips, grad.DrapeCoefficient inside the disc's projected rim, the bias strip's
+    extension) and a measured loss against central differences of positions (NumPy: no
+    simulation); the chord angle of a straight strip against its closed form."""
     import importlib.util
     from pathlib import Path
     path = Path(__file__).resolve().parents[1] / "tools" / "fit_fabric.py"
@@ -280,14 +281,37 @@ def test_the_fabric_fits_measurements_have_their_gradients():
     x = specimens.scene.positions + 0.01 * rng.standard_normal(
         (specimens.scene.num_particles, 3))
     direction = rng.standard_normal(x.shape)
-    angles, angle_grads = specimens.angles(x)
-    dc, dc_grad = specimens.drape(x)
-    _, ext_grad = specimens.extension(x)
+    measures = specimens.measures(0, targets=rng.standard_normal(6))
     plus, minus = x + 1e-7 * direction, x - 1e-7 * direction
     fd = (specimens.measure(plus) - specimens.measure(minus)) / 2e-7
-    analytic = [float((g * direction).sum()) for g in angle_grads + [dc_grad, ext_grad]]
+    analytic = [float((m.measure(x)[1] * direction).sum()) for m in measures]
     np.testing.assert_allclose(analytic, fd, rtol=1e-5, atol=1e-7)
-    assert np.all(np.isfinite(angles)) and 0.0 < dc < 1.5
+    loss = grad.Sum(*measures)
+    fd = (loss.evaluate(0, plus, None)[0] - loss.evaluate(0, minus, None)[0]) / 2e-7
+    assert float((loss.evaluate(0, x, None)[1] * direction).sum()) == pytest.approx(fd, 1e-5)
+    dc = specimens.measure(x)[4]
+    assert 0.0 < dc < 1.5
+    # a straight chord 30 degrees below the horizontal along z, tip edge of two points
+    y = np.zeros((3, 3))
+    y[1:] = [[0.01, -0.5, np.sqrt(0.75)], [-0.01, -0.5, np.sqrt(0.75)]]
+    assert grad.ChordAngle(0, [1, 2], 2, 1).measure(y)[0] == pytest.approx(30.0, 1e-12)
+
+
+def test_measured_losses_refuse_bad_arguments():
+    """A measured loss's bad argument is a SceneError naming it and the value."""
+    for make, match in (
+            (lambda: grad.ChordAngle(0, [1], 1, 5), "axis must be 0 .x. or 2 .z., horizontal "
+                                                     r"\(got 1\)"),
+            (lambda: grad.ChordAngle(0, [], 0, 5), r"tip must be at least 1 particle ids"),
+            (lambda: grad.DrapeCoefficient([0, 1], 0.15, 0.09, 5), "rim must be at least 3"),
+            (lambda: grad.DrapeCoefficient([0, 1, 2], 0.15, 0.2, 5),
+             r"support must be less than radius 0.15 m \(got 0.2\)"),
+            (lambda: grad.DrapeCoefficient([0, 1, 2], 0.15, 0.09, 5, scale=0.0),
+             r"scale must be > 0.0 \(got 0.0\)"),
+            (lambda: grad.ChordAngle(0, [1], 0, 5, target=float("nan")),
+             "target must be finite")):
+        with pytest.raises(tcloth.SceneError, match=match):
+            make()
 
 
 def test_the_fabric_fit_recovers_a_known_fabric():

@@ -90,22 +90,6 @@ def add_disc(scene, fabric, rings):
     return offset + rim[np.argsort(np.arctan2(vertices[rim, 2], vertices[rim, 0]))]
 
 
-def drape_coefficient(x, rim):
-    """The drape coefficient from the area inside the projected rim (particle ids in
-    angular order), and its gradient."""
-    p = x[rim][:, [0, 2]]
-    q = np.roll(p, -1, axis=0)
-    area = 0.5 * float((p[:, 0] * q[:, 1] - q[:, 0] * p[:, 1]).sum())
-    sign = 1.0 if area > 0 else -1.0
-    ring = np.pi * (RADIUS ** 2 - SUPPORT ** 2)
-    value = (abs(area) - np.pi * SUPPORT ** 2) / ring
-    g = np.zeros_like(x)
-    before = np.roll(p, 1, axis=0)
-    g[rim, 0] = sign * 0.5 * (q[:, 1] - before[:, 1]) / ring
-    g[rim, 2] = sign * 0.5 * (before[:, 0] - q[:, 0]) / ring
-    return value, g
-
-
 class Specimens:
     """The five specimens of one fabric in one scene, and their measurements."""
 
@@ -166,59 +150,36 @@ class Specimens:
         edge = p[:, -1] if family == 0 else p[-1, :]        # the tip's edge across the strip
         return len(scene.cloths) - 1, family, line[1], np.asarray(edge)
 
-    def angles(self, x):
-        """Each strip's chord angle below the horizontal, from the clamp line's middle to
-        the middle of the tip's edge (the mean of its points), degrees, and its gradient."""
-        values, grads = [], []
-        for _, family, clamp, edge in self.strips:
-            d = x[edge].mean(axis=0) - x[clamp]
-            axis = 0 if family == 0 else 2
-            along = d[axis]
-            angle = np.degrees(np.arctan2(-d[1], abs(along)))
-            r2 = along * along + d[1] * d[1]
-            g = np.zeros_like(x)
-            g_tip = np.zeros(3)
-            g_tip[1] = -abs(along) / r2
-            g_tip[axis] = d[1] / r2 * np.sign(along)
-            g[edge] = g_tip / len(edge)
-            g[clamp] = -g_tip
-            values.append(angle)
-            grads.append(np.degrees(g))
-        return np.array(values), grads
+    def measures(self, steps, targets=None):
+        """The six measurements as losses at ``steps`` against ``targets`` (default 0;
+        each in its unit: 1 degree, 0.01 of drape coefficient, 1 mm): the strips' chord
+        angles, the drape coefficient, the bias extension."""
+        targets = np.zeros(6) if targets is None else targets
+        angles = [grad.ChordAngle(clamp, edge, 0 if family == 0 else 2, steps, target,
+                                  SCALE_ANGLE)
+                  for (_, family, clamp, edge), target in zip(self.strips, targets)]
+        return angles + [
+            grad.DrapeCoefficient(self.rim, RADIUS, SUPPORT, steps, targets[4], SCALE_DC),
+            BiasExtension(self.top, self.bottom, steps, targets[5], SCALE_EXT)]
 
-    def drape(self, x):
-        return drape_coefficient(x, self.rim)
+    def measure(self, x):
+        return np.array([m.measure(x)[0] for m in self.measures(0)])
 
-    def extension(self, x):
-        """The bias strip's extension: its bottom edge's mean below the clamp line, less
-        its length, mm; and its gradient."""
+
+class BiasExtension(grad.Measured):
+    """The bias strip's extension: its bottom edge's mean below its clamp line's, less
+    its length, mm."""
+
+    def __init__(self, top, bottom, steps, target, scale):
+        super().__init__(steps, target, scale)
+        self.top, self.bottom = top, bottom
+
+    def measure(self, x):
         value = 1e3 * (x[self.top, 1].mean() - x[self.bottom, 1].mean() - BIAS_LENGTH)
         g = np.zeros_like(x)
         g[self.top, 1] = 1e3 / len(self.top)
         g[self.bottom, 1] = -1e3 / len(self.bottom)
         return value, g
-
-    def measure(self, x):
-        return np.concatenate([self.angles(x)[0], [self.drape(x)[0], self.extension(x)[0]]])
-
-
-def loss_for(specimens, measured, steps):
-    """The fit's loss at the last step (see the module)."""
-
-    def evaluate(step, x, v):
-        angles, angle_grads = specimens.angles(x)
-        dc, dc_grad = specimens.drape(x)
-        ext, ext_grad = specimens.extension(x)
-        ra = (angles - measured[:4]) / SCALE_ANGLE
-        rd = (dc - measured[4]) / SCALE_DC
-        re = (ext - measured[5]) / SCALE_EXT
-        value = float((ra * ra).sum() + rd * rd + re * re)
-        g = 2.0 * rd / SCALE_DC * dc_grad + 2.0 * re / SCALE_EXT * ext_grad
-        for r, ga in zip(ra, angle_grads):
-            g += 2.0 * r / SCALE_ANGLE * ga
-        return value, g, None
-
-    return grad.Loss(steps, evaluate)
 
 
 class Fit:
@@ -279,14 +240,8 @@ def fit_measured(args, minimize):
         trajectory.sim.set_state(positions=x)
         trajectory.sim.step(args.settle)
         trajectory.set("positions", trajectory.sim.positions())
-        started = drape_coefficient(trajectory.sim.positions(), rim)[0]
-
-        def evaluate(step, x, v):
-            dc, g = drape_coefficient(x, rim)
-            r = (dc - target) / SCALE_DC
-            return r * r, 2.0 * r / SCALE_DC * g, None
-
-        loss = grad.Loss(args.steps, evaluate)
+        loss = grad.DrapeCoefficient(rim, RADIUS, SUPPORT, args.steps, target, SCALE_DC)
+        started = loss.measure(trajectory.sim.positions())[0]
 
         def objective(p):
             trajectory.set("membrane.shear", float(np.exp(p[0])))
@@ -302,7 +257,7 @@ def fit_measured(args, minimize):
         shear = float(np.exp(result.x[0]))
         trajectory.set("membrane.shear", shear)
         trajectory.forward(loss)
-        fitted = drape_coefficient(trajectory.sim.positions(), rim)[0]
+        fitted = loss.measure(trajectory.sim.positions())[0]
         print(f"fit.{key}.shear: {shear:.4g}")
         print(f"fit.{key}.drape_coefficient: {fitted:.4f}")
         print(f"fit.{key}.drape_coefficient_at_start: {started:.4f}")
@@ -360,7 +315,7 @@ def main():
     print(f"fit.measured.angles_deg: {', '.join(f'{a:.3f}' for a in measured[:4])}")
     print(f"fit.measured.drape_coefficient: {measured[4]:.4f}")
     print(f"fit.measured.bias_extension_mm: {measured[5]:.3f}")
-    fit = Fit(trajectory, fit_specimens, loss_for(fit_specimens, measured, args.steps))
+    fit = Fit(trajectory, fit_specimens, grad.Sum(*fit_specimens.measures(args.steps, measured)))
     p0 = np.log([*start.bending, start.shear])
     began = time.perf_counter()
     result = minimize(fit, p0, jac=True, method="L-BFGS-B",

@@ -5,8 +5,9 @@
 parameters: the symplectic Euler step's exact adjoint and the converged backward Euler
 step's (the implicit function theorem, the adjoint solved by the integrator's own CG).
 """
-from .losses import Loss, Sum, TargetCloud, TargetPositions
+from .losses import (ChordAngle, DrapeCoefficient, Loss, Measured, Sum, TargetCloud,
+                     TargetPositions)
 from .trajectory import INTEGRATORS, Result, Trajectory
 
 __all__ = ["Trajectory", "Result", "INTEGRATORS", "Loss", "Sum", "TargetPositions",
-           "TargetCloud"]
+           "TargetCloud", "Measured", "ChordAngle", "DrapeCoefficient"]

@@ -4,11 +4,14 @@ each with its gradient.
 A loss gives ``steps`` (the steps it reads: 0 is the initial state, ``steps`` the last)
 and ``evaluate(step, x, v) -> (value, dL/dx, dL/dv or None)`` with x, v (n, 3) NumPy.
 ``Loss(steps, function)`` wraps a user's function of that form; ``Sum`` adds losses.
+``Measured`` losses compare a measurement of the positions with a target, ((m(x) -
+target) / scale)^2: the textile tests' ``ChordAngle`` (Peirce's cantilever) and
+``DrapeCoefficient`` (Cusick's drape); each gives ``measure(x) -> (m, dm/dx)`` too.
 """
 import numpy as np
 
 from ..errors import SceneError
-from ..validate import as_int
+from ..validate import as_int, as_scalar
 
 
 class Loss:
@@ -91,3 +94,81 @@ class TargetCloud(Loss):
         diff = x - self.targets[nearest]
         n = len(x)
         return float((diff * diff).sum()) / n, 2.0 * diff / n, None
+
+
+def _ids(name, ids, least):
+    """Particle ids as a 1-D int array of at least ``least``."""
+    out = np.atleast_1d(np.asarray(ids))
+    if out.ndim != 1 or len(out) < least or not np.issubdtype(out.dtype, np.integer):
+        raise SceneError(f"{name} must be at least {least} particle ids (got {ids!r})")
+    return out.astype(np.int64)
+
+
+class Measured(Loss):
+    """((m(x) - target) / scale)^2 at ``steps`` for a measurement m of the positions, its
+    ``measure(x) -> (value, dm/dx)`` given by a subclass; losses add, so a fit to several
+    measurements is their sum, each in its own unit ``scale``."""
+
+    def __init__(self, steps, target, scale):
+        super().__init__(steps)
+        self.target = as_scalar("target", target)
+        self.scale = as_scalar("scale", scale, minimum=0.0, strict=True)
+
+    def evaluate(self, step, x, v):
+        value, g = self.measure(x)
+        r = (value - self.target) / self.scale
+        return r * r, 2.0 * r / self.scale * g, None
+
+
+class ChordAngle(Measured):
+    """Peirce's cantilever: the chord's angle below the horizontal, degrees, from particle
+    ``clamp`` (on the clamp line) to the mean of the ``tip`` particles (the tip's edge),
+    its horizontal run measured along world ``axis`` (0: x, 2: z; y is up)."""
+
+    def __init__(self, clamp, tip, axis, steps, target=0.0, scale=1.0):
+        super().__init__(steps, target, scale)
+        self.clamp = int(_ids("clamp", clamp, 1)[0])
+        self.tip = _ids("tip", tip, 1)
+        if axis not in (0, 2):
+            raise SceneError(f"axis must be 0 (x) or 2 (z), horizontal (got {axis!r})")
+        self.axis = axis
+
+    def measure(self, x):
+        d = x[self.tip].mean(axis=0) - x[self.clamp]
+        run = d[self.axis]
+        r2 = run * run + d[1] * d[1]
+        g_tip = np.zeros(3)
+        g_tip[1] = -abs(run) / r2
+        g_tip[self.axis] = d[1] / r2 * np.sign(run)
+        g = np.zeros_like(x)
+        g[self.tip] = g_tip / len(self.tip)
+        g[self.clamp] -= g_tip
+        return float(np.degrees(np.arctan2(-d[1], abs(run)))), np.degrees(g)
+
+
+class DrapeCoefficient(Measured):
+    """Cusick's drape coefficient (A_shadow - A_support) / (A_disc - A_support) of a disc
+    of ``radius`` on a support of radius ``support`` (m), the shadow the area inside its
+    projected rim (``rim``: particle ids in angular order; the shoelace formula on the
+    horizontal x, z plane): the rasterised shadow's area where no fold hangs out over the
+    rim, and differentiable."""
+
+    def __init__(self, rim, radius, support, steps, target=0.0, scale=0.01):
+        super().__init__(steps, target, scale)
+        self.rim = _ids("rim", rim, 3)
+        self.radius = as_scalar("radius", radius, minimum=0.0, strict=True)
+        self.support = as_scalar("support", support, minimum=0.0, strict=True)
+        if self.support >= self.radius:
+            raise SceneError(f"support must be less than radius {self.radius:g} m (got "
+                             f"{self.support:g})")
+
+    def measure(self, x):
+        p = x[self.rim][:, [0, 2]]
+        after, before = np.roll(p, -1, axis=0), np.roll(p, 1, axis=0)
+        area = 0.5 * float((p[:, 0] * after[:, 1] - after[:, 0] * p[:, 1]).sum())
+        sign = 1.0 if area > 0 else -1.0
+        ring = np.pi * (self.radius ** 2 - self.support ** 2)
+        g = np.zeros_like(x)
+        g[self.rim, 0] = sign * 0.5 * (after[:, 1] - before[:, 1]) / ring
+        g[self.rim, 2] = sign * 0.5 * (before[:, 0] - after[:, 0]) / ring
+        return (abs(area) - np.pi * self.support ** 2) / ring, g
