@@ -2,8 +2,9 @@
 ``ti.func``s, on copies of the model's parameters that carry gradients.
 
 ``StepAdjoint(model, implicit, projective)`` holds those copies (gravity and drag, the
-masses, each spring's stiffness and damping, the colliders' table) and the step's inputs x, v (and,
-implicit, the end positions x1), all with gradients, and one differentiable kernel:
+masses, each spring's stiffness and damping, the colliders' table) and the step's inputs
+x, v (and, implicit, the end positions x1), all with gradients, and one differentiable
+kernel:
 
   - explicit (symplectic Euler): the force f(x, v) of gravity and drag, the springs and
     the colliders (``GravityDrag.force``, ``springs.spring_force``, ``Colliders.force``:
@@ -73,9 +74,8 @@ class StepAdjoint:
     Attributes (fields with gradients): params (g_x, g_y, g_z, air_drag), drag (each
     particle's drag coefficient), mass, inv_mass (each particle's; the gradient of a mass
     is mass's plus inv_mass's times -1/m^2), ks, kd (each spring's, in the model's spring
-    order),
-    table (the colliders', or None), x, v, x1 (the step's inputs), out (its output: the
-    force, or the incremental potential's gradient).
+    order), table (the colliders', or None), x, v, x1 (the step's inputs), out (its
+    output: the force, or the incremental potential's gradient).
     """
 
     def __init__(self, model, implicit, projective=False):
