@@ -104,6 +104,14 @@ def as_per_item(name, value, n, minimum=None, strict=False):
     return arr
 
 
+def as_index(name, value, n):
+    """value as an int in [0, n), or SceneError naming ``name``."""
+    i = as_int(name, value, 0)
+    if i >= n:
+        raise SceneError(f"{name} must be in [0, {n}) (got {value!r})")
+    return i
+
+
 def as_int(name, value, minimum):
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
         raise SceneError(f"{name} must be an integer (got {fmt(value)})")

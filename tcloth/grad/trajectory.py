@@ -50,11 +50,9 @@ from ..sim.simulator import Simulator
 from ..validate import as_int
 from .adjoint import StepAdjoint, unsupported
 from .krylov import fgmres
+from .parameters import MEMBRANE, bending_gradient, masses_gradient, membrane_gradient
 
 INTEGRATORS = ("symplectic_euler", "backward_euler", "projective")
-# the membrane's parameters: name -> (its settings key, column)
-MEMBRANE = {"stretch_warp": ("stretch", 0), "stretch_weft": ("stretch", 1),
-            "shear": ("shear", None)}
 
 
 class Result:
@@ -438,49 +436,6 @@ class Trajectory:
         v_new[pinned] += h * carried
         return x_new, v_new, int(iters), float(residual)
 
-    def _bending_gradient(self):
-        """dL/dB, (cloths, 2) as the settings' rigidity, from the hinge weights'
-        gradient: each hinge's c = sqrt(share B / A) K, so dc/dB = c / (2 B)."""
-        data = self.sim.model.bending
-        rigidity = np.asarray(self.scene.bending["rigidity"], dtype=np.float64)
-        c = data.scaled(rigidity)
-        c_bar = self.adjoint.hinge_weights.grad.to_numpy()[:data.count].astype(np.float64)
-        out = np.zeros_like(rigidity)
-        np.add.at(out, (data.cloth, data.family),
-                  (c_bar * c).sum(axis=1) / (2.0 * rigidity[data.cloth, data.family]))
-        return out
-
-    def _membrane_gradient(self, what):
-        """dL/d(a stretch or the shear) from the coefficients' gradient: each triangle's
-        (A C_u, A C_v, A G, beta), beta = 2 zeta sqrt(m / max(C_u, C_v))."""
-        data, settings = self.sim.model.membrane, self.scene.membrane
-        c_bar = self.adjoint.membrane_c.grad.to_numpy()[:data.count].astype(np.float64)
-        key, column = MEMBRANE[what]
-        if column is None:
-            return float((c_bar[:, 2] * data.area).sum())
-        stretch = np.asarray(settings["stretch"], dtype=np.float64)[data.cloth]
-        beta = data.coefficients_for(settings)[:, 3]
-        stiffer = stretch.argmax(axis=1) == column
-        dbeta = np.where(stiffer, -beta / (2.0 * stretch[:, column]), 0.0)
-        return float((c_bar[:, column] * data.area + c_bar[:, 3] * dbeta).sum())
-
-    def _masses_gradient(self):
-        """dL/dm (n,): the mass fields' gradients (inv_mass's through -1/m^2), the drag's
-        through c_p = c + gamma m_p, the membrane's damping through beta = 2 zeta
-        sqrt(m_reduced / max(C_u, C_v)) (m_reduced a sixth of the triangle's corner
-        masses), and symplectic Euler's M^-1 (``_explicit_adjoint``)."""
-        adj, scene = self.adjoint, self.scene
-        out = (adj.mass.grad.to_numpy() - adj.inv_mass.grad.to_numpy() * self._inv_mass ** 2
-               + scene.air_damping * adj.drag.grad.to_numpy()).astype(np.float64)
-        data = self.sim.model.membrane
-        if data is not None:
-            c_bar = adj.membrane_c.grad.to_numpy()[:data.count, 3].astype(np.float64)
-            beta = data.coefficients_for(scene.membrane)[:, 3]
-            np.add.at(out, data.ids, (c_bar * beta / (12.0 * data.reduced))[:, None])
-        if self._mass_bar is not None:
-            out += self._mass_bar
-        return out
-
     def _reduce(self, wrt, x_bar, v_bar, controls_bar):
         adj, grads = self.adjoint, {}
         count = self.sim.model.spring_count
@@ -496,15 +451,16 @@ class Trajectory:
             elif name == "air_drag":
                 grads[name] = float(adj.drag.grad.to_numpy().sum())
             elif name == "masses":
-                grads[name] = self._masses_gradient()
+                grads[name] = masses_gradient(self.sim.model, adj, self._inv_mass,
+                                              self._mass_bar)
             elif name == "wind":
                 grads[name] = adj.wind_params.grad.to_numpy()[:3].astype(np.float64)
             elif name == "bending":
-                grads[name] = self._bending_gradient()
+                grads[name] = bending_gradient(self.sim.model, adj)
             else:
                 head, what = name.split(".")
                 if head == "membrane":
-                    grads[name] = self._membrane_gradient(what)
+                    grads[name] = membrane_gradient(self.sim.model, adj, what)
                 elif head.startswith("collider"):
                     row = self.sim.model.colliders.rows.index(int(head[len("collider"):]))
                     grads[name] = float(getattr(adj.table.data.grad, what).to_numpy()[row])

@@ -7,15 +7,15 @@ from .budget import EnergyBudget
 from .constraints import StrainLimiter
 from .diagnostics import Diagnostics
 from ..errors import SceneError
-from ..features import FEATURES
 from ..features.wind import wind_velocity
 from .instability import StepCheck
+from .live import LiveParameters
 from ..integrators import INTEGRATORS
 from ..model.model import Model
 from ..runtime import serial_count
 from ..scene.scene import Scene
 from ..terms.grab import GrabSpring
-from ..validate import as_int, as_points, as_scalar, as_vec3
+from ..validate import as_index, as_points, as_scalar, as_vec3
 
 def _integrator_class(name):
     if name not in INTEGRATORS:
@@ -23,20 +23,12 @@ def _integrator_class(name):
     return INTEGRATORS[name]
 
 
-def _index(name, value, n):
-    """value as an int in [0, n), or SceneError naming ``name``."""
-    i = as_int(name, value, 0)
-    if i >= n:
-        raise SceneError(f"{name} must be in [0, {n}) (got {value!r})")
-    return i
-
-
 def _default_grab_stiffness(scene):
     return next((k for k in (scene.mean_stiffness("structural"), scene.mean_stiffness())
                  if k is not None), 100.0)
 
 
-class Simulator:
+class Simulator(LiveParameters):
     """Advance a scene in time.
 
     Args:
@@ -92,7 +84,7 @@ class Simulator:
         self.strain_bound = (None if strain_bound is None else
                              as_scalar("strain_bound", strain_bound, 0.0, strict=True))
         self.integrator_name = integrator
-        off = sorted({_index("collider index", i, len(scene.colliders)) for i in colliders_off})
+        off = sorted({as_index("collider index", i, len(scene.colliders)) for i in colliders_off})
         self.settings = {"grid_stencil": bool(grid_stencil), "position_bound":
                          self.position_bound, "velocity_bound": self.velocity_bound,
                          "strain_bound": self.strain_bound, "energy_bound": bool(energy_bound),
@@ -349,82 +341,10 @@ class Simulator:
         self._time_base, self._step_base = self.time, self.num_steps
         self.dt = dt
 
-    def set_gravity(self, gravity):
-        """Gravity (3,), m/s^2, from now on."""
-        self.scene.gravity = as_vec3("gravity", gravity)
-        self._parameters_changed()
-
-    def set_air_drag(self, air_drag):
-        """The viscous air drag c >= 0 (N s/m): force -c v on every particle, from now on."""
-        self.scene.air_drag = as_scalar("air_drag", air_drag, minimum=0.0)
-        self._parameters_changed()
-
-    def set_air_damping(self, air_damping):
-        """The mass-proportional air damping gamma >= 0 (1/s): force -gamma m_p v on
-        particle p, the same at every resolution, from now on."""
-        self.scene.air_damping = as_scalar("air_damping", air_damping, minimum=0.0)
-        self._parameters_changed()
-
-    def set_masses(self, masses):
-        """Every particle's mass (N,), kg, > 0, from now on (``Scene.set_masses``: the air
-        damping, the membrane's and the colliders' damping follow it; the springs' k_d
-        stay)."""
-        self.scene.set_masses(masses)
-        self._parameters_changed()
-
-    def set_springs(self, kind, stiffness=None, damping=None):
-        """Stiffness k_s (N/m) and/or damping k_d (N s/m) of every spring of one kind
-        ("structural", "shear", "flexion", "custom") from now on."""
-        self.scene.set_spring_parameters(kind, stiffness, damping)
-        self._parameters_changed()
-
-    def set_wind(self, velocity):
-        """The mean wind velocity (3,), m/s, of a scene with wind, from now on."""
-        if self.model.wind is None:
-            raise SceneError("the scene has no wind (Scene.set_wind before the Simulator is "
-                             "made: tcloth view --wind adds a still one)")
-        self.scene.wind["velocity"] = as_vec3("velocity", velocity)
-        self._parameters_changed()
-
-    def set_collider_enabled(self, index, enabled):
-        """Switch collider ``scene.colliders[index]`` on or off (off: no force, energy or
-        friction; the viewer hides it)."""
-        index = _index("collider index", index, len(self.scene.colliders))
-        off = set(self.settings["colliders_off"]) - {index}
-        if not enabled:
-            off.add(index)
-        self.settings["colliders_off"] = sorted(off)
-        self._parameters_changed()
-
-    def set_feature(self, name, **changes):
-        """A live scene feature's settings from now on: ``Scene.set_<name>``'s arguments
-        (bending's rigidity; the membrane's stretch, shear, damping); the rest stay."""
-        live = {f.name: f for f in FEATURES if f.live and getattr(self.model, f.name)}
-        if name not in live:
-            raise SceneError(f"no live feature {name!r} in this scene (it has {sorted(live)})")
-        method, saved = getattr(self.scene, live[name].method), live[name].saved
-        method(**{**saved(getattr(self.scene, name)), **changes})
-        self._parameters_changed()
-
-    def set_collider(self, index, friction=None, stiffness=None):
-        """Collider ``index``'s friction mu >= 0 and/or stiffness k > 0 (N/m) from now on."""
-        collider = self.scene.colliders[_index("index", index, len(self.scene.colliders))]
-        for key, value in (("friction", friction), ("stiffness", stiffness)):
-            if value is not None:
-                collider[key] = as_scalar(key, value, minimum=0.0, strict=key == "stiffness")
-        self._parameters_changed()
-
     def set_strain_limiting(self, enabled):
         """Apply the scene's strain limit after each step (True) or not."""
         self.settings["strain_limiting"] = bool(enabled)
         self._fusion = None
-
-    def _parameters_changed(self):
-        self._check()
-        self._fusion = None
-        self.model.refresh(self.settings["colliders_off"])
-        self.integrator.parameters_changed()
-        self._rebase()
 
     def grab(self, particle, target, stiffness=None, damping=None):
         """Pull particle ``particle`` towards ``target`` (3,) m with a zero-rest-length
@@ -436,7 +356,7 @@ class Simulator:
         if self.model.grab is None:
             raise SceneError("this simulator has no grab spring: make it with "
                              "Simulator(..., grab=True)")
-        particle = _index("particle", particle, self.model.particle_count)
+        particle = as_index("particle", particle, self.model.particle_count)
         if self.scene.pinned[particle]:
             raise SceneError(f"particle {particle} is pinned and cannot be grabbed")
         target = as_vec3("target", target)
