@@ -12,7 +12,7 @@ the clamps do not hold (the apparatus places those); the fit starts from another
 and simulates the same specimens with its parameters.
 
 The drape coefficient alone cannot give the shear (docs/grad.md): a 5 % change of G moves
-it by 0.001 where its noise is 0.003, and by 12 to 19 times less than the same change of
+it by 0.0007 where its noise is 0.003, and by 12 to 19 times less than the same change of
 the bending does. The bias strip shears under its load (22 mm at denim's G, 16 mm less
 per unit of log G), so it carries G to the fit; the drape coefficient checks the bending.
 
@@ -45,8 +45,9 @@ Prints one line a parameter, ``fit.<parameter>.relative_error: <value>`` (bendin
 bending_weft, shear), the measurements, iterations and seconds.
 
 Usage: python tools/fit_fabric.py [--truth denim] [--start fleece] [--cells 16]
-                                  [--rings 10] [--steps 20] [--settle 60]
-                                  [--iterations 40] [--quick]
+                                  [--rings 10] [--steps 30] [--settle 60]
+                                  [--iterations 40] [--seed 0] [--quick]
+       python tools/fit_fabric.py --measured [--rings 24] (the measured fabrics' shear)
 """
 import argparse
 import importlib.util
@@ -93,7 +94,7 @@ def add_disc(scene, fabric, rings):
 
 
 class Specimens:
-    """The five specimens of one fabric in one scene, and their measurements."""
+    """The six specimens of one fabric in one scene, and their measurements."""
 
     def __init__(self, fabric, cells, rings):
         self.scene = scene = tcloth.Scene(air_drag=1e-4)
