@@ -122,12 +122,13 @@ class Trajectory:
         self.implicit = integrator in ("backward_euler", "projective")
         self.projective = integrator == "projective"
         self._forward_residual = 0.0
-        self._mass_bar = None       # symplectic Euler's share of dL/dm, during a gradient
+        # during a gradient: the model's inverse masses in NumPy (symplectic Euler's
+        # update reads them) and symplectic Euler's share of dL/dm
+        self._inv_mass = self._mass_bar = None
         why = unsupported(scene)
         if why is not None:
             raise SceneError(f"tcloth.grad: {why}")
         self.sim = Simulator(scene, integrator=integrator, dt=dt, **options)
-        self._inv_mass = self.sim.model.inv_mass.to_numpy().astype(np.float64)
         self.scene = scene
         self.adjoint = StepAdjoint(self.sim.model, self.implicit, self.projective)
         self.adjoint.load()
@@ -236,7 +237,6 @@ class Trajectory:
             sim.set_air_drag(value)
         elif name == "masses":
             sim.set_masses(value)
-            self._inv_mass = sim.model.inv_mass.to_numpy().astype(np.float64)
         elif name == "wind":
             sim.set_wind(value)
         elif name == "bending":
@@ -318,6 +318,7 @@ class Trajectory:
         n, h = self.scene.num_particles, self.sim.dt
         adj = self.adjoint
         adj.zero_parameter_grads()
+        self._inv_mass = self.sim.model.inv_mass.to_numpy().astype(np.float64)
         self._mass_bar = np.zeros(n) if "masses" in wrt and not self.implicit else None
         x_bar, v_bar = np.zeros((n, 3)), np.zeros((n, 3))
         controls_bar = np.zeros((self.steps, len(self.pinned), 3))

@@ -141,15 +141,17 @@ class Model:
                          p["structural"], p["shear"], p["flexion"])
 
     def refresh(self, colliders_off=()):
-        """Upload the scene's current masses, gravity and drag, spring stiffness and damping, live
-        features (the wind) and colliders (those in ``colliders_off`` switched off) into
-        the model's fields.
+        """Upload the scene's current masses, gravity and drag, spring stiffness and
+        damping, live features (the wind) and colliders (those in ``colliders_off``
+        switched off) into the model's fields.
         The scene's layout (particles, springs, cloths, which terms exist) must be the one
         the model was built from."""
         scene, npr = self.scene, runtime.numpy_real()
-        self._upload_masses()
+        masses = scene.masses
+        self.mass.from_numpy(masses.astype(npr))
+        self.inv_mass.from_numpy(np.where(scene.pinned, 0.0, 1.0 / masses).astype(npr))
         if self.membrane is not None:
-            self.membrane.masses_changed(scene.masses)
+            self.membrane.masses_changed(masses)
         self.params.from_numpy(np.array([*scene.gravity, scene.air_drag], dtype=npr))
         self.drag.from_numpy(scene.drag_coefficients().astype(npr))
         if self.spring_count:
@@ -165,12 +167,6 @@ class Model:
             if feature.live and data is not None:
                 feature.refresh(data, getattr(scene, feature.name))
         self.colliders.upload(scene.colliders, colliders_off)
-
-    def _upload_masses(self):
-        """mass and inv_mass from the scene's masses (inverse mass 0 where pinned)."""
-        m, npr = self.scene.masses, runtime.numpy_real()
-        self.mass.from_numpy(m.astype(npr))
-        self.inv_mass.from_numpy(np.where(self.scene.pinned, 0.0, 1.0 / m).astype(npr))
 
     def single_grid(self):
         """The GridBlock when the scene is one cloth grid and nothing else (no other
