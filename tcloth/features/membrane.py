@@ -30,7 +30,12 @@ def triangle_frames(triangles, rest):
     v = np.cross(n, u)
     D = np.stack([np.stack([np.sum(e1 * u, 1), np.sum(e2 * u, 1)], 1),
                   np.stack([np.sum(e1 * v, 1), np.sum(e2 * v, 1)], 1)], 1)
-    inv = np.linalg.inv(D)                    # (T, 2, 2); f = [e1 e2] inv: rows weight e1, e2
+    # (T, 2, 2); f = [e1 e2] inv: rows weight e1, e2. The adjugate over the determinant in
+    # NumPy's elementwise IEEE operations, not np.linalg.inv: LAPACK's kernels round by
+    # CPU (OpenBLAS's SkylakeX against Haswell differ in the last bit)
+    det = D[:, 0, 0] * D[:, 1, 1] - D[:, 0, 1] * D[:, 1, 0]
+    inv = np.stack([np.stack([D[:, 1, 1], -D[:, 0, 1]], 1),
+                    np.stack([-D[:, 1, 0], D[:, 0, 0]], 1)], 1) / det[:, None, None]
     b = np.stack([-(inv[:, 0] + inv[:, 1]), inv[:, 0], inv[:, 1]], 1)
     return b, 0.5 * double
 
