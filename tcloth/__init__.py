@@ -8,8 +8,8 @@ os.environ.setdefault("ENABLE_TAICHI_HEADER_PRINT", "False")
 # after the environment default above; importing features gives Scene its methods
 from . import features, grad, moved  # noqa: E402,F401
 from .app import cli  # noqa: E402
-from .errors import (ConvergenceWarning, DeviceWarning, InstabilityError,  # noqa: E402
-                     MissingExtraError, SceneError, StaleSimulatorError)
+from .errors import (ConvergenceWarning, DeviceWarning, GradientWarning,  # noqa: E402
+                     InstabilityError, MissingExtraError, SceneError, StaleSimulatorError)
 from .render.camera import Camera  # noqa: E402
 from .render.mesh import export_mesh, write_obj, write_ply  # noqa: E402
 from .render.render import Renderer, render  # noqa: E402
@@ -29,6 +29,6 @@ moved.install()
 
 __all__ = ["cli", "init", "device", "Scene", "Cloth", "MeshCloth", "Rope", "Fabric", "load_obj",
            "load_usd", "Simulator", "SceneError", "InstabilityError", "ConvergenceWarning",
-           "DeviceWarning", "MissingExtraError", "StaleSimulatorError", "Camera", "Renderer",
-           "render", "record", "record_usd", "UsdWriter", "write_png", "export_mesh",
-           "write_obj", "write_ply", "view", "__version__"]
+           "DeviceWarning", "GradientWarning", "MissingExtraError", "StaleSimulatorError",
+           "Camera", "Renderer", "render", "record", "record_usd", "UsdWriter", "write_png",
+           "export_mesh", "write_obj", "write_ply", "view", "__version__"]

@@ -35,3 +35,8 @@ class DeviceWarning(UserWarning):
 class MissingExtraError(ImportError):
     """An optional dependency is not installed; the message names tcloth's extra that
     brings it (e.g. usd-core: ``pip install -e ".[usd]"``)."""
+
+
+class GradientWarning(UserWarning):
+    """A gradient is not the trajectory's derivative at some of its steps (the result
+    says which, e.g. ``Result.guarded_steps``: steps the contact guard changed)."""

@@ -145,6 +145,10 @@ LONG = {
 EXTENDED = {
     "test_grad::test_checkpoints_change_the_memory_not_the_gradient",
     "test_grad::test_the_fabric_fit_recovers_a_known_fabric",
+    "test_grad_contact::test_gradients_through_self_contact_match_central_differences[backward_euler]",
+    "test_grad_contact::test_the_adjoints_contact_terms_are_the_simulators[backward_euler]",
+    "test_grad_contact::test_the_guards_projection_is_differentiated_as_its_corrections",
+    "test_grad_contact::test_steps_the_gradient_does_not_take_are_reported",
     "test_grad::test_the_adjoints_kernels_are_the_simulators_terms[symplectic_euler]",
     "test_pressure::test_winding_and_checkpoints",
     "test_multigrid::test_multigrid_preconditioned_cg_solves_in_a_few_iterations",
@@ -379,3 +383,51 @@ def numpy_forces(scene, x, v):
         f[i] += fi
         f[j] -= fi
     return f
+
+
+def central_difference(trajectory, loss, name, direction, step):
+    """The central difference of a ``tcloth.grad.Trajectory``'s loss along ``direction``
+    of its parameter ``name`` (the parameter set back after)."""
+    value = trajectory.value(name)
+    results = []
+    for sign in (1.0, -1.0):
+        trajectory.set(name, value + sign * step * direction)
+        results.append(trajectory.forward(loss)[0])
+    trajectory.set(name, value)
+    return (results[0] - results[1]) / (2.0 * step)
+
+
+def check_gradients(trajectory, loss, result, names, rng, array_step):
+    """Each parameter of ``names``: its gradient (a scalar's, or an array's directional
+    derivative along a random direction) against central differences (a scalar's step
+    1e-6 of its value, an array's ``array_step``), within 1e-5 relative."""
+    for name in names:
+        value = trajectory.value(name)
+        if np.isscalar(value):
+            direction, step = 1.0, 1e-6 * abs(value) if value else 1e-6
+            adjoint = result.grad[name]
+        else:
+            direction, step = rng.standard_normal(value.shape), array_step
+            adjoint = float((result.grad[name] * direction).sum())
+        fd = central_difference(trajectory, loss, name, direction, step)
+        assert abs(adjoint - fd) <= 1e-5 * abs(fd), (name, adjoint, fd)
+
+
+def check_step_terms(trajectory, x, v):
+    """A ``tcloth.grad.Trajectory``'s adjoint kernel against its simulator from (x, v)
+    (set in the simulator): symplectic Euler's force is the simulator's to the last
+    digits; backward Euler's (and projective's) residual vanishes at the simulator's
+    step. Returns None, or (x1, h, the inertia term M (x1 - x - h v) / h^2) of the step."""
+    sim, adj = trajectory.sim, trajectory.adjoint
+    if not trajectory.implicit:
+        adj.set_inputs(x, v)
+        f = adj.evaluate(sim.dt, 0.0)
+        np.testing.assert_allclose(f, sim.forces(), rtol=0, atol=1e-12 * np.abs(f).max())
+        return None
+    sim.step(1)
+    x1, h, free = sim.positions(), sim.dt, trajectory.free
+    adj.set_inputs(x, v, x1)
+    g = adj.evaluate(h, h)
+    inertia = adj.mass.to_numpy()[:, None] * (x1 - x - h * v) / h ** 2
+    assert np.abs(g[free]).max() < 1e-9 * np.abs(inertia[free]).max()
+    return x1, h, inertia

@@ -66,7 +66,7 @@ LEAST_GAP = 1e-6         # m: a pair closer than this at x0 has no normal (float
 
 
 @ti.func
-def _normal_margin(ids, kind, x0, thickness):
+def normal_margin(ids, kind, x0, thickness):
     """(unit normal, D0, delta) of a candidate at x0; D0 <= LEAST_GAP: no normal."""
     alpha, g = gap(ids, kind, x0)
     d0 = g.norm()
@@ -129,7 +129,7 @@ def planes(cl: ti.template(), pl: ti.template(), count: ti.i32, x0: ti.template(
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
         ids, kind = cl.ids[c], cl.kind[c]
-        n, d0, delta = _normal_margin(ids, kind, x0, thickness)
+        n, d0, delta = normal_margin(ids, kind, x0, thickness)
         closing = _relative_path(ids, kind, x0, x1)
         pl.n[c] = n
         pl.delta[c] = 0.0

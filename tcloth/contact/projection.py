@@ -20,6 +20,40 @@ from .guard import SLACK, VERTEX_PAIRS, spans
 
 HELD_ALONG = 0.5         # a held vertex moves along a normal only if this much is left
 JACOBI = False           # the Jacobi passes on CPUs too (``project``)
+LOG_CAPACITY = 1 << 14   # the corrections a step's ``Log`` keeps
+
+
+@ti.data_oriented
+class Log:
+    """Gauss-Seidel's corrections of one step in their order, kept where ``on`` is set
+    (a gradient's runs: ``tcloth/grad/frozen.py`` takes each as the projection it is):
+    each one's vertices (``pair``), plane (``n``, ``delta``), directions ``da`` and ``db``,
+    ``w`` and whether it removed approaching velocity (``stopped``): x_a += m_a^-1 lam da,
+    x_b += m_b^-1 lam db with lam = (delta - n . (x_a - x_b)) / w, and where ``stopped`` v
+    the same with lam = -n . (v_a - v_b) / w; the candidate's ``ids`` and ``kind`` (its
+    plane's), and x_a - x_b and v_a - v_b before it (``gap_x``, ``gap_v``). ``count``
+    counts them all; past ``capacity`` they are not kept."""
+
+    def __init__(self, capacity=LOG_CAPACITY):
+        real = runtime.real()
+        self.capacity = capacity
+        self.pair = ti.Vector.field(2, ti.i32, shape=capacity)
+        self.ids = ti.Vector.field(4, ti.i32, shape=capacity)
+        self.kind = ti.field(ti.i32, shape=capacity)
+        self.n, self.da, self.db, self.gap_x, self.gap_v = (
+            ti.Vector.field(3, real, shape=capacity) for _ in range(5))
+        self.w, self.delta = (ti.field(real, shape=capacity) for _ in range(2))
+        self.stopped = ti.field(ti.i32, shape=capacity)
+        self.count = ti.field(ti.i32, shape=())
+        self.on = ti.field(ti.i32, shape=())
+
+    def entries(self):
+        """The kept corrections as NumPy arrays: (pair, n, delta, da, db, w, stopped,
+        ids, kind, gap_x, gap_v)."""
+        k = min(int(self.count[None]), self.capacity)
+        return tuple(f.to_numpy()[:k] for f in (
+            self.pair, self.n, self.delta, self.da, self.db, self.w, self.stopped, self.ids,
+            self.kind, self.gap_x, self.gap_v))
 
 
 @ti.func
@@ -98,31 +132,52 @@ def _correct(ids, a: ti.template(), b: ti.template(), n, delta, x1, v1, inv_mass
 
 
 @ti.func
-def _correct_now(ids, a: ti.template(), b: ti.template(), n, delta, x1, v1, inv_mass, held):
+def _correct_now(ids, kind, a: ti.template(), b: ti.template(), n, delta, x1, v1, inv_mass,
+                 held, log):
     """``_correct`` in place, positions and velocities at once (a Gauss-Seidel step):
-    the vertex pair moved onto its plane and its approaching normal velocity removed.
-    1 if they were closer, else 0."""
+    the vertex pair moved onto its plane and its approaching normal velocity removed,
+    written to ``log`` where it is on. 1 if they were closer, else 0."""
     pa, pb = ids[a], ids[b]
     closer, da, db, w, short = _violated(ids, a, b, n, delta, x1, v1, inv_mass, held, 0,
                                          False)
     corrected = 0
     if closer:
+        gap_x, gap_v = x1[pa] - x1[pb], v1[pa] - v1[pb]
         lam = short / w
         x1[pa] += inv_mass[pa] * lam * da
         x1[pb] += inv_mass[pb] * lam * db
-        approach = n.dot(v1[pa] - v1[pb])
+        approach = n.dot(gap_v)
+        stopped = 0
         if approach < 0.0:
             stop = -approach / w
             v1[pa] += inv_mass[pa] * stop * da
             v1[pb] += inv_mass[pb] * stop * db
+            stopped = 1
         corrected = 1
+        if log.on[None]:
+            _log(log, ids, kind, pa, pb, n, delta, w, da, db, gap_x, gap_v, stopped)
     return corrected
+
+
+@ti.func
+def _log(log, ids, kind, pa, pb, n, delta, w, da, db, gap_x, gap_v, stopped):
+    """A correction into the ``Log`` (with its candidate's ids and kind, and the vertex
+    pair's x_a - x_b and v_a - v_b before it)."""
+    k = log.count[None]
+    if k < log.capacity:
+        log.pair[k] = ti.Vector([pa, pb])
+        log.ids[k], log.kind[k] = ids, kind
+        log.n[k], log.delta[k], log.w[k] = n, delta, w
+        log.da[k], log.db[k] = da, db
+        log.gap_x[k], log.gap_v[k] = gap_x, gap_v
+        log.stopped[k] = stopped
+    log.count[None] = k + 1
 
 
 @ti.kernel
 def _gauss_seidel(cl: ti.template(), pl: ti.template(), count: ti.i32, x1: ti.template(),
                   v1: ti.template(), inv_mass: ti.template(), held: ti.template(),
-                  sweeps: ti.i32) -> ti.types.vector(2, ti.i32):
+                  sweeps: ti.i32, log: ti.template()) -> ti.types.vector(2, ti.i32):
     """Serial sweeps of ``_correct_now`` over the candidates until one corrects nothing,
     at most ``sweeps``: (corrections of the first sweep, the sweeps run)."""
     found = 0
@@ -136,8 +191,8 @@ def _gauss_seidel(cl: ti.template(), pl: ti.template(), count: ti.i32, x1: ti.te
             if delta > 0.0:
                 for a, b in ti.static(VERTEX_PAIRS):
                     if spans(kind, a, b):
-                        corrected += _correct_now(ids, a, b, n, delta, x1, v1, inv_mass,
-                                                  held)
+                        corrected += _correct_now(ids, kind, a, b, n, delta, x1, v1,
+                                                  inv_mass, held, log)
         if ran == 0:
             found = corrected
         ran += 1
@@ -192,14 +247,15 @@ def _project_pass(cl: ti.template(), pl: ti.template(), count: ti.i32, x1: ti.te
     return corrected
 
 
-def project(cl, pl, count, x1, v1, inv_mass, held, sweeps, work):
+def project(cl, pl, count, x1, v1, inv_mass, held, sweeps, work, log):
     """The candidates' projection (their ``planes``): sweeps until one corrects nothing,
     at most ``sweeps``. On CPUs (unless JACOBI) Gauss-Seidel on one thread
     (``_gauss_seidel``: a few sweeps where Jacobi's passes take many, and the same
     numbers whatever the threads); on GPUs (or with JACOBI) Jacobi passes in parallel
     (``_project_pass``): on the positions, then on the velocities of the pairs the
     positions' passes moved (an inelastic contact, as Gauss-Seidel's). pl: the list's
-    ``guard.Planes``; work: (hits, dx), a particle's count and sum. Returns (the vertex
+    ``guard.Planes``; work: (hits, dx), a particle's count and sum; log: Gauss-Seidel's
+    corrections are written there where it is on (``Log``). Returns (the vertex
     pairs the first sweep corrected, the sweeps run); the last corrected nothing when
     fewer than ``sweeps`` ran."""
     if JACOBI or not runtime.cpu():
@@ -217,4 +273,5 @@ def project(cl, pl, count, x1, v1, inv_mass, held, sweeps, work):
                                          True, False)):
                     break
         return found, ran
-    return (int(v) for v in _gauss_seidel(cl, pl, count, x1, v1, inv_mass, held, sweeps))
+    return (int(v) for v in _gauss_seidel(cl, pl, count, x1, v1, inv_mass, held, sweeps,
+                                          log))

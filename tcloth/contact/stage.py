@@ -21,6 +21,8 @@ colliders, and updated only at named points, all called by the ``Simulator``:
     ``bounds=True``) at a step's start and after an iteration that clamped a move: the
     bounds from the proximity list, which it builds again at x where it has grown stale
     for them (the one rebuild inside a solve, and the stage's own).
+  - ``record(on)``: a gradient's runs keep each step's projection corrections and the
+    solver's end of the step (``tcloth/grad/frozen.py``).
 So the proximity list covers the current state (a rebuild at most once a step, but for
 ``detect_bounds``), and the self-contact term (explicit forces, backward Euler's
 potential and Hessian, projective's projection) and the diagnostics read it; only the
@@ -102,6 +104,9 @@ class ContactStage:
             self.cut = ti.field(real, shape=n)
             # the projection's Jacobi passes on GPUs: a particle's corrections and their sum
             self.work = (ti.field(ti.i32, shape=n), ti.Vector.field(3, real, shape=n))
+            self.log = projection.Log()
+        # the solver's end of the step, kept by ``end_step`` while ``record`` is on
+        self.solved, self.recording = None, False
         # x1 after the step's first collider sweep, where later sweeps start
         self.x_swept = ti.Vector.field(3, real, shape=n) \
             if self.colliders and self.table is not None else None
@@ -215,6 +220,18 @@ class ContactStage:
         self.obstacle.hold.end()
 
     # -- the guard ---------------------------------------------------------------------------
+    def record(self, on):
+        """Keep what a gradient takes of each step's guard (``tcloth/grad/frozen.py``):
+        the projection's corrections in order (``log``) and the step's end as the solver
+        left it (``solved``: x1, v1), from the next ``end_step`` on."""
+        if self.broad is None:          # (the colliders' sweeps alone: no projection)
+            return
+        if on and self.solved is None:
+            n, real = self.model.particle_count, runtime.real()
+            self.solved = tuple(ti.Vector.field(3, real, shape=n) for _ in range(2))
+        self.log.on[None] = int(on)
+        self.recording = bool(on)
+
     def end_step(self, x0, x1, v1, t0, dt):
         """The guard on the motion x0 -> x1 (v1 changed with x1); afterwards the proximity
         list covers x1. Returns whether it changed x1 and v1.
@@ -232,6 +249,10 @@ class ContactStage:
         back along them, which keeps every pair on its side)."""
         start = time.perf_counter()
         changed = 0
+        if self.recording:
+            self.log.count[None] = 0
+            self.solved[0].copy_from(x1)
+            self.solved[1].copy_from(v1)
         if self.obstacle is not None:
             self.obstacle.begin(x0, x1, t0, dt, OBSTACLE_MARGIN * self.obstacle.thickness)
         if self.broad is None:
@@ -280,7 +301,7 @@ class ContactStage:
                     break
             corrected, sweeps = projection.project(cl, self.planes_of(cl), count, x1, v1,
                                                    self.inv_mass, self.held, SWEEPS,
-                                                   self.work)
+                                                   self.work, self.log)
             self.stats["guard_corrections"] += corrected
             self.stats["guard_sweeps"] += sweeps
             changed += corrected

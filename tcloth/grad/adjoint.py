@@ -24,6 +24,13 @@ kernel:
     plane of the step's start (``plane_contact_force``); and, in a second kernel, the
     Coulomb friction the solver applies to v1 after its iterations (``coulomb_change``).
 
+Self-contact (symplectic and backward Euler): the kernels sum the contact force, or its
+part of the incremental potential's gradient, over the rows of ``set_contacts`` (the
+list the forward step read, ``frozen.py``) with the term's own functions
+(``self_contact.pair_force``; ``lagged``, ``penalty_gradient`` and ``dissipation``, the
+lagged values computed from x in the kernel). ``plane_vjp`` differentiates the guard's
+planes (``guard.normal_margin``) at the step's start.
+
 ``vjp(seed)`` runs the kernel's reverse mode with ``seed`` as the output's adjoint: the
 inputs' gradients (x.grad, v.grad, x1.grad) are set and the parameters' accumulate (a
 trajectory's sum over its steps). Which scenes it covers is ``unsupported(scene)``'s
@@ -36,21 +43,26 @@ import numpy as np
 import taichi as ti
 
 from .. import runtime
+from ..contact.candidates import ContactList
+from ..contact.guard import normal_margin
+from ..contact.projection import LOG_CAPACITY
 from ..model.collider_table import ColliderTable
 from ..features import FEATURES
 from ..terms import Bending, Colliders, GravityDrag, Membrane, Wind
 from ..terms.colliders import (coulomb_change, lagged_normal_force, plane_contact_force,
                                plane_offset, step_contact)
+from ..terms.self_contact import dissipation, lagged, pair_force, penalty_gradient
 from ..terms.springs import direction, incremental, spring_force
 
 
-COVERED = ("bending", "membrane", "wind")      # the scene features the adjoint takes
+# the scene features the adjoint takes (self-collision: symplectic and backward Euler)
+COVERED = ("bending", "membrane", "wind", "self_collision")
 
 
 def unsupported(scene):
     """Why the adjoint cannot take a step of this scene (one line), or None. It covers
-    gravity, drag, springs, hinge bending, the membrane, wind and the analytic colliders
-    at rest."""
+    gravity, drag, springs, hinge bending, the membrane, wind, self-collision and the
+    analytic colliders at rest."""
     features = [f.name for f in FEATURES if getattr(scene, f.name) is not None
                 and f.name not in COVERED]
     if scene.wind is not None and scene.wind["callable"] is not None:
@@ -105,6 +117,16 @@ class StepAdjoint:
         self.colliders = Colliders(view) if self.table is not None else None
         self.has_colliders = self.colliders is not None
         self.pairs, self.rest = model.spring_pairs, model.spring_rest
+        # self-collision: the contacts of the step (``set_contacts``), the forward run's
+        self.self_contact = model.self_collision is not None
+        self.rows = ContactList(model.self_collision, self.inv_mass, 1)
+        # the guard's planes (``plane_vjp``): each correction's candidate and the adjoints
+        # of its normal and delta
+        if self.self_contact:
+            self.planes = ContactList(model.self_collision, self.inv_mass, LOG_CAPACITY)
+            self.n_bar = ti.Vector.field(3, real, shape=LOG_CAPACITY)
+            self.delta_bar = ti.field(real, shape=LOG_CAPACITY)
+            self.plane_sum = ti.field(real, shape=(), needs_grad=True)
         self.parameter_fields = [self.params, self.drag, self.mass, self.inv_mass, self.ks,
                                  self.kd]
         # hinge bending: the term on weights that carry gradients
@@ -135,6 +157,52 @@ class StepAdjoint:
                 triangles=data.triangles, weights=data.weights, coefficients=self.membrane_c,
                 start=data.start, entries=data.entries)))
             self.parameter_fields.append(self.membrane_c)
+
+    def set_contacts(self, rows):
+        """The self-contacts of the step whose adjoint comes next: the repelling rows
+        (ids (r, 4), kinds (r,)) of the list its forward step read, frozen (the active
+        set of the forward run; the kernels' capacity grows where they do not fit)."""
+        ids, kinds = rows
+        if len(ids) > self.rows.capacity:
+            capacity = 1 << int(np.ceil(np.log2(len(ids))))
+            self.rows = ContactList(self.model.self_collision, self.inv_mass, capacity)
+        capacity = self.rows.capacity
+        padded = np.zeros((capacity, 4), dtype=np.int32)
+        padded[:len(ids)] = ids
+        self.rows.ids.from_numpy(padded)
+        self.rows.kind.from_numpy(np.pad(kinds.astype(np.int32), (0, capacity - len(ids))))
+        self.rows.repels.from_numpy((np.arange(capacity) < len(ids)).astype(np.uint8))
+
+    def plane_vjp(self, x0, planes):
+        """The adjoint of the step's start x0 ((n, 3) NumPy) from those of the guard's
+        planes there: planes = (ids (k, 4), kinds (k,), n_bar (k, 3), delta_bar (k,)) of
+        ``frozen.pull_back``, each a candidate's plane as ``guard.normal_margin`` makes it
+        (its normal and delta from its closest points at x0)."""
+        ids, kinds, n_bar, delta_bar = planes
+        k, npr = len(kinds), runtime.numpy_real()
+        ids_all = np.zeros((LOG_CAPACITY, 4), dtype=np.int32)
+        ids_all[:k] = ids
+        self.planes.ids.from_numpy(ids_all)
+        self.planes.kind.from_numpy(np.pad(kinds.astype(np.int32), (0, LOG_CAPACITY - k)))
+        self.planes.repels.from_numpy((np.arange(LOG_CAPACITY) < k).astype(np.uint8))
+        self.n_bar.from_numpy(np.pad(n_bar, ((0, LOG_CAPACITY - k), (0, 0))).astype(npr))
+        self.delta_bar.from_numpy(np.pad(delta_bar, (0, LOG_CAPACITY - k)).astype(npr))
+        self.x.from_numpy(x0.astype(npr))
+        self.x.grad.fill(0)
+        self.plane_sum[None] = 0.0
+        self.plane_sum.grad[None] = 1.0
+        self._planes()
+        self._planes.grad()
+        return self.x.grad.to_numpy()
+
+    @ti.kernel
+    def _planes(self):
+        """sum over the planes of n_bar . n + delta_bar delta at x."""
+        for c in range(LOG_CAPACITY):
+            if self.planes.repels[c]:
+                n, _, delta = normal_margin(self.planes.ids[c], self.planes.kind[c], self.x,
+                                            self.planes.table.params[0])
+                self.plane_sum[None] += self.n_bar[c].dot(n) + self.delta_bar[c] * delta
 
     def load(self, colliders_off=()):
         """Copy the model's current parameters (after its ``refresh``)."""
@@ -194,9 +262,9 @@ class StepAdjoint:
         residual."""
         self._set_clock(t, h)
         if self.implicit:
-            self._kernel(friction)(h)
+            self._kernel(friction)(h, self.rows)
         else:
-            self._forces()
+            self._forces(self.rows)
         return self.out.to_numpy()
 
     def vjp(self, seed, h, t, friction=False):
@@ -209,11 +277,11 @@ class StepAdjoint:
         self._set_clock(t, h)
         if self.implicit:
             kernel = self._kernel(friction)
-            kernel(h)
-            kernel.grad(h)
+            kernel(h, self.rows)
+            kernel.grad(h, self.rows)
             return self.x.grad.to_numpy(), self.v.grad.to_numpy(), self.x1.grad.to_numpy()
-        self._forces()
-        self._forces.grad()
+        self._forces(self.rows)
+        self._forces.grad(self.rows)
         return self.x.grad.to_numpy(), self.v.grad.to_numpy(), None
 
     def repeat_vjp(self, seed, h):
@@ -224,7 +292,7 @@ class StepAdjoint:
         self.out.grad.from_numpy(seed.astype(runtime.numpy_real()))
         self.v1.grad.fill(0)
         self.x1.grad.fill(0)
-        self._kernel(False).grad(h)
+        self._kernel(False).grad(h, self.rows)
         return self.x1.grad.to_numpy()
 
     def _set_clock(self, t, h):
@@ -233,7 +301,7 @@ class StepAdjoint:
                                        dtype=runtime.numpy_real()))
 
     @ti.kernel
-    def _forces(self):
+    def _forces(self, rows: ti.template()):
         for p in range(self.x.shape[0]):
             t = self.clock[0]
             f = self.gravity.force(p, self.x, self.v, t)
@@ -252,6 +320,13 @@ class StepAdjoint:
             for e in range(self.triangle_count):
                 gu, gv = self.membrane.triangle_gradient(e, self.x, self.v)
                 self._gather_triangle(e, gu, gv, -1.0)
+        if ti.static(self.self_contact):
+            for c in range(rows.capacity):
+                if rows.repels[c]:      # (the padding's rows have no gap: d = 0)
+                    touches, ids, alpha, f = pair_force(rows, c, self.x, self.v)
+                    if touches:
+                        for j in ti.static(range(4)):
+                            self.out[ids[j]] += alpha[j] * f
 
     @ti.func
     def _gather_triangle(self, e, gu, gv, sign: ti.template()):
@@ -321,7 +396,7 @@ class StepAdjoint:
             self.v1[p] = (self.x1[p] - self.x[p]) / self.clock[2]
 
     @ti.kernel
-    def _residual(self, h: float):
+    def _residual(self, h: float, rows: ti.template()):
         """Projective dynamics' force residual G(x1; x, v) (its negative: the backward
         Euler gradient's sign), whose zero is the solver's converged step."""
         self._end_velocities()
@@ -349,7 +424,7 @@ class StepAdjoint:
                 self._gather_triangle(e, gu, gv, 1.0)
 
     @ti.kernel
-    def _friction(self, h: float):
+    def _friction(self, h: float, rows: ti.template()):
         """The velocities after projective dynamics' friction (``Projective._friction``):
         v1 = (x1 - x) / h and, at each contact a free particle touches, the approaching
         normal velocity removed and the tangential cut by mu times the normal velocity
@@ -373,7 +448,7 @@ class StepAdjoint:
             self.out[p] = vp
 
     @ti.kernel
-    def _gradient(self, h: float):
+    def _gradient(self, h: float, rows: ti.template()):
         for p in range(self.x.shape[0]):
             t = self.clock[0]
             _, _, g = self.gravity.incremental(p, self.x1, self.x, h, t)
@@ -400,3 +475,13 @@ class StepAdjoint:
                 _, gu, gv = self.membrane.incremental(fu, fv, f0u, f0v, self.membrane_c[e],
                                                       self.clock[2])
                 self._gather_triangle(e, gu, gv, 1.0)
+        if ti.static(self.self_contact):
+            for c in range(rows.capacity):
+                if rows.repels[c]:
+                    # the penalty at the end, the damping and friction with the normal
+                    # force, normal and weights of the step's start (``SelfContact``)
+                    fn0, n0, alpha0 = lagged(rows, c, self.x)
+                    ids, alpha, _, grad = penalty_gradient(rows, c, self.x1)
+                    _, g_d, _ = dissipation(rows, ids, fn0, n0, alpha0, self.x1, self.x, h)
+                    for j in ti.static(range(4)):
+                        self.out[ids[j]] += alpha[j] * grad + alpha0[j] * g_d

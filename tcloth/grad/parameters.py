@@ -40,8 +40,9 @@ def masses_gradient(model, adjoint, inv_mass, explicit):
     """dL/dm (n,): the mass fields' gradients (inv_mass's through -1/m^2, ``inv_mass``
     the model's inverse masses in NumPy), the drag's through c_p = c + gamma m_p, the
     membrane's damping through beta = 2 zeta sqrt(m_reduced / max(C_u, C_v)) (m_reduced a
-    sixth of the triangle's corner masses), and ``explicit``: symplectic Euler's share
-    through M^-1 (``Trajectory._explicit_adjoint``; None for the implicit steps)."""
+    sixth of the triangle's corner masses), and ``explicit`` (or None): the share computed
+    in NumPy, symplectic Euler's through M^-1 (``StepAdjoints._explicit_adjoint``) and the
+    guard's corrections' (``frozen.pull_back``)."""
     scene = model.scene
     out = (adjoint.mass.grad.to_numpy() - adjoint.inv_mass.grad.to_numpy() * inv_mass ** 2
            + scene.air_damping * adjoint.drag.grad.to_numpy()).astype(np.float64)

@@ -6,51 +6,28 @@ from the last: it runs the segment again from its checkpoint (the same steps, so
 states), then takes the steps' adjoints in reverse order, carrying the adjoints (x_bar,
 v_bar) of the positions and velocities and accumulating the parameters' gradients.
 
-A step's adjoint (``StepAdjoint`` gives the vector-Jacobian products of its kernel):
-
-  - symplectic Euler, v1 = v + h M^-1 f(x, v), x1 = x + h v1: with a = v1_bar + h x1_bar
-    (v1's whole adjoint) and the force's adjoint f_bar = h M^-1 a, x_bar = x1_bar + f_x^T
-    f_bar and v_bar = a + f_v^T f_bar; the parameters get f_theta^T f_bar. Pinned particles
-    (M^-1 = 0) move with their velocity;
-  - backward Euler, x1 solving g(x1; x, v) = 0 (g the incremental potential's gradient),
-    v1 = (x1 - x) / h: with r = x1_bar + v1_bar / h, the adjoint solve H lambda = r on the
-    free particles, H = dg/dx1 the step's Hessian, solved by the integrator's own CG and
-    preconditioner (multigrid on a single cloth grid) at the step's end; then x_bar =
-    -v1_bar / h - g_x^T lambda, v_bar = -g_v^T lambda, the parameters -g_theta^T lambda, and
-    the pinned particles' share of -g_x1^T lambda (their x1 = x + h v) passed back to their
-    x and v. This is the implicit function theorem's derivative of the converged step: the
-    forward Newton must converge (``newton_tol``) well below the accuracy wanted of the
-    gradient, and the adjoint CG (``adjoint_tol``) likewise (docs/grad.md measures both);
-  - projective dynamics, x1 solving G(x1; x, v) = 0 (its force residual; the iterations'
-    fixed point), v1 = F(x1; x, v) (the friction after the solve): F's vector-Jacobian
-    product with v1_bar first, then the adjoint solve G_x1^T lambda = r (r = x1_bar plus
-    F's share) on the free particles by flexible GMRES (``krylov.fgmres``; G_x1 is not
-    symmetric: the springs' damping acts along their current direction), preconditioned
-    by backward Euler's projected Hessian at the step's end (one V-cycle of its multigrid,
-    or its block Jacobi off a grid: the same stiffness but for the damping's direction
-    terms and friction), its products G_x1^T lambda by Taichi's reverse mode over G, at
-    most 500 iterations; then x_bar, v_bar and the parameters as for backward Euler. The
-    derivative of the converged step: the forward iterations (``iterations``) must bring
-    the residual (``stats["residual"]``; the largest is ``Result.forward_residual``) well
-    below the accuracy wanted.
+A step's adjoint is ``steps.StepAdjoints``'s (one per integrator; ``adjoint.StepAdjoint``
+gives the vector-Jacobian products of its kernel).
 
 Controls: ``controls`` (steps, pinned, 3) set the pinned particles' velocities before each
 step (they move x += h u during step n); their gradient is the adjoint of those velocities.
 """
 import time
+import warnings
 
 import numpy as np
 import taichi as ti
 
 from .. import runtime
-from ..errors import SceneError
+from ..errors import GradientWarning, SceneError
 from ..integrators.implicit import BackwardEuler
 from ..scene.scene import KIND_CODE
 from ..sim.simulator import Simulator
 from ..validate import as_int
 from .adjoint import StepAdjoint, unsupported
-from .krylov import fgmres
+from .frozen import StepRecord, pull_back
 from .parameters import MEMBRANE, bending_gradient, masses_gradient, membrane_gradient
+from .steps import StepAdjoints
 
 INTEGRATORS = ("symplectic_euler", "backward_euler", "projective")
 
@@ -66,7 +43,11 @@ class Result:
     flexible GMRES's for projective dynamics); adjoint_residual (the largest relative
     residual an adjoint solve ended with); forward_residual (projective dynamics: the
     largest ``stats["residual"]`` of the forward run's steps, how far from its converged
-    step, whose derivative the gradient is, the solver stopped).
+    step, whose derivative the gradient is, the solver stopped); guarded_steps (the
+    forward run's steps whose end the contact stage's guard changed in a way the
+    gradient does not take: it is the solver's step's there, not the trajectory's);
+    projected_steps (those whose end the guard's projection changed, differentiated as
+    the projections they are, their planes frozen; ``frozen.py``).
     """
 
     def __init__(self, loss, grad, **stats):
@@ -81,7 +62,7 @@ class Result:
                 f"memory_bytes={self.memory_bytes})")
 
 
-class Trajectory:
+class Trajectory(StepAdjoints):
     """``steps`` steps of ``scene`` with ``integrator`` ("symplectic_euler",
     "backward_euler" or "projective") at ``dt``; ``options`` go to the integrator. Its
     parameters (``names``) are read with ``value(name)`` and changed with ``set(name,
@@ -123,15 +104,19 @@ class Trajectory:
         self.projective = integrator == "projective"
         self._forward_residual = 0.0
         # during a gradient: the model's inverse masses in NumPy (symplectic Euler's
-        # update reads them) and symplectic Euler's share of dL/dm
+        # update and the guard's corrections read them) and their share of dL/dm
         self._inv_mass = self._mass_bar = None
         why = unsupported(scene)
+        if why is None and self.projective and scene.self_collision is not None:
+            why = ("projective dynamics' self-contact projection is not differentiated "
+                   "(backward_euler and symplectic_euler take self-collision)")
         if why is not None:
             raise SceneError(f"tcloth.grad: {why}")
         self.sim = Simulator(scene, integrator=integrator, dt=dt, **options)
         self.scene = scene
         self.adjoint = StepAdjoint(self.sim.model, self.implicit, self.projective)
         self.adjoint.load()
+        self.record = StepRecord(self.sim.model)
         self.pinned = np.flatnonzero(scene.pinned)
         self.free = np.flatnonzero(~scene.pinned)
         self.initial = {"positions": scene.positions.astype(np.float64),
@@ -266,18 +251,23 @@ class Trajectory:
     def _state(self):
         return self.sim.positions().astype(np.float64), self.sim.velocities().astype(np.float64)
 
-    def _run(self, start, stop, state):
+    def _run(self, start, stop, state, keep=False):
         """Steps start .. stop - 1 from ``state`` (the state at ``start``, before its
-        control): the states start .. stop, each after its control where it has one."""
+        control): the states start .. stop, each after its control where it has one;
+        ``record`` holds what the steps read and what their guard did (kept where
+        ``keep``)."""
         sim = self.sim
         sim.num_steps = start           # the time of step ``start`` (a gust reads it): the
         sim.state.t = sim.time          # simulator's clock counts from 0 at its reset
         sim.set_state(*state)
         states = []
+        self.record.start(keep)
         for n in range(start, stop):
             self._apply_control(n)
             states.append(self._state())
+            self.record.before(n)
             sim.step(1)
+            self.record.after(n)
             if self.projective:
                 self._forward_residual = max(self._forward_residual,
                                              sim.integrator.stats["residual"])
@@ -285,15 +275,19 @@ class Trajectory:
         return states
 
     def forward(self, loss):
-        """The forward run alone: (loss value, the checkpoints {step: (x, v)})."""
+        """The forward run alone: (loss value, the checkpoints {step: (x, v)}); the steps
+        the guard changed in ``guarded_steps`` and ``projected_steps`` (``Result``)."""
         k, steps = self.checkpoint_every, self.steps
         self._forward_residual = 0.0
+        self.guarded_steps, self.projected_steps = [], []
         state = self.initial["positions"], self.initial["velocities"]
         checkpoints, value = {0: state}, 0.0
         reads = set(loss.steps)
         for start in range(0, steps, k):
             stop = min(start + k, steps)
             states = self._run(start, stop, state)
+            self.guarded_steps += sorted(self.record.guarded)
+            self.projected_steps += sorted(self.record.projected)
             if start == 0:
                 checkpoints[0] = states[0]      # as the simulator holds it, after control 0
             for m in range(start, stop + 1):
@@ -315,22 +309,29 @@ class Trajectory:
         t0 = time.perf_counter()
         value, checkpoints = self.forward(loss)
         t1 = time.perf_counter()
+        if self.guarded_steps:
+            warnings.warn(
+                f"the contact stage's guard changed {len(self.guarded_steps)} of the "
+                f"{self.steps} steps (the first: step {self.guarded_steps[0]}): the gradient "
+                "takes the solver's step there, not the guard's change "
+                "(Result.guarded_steps)", GradientWarning, stacklevel=2)
         n, h = self.scene.num_particles, self.sim.dt
         adj = self.adjoint
         adj.zero_parameter_grads()
         self._inv_mass = self.sim.model.inv_mass.to_numpy().astype(np.float64)
-        self._mass_bar = np.zeros(n) if "masses" in wrt and not self.implicit else None
+        self._mass_bar = np.zeros(n) if "masses" in wrt else None
         x_bar, v_bar = np.zeros((n, 3)), np.zeros((n, 3))
         controls_bar = np.zeros((self.steps, len(self.pinned), 3))
         reads = set(loss.steps)
         iterations, worst = 0, 0.0
         k = self.checkpoint_every
         starts = list(range(0, self.steps, k))
-        segment = 0
+        segment = rows = 0
         for start in reversed(starts):
             stop = min(start + k, self.steps)
-            states = self._run(start, stop, checkpoints[start])
+            states = self._run(start, stop, checkpoints[start], keep=True)
             segment = max(segment, len(states))
+            rows = max(rows, self.record.nbytes)
             for m in range(stop - 1, start - 1, -1):
                 if m + 1 in reads:
                     _, dx, dv = loss.evaluate(m + 1, *states[m + 1 - start])
@@ -338,6 +339,15 @@ class Trajectory:
                     if dv is not None:
                         v_bar += dv
                 (x, v), (x1, _) = states[m - start], states[m + 1 - start]
+                if m in self.record.rows:
+                    adj.set_contacts(self.record.rows[m])
+                planes = None
+                if m in self.record.projections:    # the guard's, then the solver's step
+                    corrections, x1, _ = self.record.projections[m]
+                    x_bar, v_bar, inv_bar, planes = pull_back(corrections, self._inv_mass,
+                                                              x_bar, v_bar)
+                    if self._mass_bar is not None:
+                        self._mass_bar -= self._inv_mass ** 2 * inv_bar
                 if self.implicit:
                     adjoint = (self._projective_adjoint if self.projective
                                else self._implicit_adjoint)
@@ -346,6 +356,8 @@ class Trajectory:
                     worst = max(worst, residual)
                 else:
                     x_bar, v_bar = self._explicit_adjoint(x, v, x_bar, v_bar, h, m)
+                if planes is not None:      # the guard's planes, from the step's start
+                    x_bar = x_bar + adj.plane_vjp(x, planes)
                 if self.controls is not None and len(self.pinned):
                     controls_bar[m] = v_bar[self.pinned]
                     v_bar[self.pinned] = 0.0
@@ -358,84 +370,11 @@ class Trajectory:
         grads = self._reduce(wrt, x_bar, v_bar, controls_bar)
         state_bytes = 2 * n * 3 * np.dtype(runtime.numpy_real()).itemsize
         return Result(value, grads, forward_seconds=t1 - t0, backward_seconds=t2 - t1,
-                      memory_bytes=(len(checkpoints) + segment) * state_bytes,
+                      memory_bytes=(len(checkpoints) + segment) * state_bytes + rows,
                       adjoint_iterations=iterations, adjoint_residual=worst,
-                      forward_residual=self._forward_residual)
-
-    def _explicit_adjoint(self, x, v, x_bar, v_bar, h, m):
-        a = v_bar + h * x_bar
-        self.adjoint.set_inputs(x, v)
-        gx, gv, _ = self.adjoint.vjp(h * self._inv_mass[:, None] * a, h, self.sim.time_at(m))
-        if self._mass_bar is not None:      # v1's M^-1: d(h f / m)/dm = -h f / m^2 at fixed f
-            f = self.adjoint.out.to_numpy().astype(np.float64)
-            self._mass_bar -= h * self._inv_mass ** 2 * (a * f).sum(axis=1)
-        return x_bar + gx, a + gv
-
-    def _implicit_adjoint(self, x, v, x1, x_bar, v_bar, h, m):
-        sim, adj = self.sim, self.adjoint
-        integ = sim.integrator
-        npr = runtime.numpy_real()
-        t0 = sim.time_at(m)
-        r = x_bar + v_bar / h
-        r[self.pinned] = 0.0
-        # the step's Hessian at its end, with its lagged quantities from its start
-        adj.set_inputs(x, v, x1)
-        integ.potential.begin(adj.x, adj.v, h, t0, self._x_start)
-        integ.hessian.assemble(adj.x1, h, t0 + h)
-        self._rhs.from_numpy((-r).astype(npr))      # solve(grad) solves H dx = -grad
-        iters, residual = integ.hessian.solve(self._rhs, self.adjoint_tol, 100 * len(x))
-        lam = integ.hessian.dx.to_numpy().astype(np.float64)
-        lam[self.pinned] = 0.0
-        gx, gv, gx1 = adj.vjp(-lam, h, t0 + h)
-        x_new = -v_bar / h + gx
-        v_new = gv.copy()
-        carried = x_bar[self.pinned] + v_bar[self.pinned] / h + gx1[self.pinned]
-        x_new[self.pinned] += carried
-        v_new[self.pinned] += h * carried
-        return x_new, v_new, int(iters), float(residual)
-
-    def _projective_adjoint(self, x, v, x1, x_bar, v_bar, h, m):
-        adj, pinned, free = self.adjoint, self.pinned, self.free
-        t0 = self.sim.time_at(m)
-        t1 = t0 + h
-        adj.set_inputs(x, v, x1)
-        newton = self._newton
-        newton.potential.begin(adj.x, adj.v, h, t0, self._x_start)
-        newton.hessian.assemble(adj.x1, h, t1)
-        # v1 = F(x1; x, v), the friction after the solve
-        x_new, v_new, gx1 = adj.vjp(v_bar, h, t1, friction=True)
-        r = x_bar + gx1
-
-        adj.evaluate(h, t1)                 # the residual's values, for repeat_vjp
-
-        def transposed(z):
-            """G_x1^T z on the free particles."""
-            seed = np.zeros_like(r)
-            seed[free] = z.reshape(-1, 3)
-            return adj.repeat_vjp(seed, h)[free].ravel()
-
-        def precondition(z):
-            """B z, B one V-cycle (or block Jacobi) of backward Euler's projected Hessian
-            at the step's end."""
-            b = np.zeros_like(r)
-            b[free] = -z.reshape(-1, 3)
-            self._rhs.from_numpy(b.astype(runtime.numpy_real()))
-            newton.hessian.descent(self._rhs)        # dx = -B grad
-            return newton.hessian.dx.to_numpy()[free].ravel().astype(np.float64)
-
-        kept = adj.parameter_grads()        # the solve's products accumulate nothing
-        lam_free, iters, residual = fgmres(transposed, precondition, r[free].ravel(),
-                                           self.adjoint_tol, max_iterations=500)
-        adj.set_parameter_grads(kept)
-        lam = np.zeros_like(r)
-        lam[free] = lam_free.reshape(-1, 3)
-        gx, gv, gx1 = adj.vjp(-lam, h, t1)
-        x_new = x_new + gx
-        v_new = v_new + gv
-        carried = r[pinned] + gx1[pinned]
-        x_new[pinned] += carried
-        v_new[pinned] += h * carried
-        return x_new, v_new, int(iters), float(residual)
+                      forward_residual=self._forward_residual,
+                      guarded_steps=list(self.guarded_steps),
+                      projected_steps=list(self.projected_steps))
 
     def _reduce(self, wrt, x_bar, v_bar, controls_bar):
         adj, grads = self.adjoint, {}

@@ -60,6 +60,31 @@ def _normal(g, d):
     return g / ti.max(d, 1e-30)
 
 
+@ti.func
+def pair_force(cl, c, x, v):
+    """(touches, ids, alpha, f) of candidate c of list cl at (x, v): particle k of the
+    contact gets alpha_k f where it touches (a repelling pair closer than the thickness,
+    not at d = 0, with a free particle)."""
+    prm = ti.static(cl.table.params)
+    ids, kind = cl.ids[c], cl.kind[c]
+    alpha, g = cl.gap(ids, kind, x)
+    d = g.norm()
+    thickness, k = prm[0], prm[1]
+    touches = False
+    f = ti.Vector.zero(float, 3)
+    if cl.repels[c] and d > 0.0 and d < thickness:
+        n = _normal(g, d)
+        v_rel = ti.Vector.zero(float, 3)
+        for j in ti.static(range(4)):
+            v_rel += alpha[j] * v[ids[j]]
+        w = cl.inverse_mass(ids, alpha)
+        if w > 0.0:
+            touches = True
+            f = contact_force(thickness - d, v_rel, n, k, 2.0 * prm[3] * ti.sqrt(k / w),
+                              prm[2], prm[4])
+    return touches, ids, alpha, f
+
+
 @ti.kernel
 def self_contact_forces(
         # Model:
@@ -69,24 +94,12 @@ def self_contact_forces(
         # Out:
         f_out: ti.template()):
     """f_out += the self-contact forces of the first ``count`` candidates."""
-    prm = ti.static(cl.table.params)
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
-        ids, kind = cl.ids[c], cl.kind[c]
-        alpha, g = cl.gap(ids, kind, x)
-        d = g.norm()
-        thickness, k = prm[0], prm[1]
-        if cl.repels[c] and d > 0.0 and d < thickness:
-            n = _normal(g, d)
-            v_rel = ti.Vector.zero(float, 3)
+        touches, ids, alpha, f = pair_force(cl, c, x, v)
+        if touches:
             for j in ti.static(range(4)):
-                v_rel += alpha[j] * v[ids[j]]
-            w = cl.inverse_mass(ids, alpha)
-            if w > 0.0:
-                f = contact_force(thickness - d, v_rel, n, k, 2.0 * prm[3] * ti.sqrt(k / w),
-                                  prm[2], prm[4])
-                for j in ti.static(range(4)):
-                    f_out[ids[j]] += alpha[j] * f
+                f_out[ids[j]] += alpha[j] * f
 
 
 @ti.kernel
@@ -137,35 +150,39 @@ class Lagged:
         self.damping = ti.Matrix.field(3, 3, real, shape=capacity)
 
 
+@ti.func
+def lagged(cl, c, x0):
+    """(fn, n, alpha) of candidate c at the step's start x0: its normal force k (T - d)
+    (0 where it does not touch), normal and weights."""
+    prm = ti.static(cl.table.params)
+    alpha, g = cl.gap(cl.ids[c], cl.kind[c], x0)
+    d = g.norm()
+    fn = 0.0
+    if cl.repels[c] and d > 0.0 and d < prm[0]:
+        fn = prm[1] * (prm[0] - d)
+    return fn, _normal(g, d), alpha
+
+
 @ti.kernel
 def _lag(cl: ti.template(), lag: ti.template(), count: ti.i32, x0: ti.template()):
     """Each candidate's normal force, normal and weights at the step's start."""
-    prm = ti.static(cl.table.params)
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
-        alpha, g = cl.gap(cl.ids[c], cl.kind[c], x0)
-        d = g.norm()
-        fn = 0.0
-        if cl.repels[c] and d > 0.0 and d < prm[0]:
-            fn = prm[1] * (prm[0] - d)
-        lag.fn[c] = fn
-        lag.n[c] = _normal(g, d)
-        lag.alpha0[c] = alpha
+        lag.fn[c], lag.n[c], lag.alpha0[c] = lagged(cl, c, x0)
 
 
 @ti.func
-def _dissipation(cl, lag, c, x, x0, h):
-    """(energy, gradient, Hessian) in the relative motion sum_k alpha0_k x_k of contact c's
+def dissipation(cl, ids, fn0, n0, alpha0, x, x0, h):
+    """(energy, gradient, Hessian) in the relative motion sum_k alpha0_k x_k of a contact's
     normal damping and friction as convex potentials of the end velocity (the colliders'
-    ``add_dissipation`` between two moving sides; no damping where every particle of the
-    contact is pinned)."""
+    ``add_dissipation`` between two moving sides), with its lagged normal force fn0,
+    normal n0 and weights alpha0 (``lagged``); no damping where every particle of the
+    contact is pinned."""
     prm = ti.static(cl.table.params)
-    ids, fn0 = cl.ids[c], lag.fn[c]
     e = 0.0
     g = ti.Vector.zero(float, 3)
     block = ti.Matrix.zero(float, 3, 3)
     if fn0 > 0.0:
-        alpha0 = lag.alpha0[c]
         w = cl.inverse_mass(ids, alpha0)
         v = ti.Vector.zero(float, 3)
         for j in ti.static(range(4)):
@@ -173,8 +190,29 @@ def _dissipation(cl, lag, c, x, x0, h):
         cd = 0.0
         if w > 0.0:
             cd = 2.0 * prm[3] * ti.sqrt(prm[1] / w)
-        e, g, block = add_dissipation(e, g, block, v, lag.n[c], fn0, cd, prm[2], prm[4], h)
+        e, g, block = add_dissipation(e, g, block, v, n0, fn0, cd, prm[2], prm[4], h)
     return e, g, block
+
+
+@ti.func
+def _dissipation(cl, lag, c, x, x0, h):
+    """``dissipation`` of candidate c with its values lagged by ``_lag``."""
+    return dissipation(cl, cl.ids[c], lag.fn[c], lag.n[c], lag.alpha0[c], x, x0, h)
+
+
+@ti.func
+def penalty_gradient(cl, c, x):
+    """(ids, alpha, depth T - d, the penalty's gradient in the gap -k (T - d) n) of
+    candidate c at x: the gradient zero where it does not touch."""
+    prm = ti.static(cl.table.params)
+    ids = cl.ids[c]
+    alpha, g = cl.gap(ids, cl.kind[c], x)
+    d = g.norm()
+    depth = prm[0] - d
+    grad = ti.Vector.zero(float, 3)
+    if cl.repels[c] and depth > 0.0:
+        grad = -prm[1] * depth * _normal(g, d)
+    return ids, alpha, depth, grad
 
 
 @ti.kernel
@@ -186,15 +224,11 @@ def _incremental(cl: ti.template(), lag: ti.template(), count: ti.i32, x: ti.tem
     prm = ti.static(cl.table.params)
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
-        ids = cl.ids[c]
-        alpha, g = cl.gap(ids, cl.kind[c], x)
-        d = g.norm()
-        depth = prm[0] - d
+        ids, alpha, depth, grad = penalty_gradient(cl, c, x)
         e = 0.0
         if cl.repels[c] and depth > 0.0:
             e = 0.5 * prm[1] * depth * depth
             if ti.static(with_grad):
-                grad = -prm[1] * depth * _normal(g, d)
                 for j in ti.static(range(4)):
                     grad_out[ids[j]] += alpha[j] * grad
         e_d, g_d, _ = _dissipation(cl, lag, c, x, x0, h)

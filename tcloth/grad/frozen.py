@@ -1,0 +1,135 @@
+"""What the backward run keeps of each forward step besides its state (``StepRecord``):
+the self-contacts its solve read and the guard's projections, frozen (the active set and
+the planes of the forward run), and whether the guard changed the step otherwise.
+
+Self-contact. A step's self-contact force (symplectic Euler) or potential (backward
+Euler) sums over the candidate rows of the contact stage's list as the step found it
+(``contact/stage.py``: rebuilt only between steps). The adjoint differentiates that sum
+over the same rows: the pairs are frozen, each pair's closest points, normal and depth
+move with the positions (the derivative of the step the forward run took). A pair that
+the list did not hold has no force in the forward step and none in its derivative.
+
+The guard's projection. Where the solver's step would take a vertex pair across its
+separating plane, the guard's Gauss-Seidel sweeps (``contact/projection.py``) move it
+back onto the plane, x <- x + u (delta - J x) / w, and remove its approaching normal
+velocity, v <- v - u (J v) / w (J x = n . (x_a - x_b); u the vertices' inverse masses
+times their directions, w = J u): each correction an affine projection. With the planes
+(n, delta: the step's start's) and the corrections that fired frozen, the guard is their
+composition, and its transposed Jacobian is theirs in reverse order (``pull_back``); the
+step's adjoint then takes the solver's end of the step, which the stage keeps
+(``ContactStage.record``).
+
+What is not differentiated. The colliders' sweep (a path cut where it enters a
+collider), the fail-safe, the mesh colliders' planes, the projection's Jacobi passes (on
+GPUs) and a step whose corrections overflow the log: at such a step the gradient takes
+the solver's step, not the guard's change; ``Trajectory.gradient`` reports those steps
+(``Result.guarded_steps``) and warns.
+"""
+import numpy as np
+
+# the contact stage's counts (``contact.stage.STATS``) of the guard's changes that the
+# gradient does not take, and of its projection's, which it does
+NOT_TAKEN = ("failsafe_vertices", "collider_paths_cut", "obstacle_corrections",
+             "obstacle_carried")
+PROJECTED = "guard_corrections"
+
+
+class StepRecord:
+    """Per step of a run (``before(n)`` and ``after(n)`` around step n): the repelling
+    self-contact rows its forward step read (``rows[n]``: ids (r, 4) and kinds (r,)), the
+    guard's projection where it changed the step (``projections[n]``: its corrections
+    and the solver's x1, v1), each where ``keep`` is set; the steps whose guard changed
+    them in a way the gradient does not take (``guarded``) and those whose projection
+    it takes (``projected``)."""
+
+    def __init__(self, model):
+        self.stage = model.contact
+        self.self_contact = model.self_collision is not None
+        self.rows, self.projections = {}, {}
+        self.guarded, self.projected = set(), set()
+        self.keep = False
+        self._counts = {}
+        if self.stage is not None:
+            self.stage.record(True)
+
+    def start(self, keep):
+        """A new run (its rows and projections kept where ``keep``: a segment of the
+        backward run)."""
+        self.rows, self.projections = {}, {}
+        self.guarded, self.projected = set(), set()
+        self.keep = keep
+
+    def before(self, n):
+        if self.stage is None:
+            return
+        self._counts = dict(self.stage.stats)
+        if self.keep and self.self_contact:
+            cl, count = self.stage.candidates, self.stage.count
+            repels = cl.repels.to_numpy()[:count].astype(bool)
+            self.rows[n] = (cl.ids.to_numpy()[:count][repels],
+                            cl.kind.to_numpy()[:count][repels])
+
+    def after(self, n):
+        if self.stage is None:
+            return
+        stats = self.stage.stats
+        if any(stats[key] != self._counts[key] for key in NOT_TAKEN):
+            self.guarded.add(n)
+        elif stats[PROJECTED] != self._counts[PROJECTED]:
+            log = self.stage.log
+            kept = int(log.count[None])
+            entries = log.entries() if 0 < kept <= log.capacity else None
+            if entries is None or not along_normals(entries):
+                self.guarded.add(n)       # Jacobi passes, an overflow, a held vertex
+                return
+            self.projected.add(n)
+            if self.keep:
+                self.projections[n] = (entries, *(f.to_numpy().astype(np.float64)
+                                                  for f in self.stage.solved))
+
+    @property
+    def nbytes(self):
+        """The memory the rows and projections kept take."""
+        rows = sum(ids.nbytes + kinds.nbytes for ids, kinds in self.rows.values())
+        return rows + sum(sum(a.nbytes for a in entries) + x1.nbytes + v1.nbytes
+                          for entries, x1, v1 in self.projections.values())
+
+
+def pull_back(entries, inv_mass, x_bar, v_bar):
+    """The adjoints of the guard's input (the solver's x1, v1) from those of its output,
+    its corrections' in reverse order, of the inverse masses, and of their planes:
+    (x_bar, v_bar, inv_mass_bar, (ids, kinds, n_bar, delta_bar)), the last for
+    ``StepAdjoint.plane_vjp`` (the planes' dependence on the step's start). A correction
+    x_a += m_a^-1 lam n, x_b -= m_b^-1 lam n with lam = (delta - n . g) / w (g = x_a - x_b
+    before it, w = m_a^-1 + m_b^-1), y_a and y_b its output's adjoints, takes s = (m_a^-1
+    n . y_a - m_b^-1 n . y_b) / w (lam's adjoint over w), passes -s n and s n to its
+    input's, and gives n lam (m_a^-1 y_a - m_b^-1 y_b) - s g, delta s, m_a^-1 lam (n . y_a
+    - s) and m_b^-1 -lam (n . y_b + s); a velocity correction likewise with lam = -n .
+    g_v / w and no delta."""
+    pair, n, delta, _, _, w, stopped, ids, kinds, gap_x, gap_v = entries
+    x_bar, v_bar = x_bar.copy(), v_bar.copy()
+    n_bar, delta_bar = np.zeros_like(n), np.zeros(len(w))
+    inv_bar = np.zeros(len(inv_mass))
+    for k in range(len(w) - 1, -1, -1):
+        a, b = pair[k]
+        moves = ((x_bar, gap_x[k], True), (v_bar, gap_v[k], False))
+        for y, g, positions in moves if stopped[k] else moves[:1]:
+            lam = ((delta[k] if positions else 0.0) - n[k] @ g) / w[k]
+            ya, yb = inv_mass[a] * y[a], inv_mass[b] * y[b]
+            s = n[k] @ (ya - yb) / w[k]
+            n_bar[k] += lam * (ya - yb) - s * g
+            inv_bar[a] += lam * (n[k] @ y[a] - s)
+            inv_bar[b] -= lam * (n[k] @ y[b] + s)
+            if positions:
+                delta_bar[k] += s
+            y[a] -= s * n[k]
+            y[b] += s * n[k]
+    return x_bar, v_bar, inv_bar, (ids, kinds, n_bar, delta_bar)
+
+
+def along_normals(entries):
+    """Whether every correction moved its vertices along its normal (+n, -n): none was
+    held by a collider, the case ``pull_back`` differentiates."""
+    _, n, _, da, db = entries[:5]
+    return bool(np.allclose(da, n, rtol=0, atol=1e-12) and
+                np.allclose(db, -n, rtol=0, atol=1e-12))
