@@ -13,13 +13,18 @@ side in one run, medians of --repeats:
   - gradient: the forward run and the backward run (each segment run again, then the
     steps' adjoints).
 
+--self-collision T gives the cloth self-collision of thickness T (projective dynamics
+does not take it); the steps the guard's projection changed and those the gradient
+does not take are reported (``projected_steps``, ``guarded_steps``).
+
 Prints greppable lines ``grad.<integrator>.<n>x<n>.<metric>: value`` (seconds, the ratios
 gradient / forward and gradient / trajectory, the checkpoints' memory against storing every
 state) and writes <out>/grad_bench.csv.
 
 Usage: python tools/bench_grad.py [--sizes 32] [--steps 120] [--repeats 3] [--tol 1e-8]
                                   [--iterations 100] [--integrators all]
-                                  [--precision f64] [--out docs] [--arch cpu]
+                                  [--self-collision 0] [--precision f64] [--out docs]
+                                  [--arch cpu]
 """
 import argparse
 import os
@@ -32,21 +37,23 @@ from benchcsv import write_csv
 from tcloth import grad
 
 
-def cloth(n, collider=True):
+def cloth(n, collider=True, layer=0.0):
     scene = tcloth.Scene(air_drag=0.01)
     scene.add_cloth(resolution=(n, n), size=(0.5, 0.5), center=(0.0, 0.3, 0.0), mass=0.5,
                     structural=(500.0, 0.5), shear=(200.0, 0.2), flexion=(100.0, 0.1),
                     pinned=[(0, 0), (n - 1, 0)])
     if collider:
         scene.add_sphere((0.0, 0.18, 0.1), 0.12, friction=0.3)     # touching the cloth
+    if layer > 0.0:
+        scene.set_self_collision(thickness=layer)
     return scene
 
 
-def measure(integrator, n, steps, repeats, tol, iterations):
+def measure(integrator, n, steps, repeats, tol, iterations, layer):
     dt = 2e-4 if integrator == "symplectic_euler" else 1.0 / 60.0
     options = {"backward_euler": {"newton_tol": tol, "cg_tol": 1e-6, "adjoint_tol": tol},
                "projective": {"iterations": iterations, "adjoint_tol": tol}}.get(integrator, {})
-    scene = cloth(n, True)
+    scene = cloth(n, True, layer)
     trajectory = grad.Trajectory(scene, steps=steps, dt=dt, integrator=integrator, **options)
     target = scene.positions + np.array([0.0, -0.05, 0.0])
     loss = grad.TargetPositions(target, steps=steps)
@@ -79,7 +86,9 @@ def measure(integrator, n, steps, repeats, tol, iterations):
             "memory_every_state_bytes": stored,
             "adjoint_iterations": result.adjoint_iterations,
             "adjoint_residual": result.adjoint_residual,
-            "forward_residual": result.forward_residual}
+            "forward_residual": result.forward_residual,
+            "projected_steps": len(result.projected_steps),
+            "guarded_steps": len(result.guarded_steps)}
 
 
 def main():
@@ -91,6 +100,8 @@ def main():
     parser.add_argument("--iterations", type=int, default=100,
                         help="projective dynamics' iterations a step")
     parser.add_argument("--integrators", default=",".join(grad.INTEGRATORS))
+    parser.add_argument("--self-collision", type=float, default=0.0,
+                        help="the cloth's self-collision thickness, m (0: none)")
     parser.add_argument("--precision", default="f64")
     parser.add_argument("--out", default="docs")
     parser.add_argument("--arch", default="cpu")
@@ -99,7 +110,8 @@ def main():
     rows = []
     for n in (int(s) for s in args.sizes.split(",") if s):
         for integrator in args.integrators.split(","):
-            row = measure(integrator, n, args.steps, args.repeats, args.tol, args.iterations)
+            row = measure(integrator, n, args.steps, args.repeats, args.tol, args.iterations,
+                          args.self_collision)
             rows.append(row)
             for key, value in row.items():
                 if key not in ("integrator", "n"):

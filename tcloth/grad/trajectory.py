@@ -47,7 +47,8 @@ class Result:
     forward run's steps whose end the contact stage's guard changed in a way the
     gradient does not take: it is the solver's step's there, not the trajectory's);
     projected_steps (those whose end the guard's projection changed, differentiated as
-    the projections they are, their planes frozen; ``frozen.py``).
+    the projections they are: the corrections that fired frozen, their planes through
+    the step's start; ``frozen.py``).
     """
 
     def __init__(self, loss, grad, **stats):
@@ -103,6 +104,7 @@ class Trajectory(StepAdjoints):
         self.implicit = integrator in ("backward_euler", "projective")
         self.projective = integrator == "projective"
         self._forward_residual = 0.0
+        self.guarded_steps, self.projected_steps = [], []     # the last forward run's
         # during a gradient: the model's inverse masses in NumPy (symplectic Euler's
         # update and the guard's corrections read them) and their share of dL/dm
         self._inv_mass = self._mass_bar = None
