@@ -11,9 +11,12 @@ target puts the two rows on one line though springs 1/(n-1) of the towel long jo
 a target no motion reaches: at n = 8 the descent stopped at 0.012 m^2.) The loss is
 the squared distance to the target at the last step. The descent starts from the motion a
 person would try first: each corner over a half circle about the middle line. Each corner's path is --knots
-stretches of constant velocity (piecewise linear), at most 0.8 m/s along each axis. Self-collision is not differentiated yet (docs/grad.md),
-so the run has none: the turned-over half lies at the table's height, through the far
-half, and the target says so.
+stretches of constant velocity (piecewise linear), at most 0.8 m/s along each axis. With
+--layer T the towel has self-collision of thickness T (differentiated through each step's
+contacts and the guard's projection, docs/grad.md) and the target's near half lies T
+above the far half; without it (the default: backward Euler's Newton with self-collision
+solves by CG, not multigrid, and a gradient costs about ten times as much) the
+turned-over half lies at the table's height through the far half, as the target says.
 
 Prints ``steer.loss.still`` (the corners held still), ``steer.loss.start`` (the half
 circles), ``steer.loss.end``, ``steer.loss.reduction`` (still / end, the issue's target: at
@@ -21,7 +24,8 @@ least 100) and ``reduction_from_start``, iterations and seconds, and renders the
 (<out>/steer.png: four frames side by side; --video adds <out>/steer.mp4).
 
 Usage: python tools/steer.py [--n 13] [--steps 90] [--rest 20] [--iterations 60]
-                             [--knots 6] [--out docs/img] [--video] [--quick]
+                             [--knots 6] [--layer 0] [--out docs/img] [--video]
+                             [--quick]
 """
 import argparse
 import os
@@ -36,25 +40,29 @@ SIZE, MASS, THICKNESS = 0.4, 0.1, 0.005
 SPEED = 0.8             # the corners' largest speed along each axis, m/s
 
 
-def towel(n):
-    """The towel flat on the table (a plane at y = 0), its near edge's corners held."""
+def towel(n, layer):
+    """The towel flat on the table (a plane at y = 0), its near edge's corners held; with
+    self-collision of thickness ``layer`` (none where it is 0)."""
     scene = tcloth.Scene(air_drag=0.02)
-    cloth = scene.add_cloth(resolution=(n, n), size=(SIZE, SIZE), mass=MASS,
+    scene.add_cloth(resolution=(n, n), size=(SIZE, SIZE), mass=MASS,
                             center=(0.0, THICKNESS, 0.0), structural=(400.0, 0.4),
                             shear=(100.0, 0.1), flexion=None, pinned=[(0, 0), (n - 1, 0)])
     scene.set_bending(2e-5)
     scene.add_plane((0.0, 0.0, 0.0), (0.0, 1.0, 0.0), friction=0.4, thickness=THICKNESS)
-    return scene, cloth
+    if layer > 0.0:
+        scene.set_self_collision(thickness=layer, friction=0.4)
+    return scene
 
 
-def folded(scene, cloth):
+def folded(scene, layer):
     """The towel folded across its middle row: the rows before it (the near half, z below
-    the middle) mirrored onto the far half."""
+    the middle) mirrored onto the far half, ``layer`` above it."""
     x = scene.positions.copy()
     z = x[:, 2]
     middle = 0.5 * (z.min() + z.max())
     near = z < middle
     x[near, 2] = 2.0 * middle - z[near]
+    x[near, 1] += layer
     return x
 
 
@@ -144,6 +152,8 @@ def main():
     parser.add_argument("--rest", type=int, default=20)
     parser.add_argument("--iterations", type=int, default=60)
     parser.add_argument("--knots", type=int, default=6)
+    parser.add_argument("--layer", type=float, default=0.0,
+                        help="the self-collision thickness, m (default 0: none)")
     parser.add_argument("--out", default="docs/img")
     parser.add_argument("--video", action="store_true")
     parser.add_argument("--quick", action="store_true",
@@ -153,13 +163,15 @@ def main():
         args.n, args.steps, args.rest, args.iterations = 9, 60, 15, 30
     if args.n < 3 or args.n % 2 == 0:
         parser.error(f"--n must be odd and at least 3, the fold along the middle row (got {args.n})")
+    if args.layer < 0.0:
+        parser.error(f"--layer must be >= 0 (got {args.layer})")
     from scipy.optimize import minimize
     tcloth.init(arch="cpu", precision="f64")
-    scene, cloth = towel(args.n)
+    scene = towel(args.n, args.layer)
     trajectory = grad.Trajectory(scene, steps=args.steps, dt=1.0 / 60.0,
                                  integrator="backward_euler", newton_tol=1e-5, cg_tol=1e-4,
                                  adjoint_tol=1e-6)
-    loss = grad.TargetPositions(folded(scene, cloth), steps=args.steps)
+    loss = grad.TargetPositions(folded(scene, args.layer), steps=args.steps)
     objective = Objective(trajectory, loss, args.steps - args.rest, args.knots)
     z0 = objective.arc(0.5 * SIZE)
     start = time.perf_counter()
@@ -181,6 +193,8 @@ def main():
     print(f"steer.iterations: {len(history)}")
     print(f"steer.gradients: {objective.calls}")
     print(f"steer.seconds: {seconds:.4g}")
+    print(f"steer.guarded_steps: {len(trajectory.guarded_steps)}")
+    print(f"steer.projected_steps: {len(trajectory.projected_steps)}")
     if not args.quick:
         render_run(trajectory, controls, args.out, args.video)
 
