@@ -103,9 +103,9 @@ def pull_back(entries, inv_mass, x_bar, v_bar):
     x_a += m_a^-1 lam n, x_b -= m_b^-1 lam n with lam = (delta - n . g) / w (g = x_a - x_b
     before it, w = m_a^-1 + m_b^-1), y_a and y_b its output's adjoints, takes s = (m_a^-1
     n . y_a - m_b^-1 n . y_b) / w (lam's adjoint over w), passes -s n and s n to its
-    input's, and gives n lam (m_a^-1 y_a - m_b^-1 y_b) - s g, delta s, m_a^-1 lam (n . y_a
-    - s) and m_b^-1 -lam (n . y_b + s); a velocity correction likewise with lam = -n .
-    g_v / w and no delta."""
+    input's, and adds to the adjoints of n: lam (m_a^-1 y_a - m_b^-1 y_b) - s g; of
+    delta: s; of m_a^-1: lam (n . y_a - s); of m_b^-1: -lam (n . y_b + s). A velocity
+    correction likewise with lam = -n . g_v / w (g_v = v_a - v_b before it), no delta."""
     pair, n, delta, _, _, w, stopped, ids, kinds, gap_x, gap_v = entries
     x_bar, v_bar = x_bar.copy(), v_bar.copy()
     n_bar, delta_bar = np.zeros_like(n), np.zeros(len(w))
