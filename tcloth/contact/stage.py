@@ -104,7 +104,7 @@ class ContactStage:
             self.cut = ti.field(real, shape=n)
             # the projection's Jacobi passes on GPUs: a particle's corrections and their sum
             self.work = (ti.field(ti.i32, shape=n), ti.Vector.field(3, real, shape=n))
-            self.log = projection.Log()
+            self.log = projection.Log(1)        # its full size once ``record`` is on
         # the solver's end of the step, kept by ``end_step`` while ``record`` is on
         self.solved, self.recording = None, False
         # x1 after the step's first collider sweep, where later sweeps start
@@ -229,6 +229,7 @@ class ContactStage:
         if on and self.solved is None:
             n, real = self.model.particle_count, runtime.real()
             self.solved = tuple(ti.Vector.field(3, real, shape=n) for _ in range(2))
+            self.log = projection.Log()
         self.log.on[None] = int(on)
         self.recording = bool(on)
 
