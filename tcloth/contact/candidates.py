@@ -15,6 +15,7 @@ closest points is g = sum_k alpha_k x_k (``geometry/proximity.py``): point-trian
 particle against a cloth triangle, alpha = (1, -w_a, -w_b, -w_c)) and edge-edge (two
 cloth edges or rope segments, alpha = (1 - s, s, -(1 - u), -u)).
 """
+import numpy as np
 import taichi as ti
 
 from ..geometry.proximity import contact_weights
@@ -45,6 +46,16 @@ class ContactList:
         # 0 for a pair that touches by construction (mesh neighbours across its sides):
         # no penalty, but the guard keeps it from crossing
         self.repels = ti.field(ti.u8, shape=capacity)
+
+    def upload(self, ids, kinds):
+        """Rows from NumPy (ids (r, 4), kinds (r,), r <= capacity), each repelling; the
+        rows past them zero and not repelling."""
+        r, capacity = len(kinds), self.capacity
+        padded = np.zeros((capacity, 4), dtype=np.int32)
+        padded[:r] = ids
+        self.ids.from_numpy(padded)
+        self.kind.from_numpy(np.pad(np.asarray(kinds, dtype=np.int32), (0, capacity - r)))
+        self.repels.from_numpy((np.arange(capacity) < r).astype(np.uint8))
 
     @ti.func
     def gap(self, ids, kind, x):

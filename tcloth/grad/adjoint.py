@@ -166,12 +166,7 @@ class StepAdjoint:
         if len(ids) > self.rows.capacity:
             capacity = 1 << int(np.ceil(np.log2(len(ids))))
             self.rows = ContactList(self.model.self_collision, self.inv_mass, capacity)
-        capacity = self.rows.capacity
-        padded = np.zeros((capacity, 4), dtype=np.int32)
-        padded[:len(ids)] = ids
-        self.rows.ids.from_numpy(padded)
-        self.rows.kind.from_numpy(np.pad(kinds.astype(np.int32), (0, capacity - len(ids))))
-        self.rows.repels.from_numpy((np.arange(capacity) < len(ids)).astype(np.uint8))
+        self.rows.upload(ids, kinds)
 
     def plane_vjp(self, x0, planes):
         """The adjoint of the step's start x0 ((n, 3) NumPy) from those of the guard's
@@ -180,11 +175,7 @@ class StepAdjoint:
         (its normal and delta from its closest points at x0)."""
         ids, kinds, n_bar, delta_bar = planes
         k, npr = len(kinds), runtime.numpy_real()
-        ids_all = np.zeros((LOG_CAPACITY, 4), dtype=np.int32)
-        ids_all[:k] = ids
-        self.planes.ids.from_numpy(ids_all)
-        self.planes.kind.from_numpy(np.pad(kinds.astype(np.int32), (0, LOG_CAPACITY - k)))
-        self.planes.repels.from_numpy((np.arange(LOG_CAPACITY) < k).astype(np.uint8))
+        self.planes.upload(ids, kinds)
         self.n_bar.from_numpy(np.pad(n_bar, ((0, LOG_CAPACITY - k), (0, 0))).astype(npr))
         self.delta_bar.from_numpy(np.pad(delta_bar, (0, LOG_CAPACITY - k)).astype(npr))
         self.x.from_numpy(x0.astype(npr))
