@@ -47,8 +47,12 @@ def contact_force(depth, v_rel, n, k, cd, mu, eps):
     vn = v_rel.dot(n)
     fn = ti.max(k * depth - cd * vn, 0.0)
     vt = v_rel - vn * n
-    speed = vt.norm()
-    return fn * n - mu * fn / ti.max(speed, eps) * vt
+    # the norm only where it exceeds eps: its derivative at rest is 0/0 (reverse mode)
+    speed = eps
+    s2 = vt.dot(vt)
+    if s2 > eps * eps:
+        speed = ti.sqrt(s2)
+    return fn * n - mu * fn / speed * vt
 
 
 @ti.func
@@ -64,13 +68,14 @@ def add_dissipation(e, g, block, v, n0, fn0, cd, mu, eps, h):
         g += cd * vn * n0
         block += cd / h * nn
     vt = v - vn * n0
-    s = vt.norm()
+    s2 = vt.dot(vt)
     tangent = ti.Matrix.identity(float, 3) - nn
-    if s < eps:
-        e += mu * fn0 * h * s * s / (2.0 * eps)
+    if s2 < eps * eps:      # (the norm's derivative at rest is 0/0: reverse mode)
+        e += mu * fn0 * h * s2 / (2.0 * eps)
         g += mu * fn0 / eps * vt
         block += mu * fn0 / (eps * h) * tangent
     else:
+        s = ti.sqrt(s2)
         e += mu * fn0 * h * (s - 0.5 * eps)
         g += mu * fn0 / s * vt
         that = vt / s
