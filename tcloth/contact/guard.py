@@ -59,8 +59,12 @@ SLACK = 1e-3             # a violation below this fraction of delta is no violat
 KEEP = 0.9               # the fail-safe stops a vertex at this fraction of its way to a plane
 FLOOR = 0.25             # pairs end a step at least this fraction of the thickness apart
 BACK_OFF = 1e-6          # m: a path a collider stops ends this far before the surface
-STOP_BISECTIONS = 30     # halvings of the stop's search along a path (2^-30 of it)
+# halvings of the stop's search along a path: to float64's last bit, so the stop is the
+# root to rounding, on its outer side (a smooth function of the path, whose derivative
+# the gradient takes: ``tcloth/grad/sweep.py``)
+STOP_BISECTIONS = 53
 FAR_APART = -1.0         # the delta of a candidate that cannot come within reach
+PATH, START = 1, 2       # the kinds of a collider sweep's cut (``SweepLog``)
 LEAST_GAP = 1e-6         # m: a pair closer than this at x0 has no normal (float32 rounds
                          # coordinates near 1 m to 6e-8 m)
 
@@ -252,6 +256,36 @@ def truncate(cl: ti.template(), pl: ti.template(), count: ti.i32, x0: ti.templat
     return cut
 
 
+@ti.data_oriented
+class SweepLog:
+    """The cuts of a step's first collider sweep, kept where ``on`` is set (a gradient's
+    runs: ``tcloth/grad/frozen.py``): each cut's particle, collider row, kind (PATH: the
+    particle ends at x0 + tau (x1 - x0), where the path meets the collider's offset
+    surface; START: at x0, where it started within the thickness or inside) and tau.
+    ``count`` counts them all; past ``capacity`` they are not kept."""
+
+    def __init__(self, capacity):
+        self.capacity = capacity
+        self.particle, self.row, self.kind = (ti.field(ti.i32, shape=capacity)
+                                              for _ in range(3))
+        self.tau = ti.field(runtime.real(), shape=capacity)
+        self.count = ti.field(ti.i32, shape=())
+        self.on = ti.field(ti.i32, shape=())
+
+    def entries(self):
+        """The kept cuts as NumPy arrays: (particle, row, kind, tau)."""
+        k = min(int(self.count[None]), self.capacity)
+        return tuple(f.to_numpy()[:k] for f in (self.particle, self.row, self.kind,
+                                                self.tau))
+
+    @ti.func
+    def keep(self, p, row, kind, tau):
+        if self.on[None]:
+            c = ti.atomic_add(self.count[None], 1)
+            if c < self.capacity:
+                self.particle[c], self.row[c], self.kind[c], self.tau[c] = p, row, kind, tau
+
+
 @ti.func
 def _stop(p, at, n, u, dt, x1, v1, held):
     """Particle p stopped at ``at`` (at the step's start, in the frame of a collider moving
@@ -287,7 +321,8 @@ def _offset_stop(table: ti.template(), shape: ti.template(), col, start, d, phi0
 
 
 @ti.func
-def sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held):
+def sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held, log: ti.template(),
+                    keep: ti.template()):
     """Each free particle's path from x0 to x1 against every switched-on collider, in the
     collider's frame (it moves by dt times its velocity): a path from outside that enters
     it ends at the entry, riding with the collider, its velocity into it removed; a
@@ -320,6 +355,9 @@ def sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held):
                                     _, n = table.distance(g.shape, col, entry, t0)
                                     _stop(p, entry, n, u, dt, x1, v1, held)
                                     entered = True
+                                    if ti.static(keep):
+                                        log.keep(p, k, PATH if stop > 0.0 else START,
+                                                 stop / length)
                             if not entered:
                                 # a path that ends inside without a hit the ray cast
                                 # resolves (a start on the surface within rounding), or
@@ -329,6 +367,8 @@ def sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held):
                                 if phi1 < ti.min(phi0, 0.0):
                                     _stop(p, start, n0, u, dt, x1, v1, held)
                                     entered = True
+                                    if ti.static(keep):
+                                        log.keep(p, k, START, 0.0)
                             if entered:
                                 clamped += 1
     return clamped
@@ -337,10 +377,16 @@ def sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held):
 @ti.kernel
 def sweep_colliders_kernel(table: ti.template(), inv_mass: ti.template(), x0: ti.template(),
                            x1: ti.template(), v1: ti.template(), t0: float, dt: float,
-                           held: ti.template(), first: ti.template()) -> ti.i32:
-    """``sweep_colliders``; ``first``: held = 0 before (the step's first sweep)."""
+                           held: ti.template(), first: ti.template(),
+                           log: ti.template()) -> ti.i32:
+    """``sweep_colliders``; ``first``: held = 0 before (the step's first sweep), and its
+    cuts kept in ``log`` while it is on."""
+    cut = 0
     if ti.static(first):
         ti.loop_config(serialize=ti.static(serial(held)))
         for p in range(held.shape[0]):
             held[p] = ti.Vector([0.0, 0.0, 0.0])
-    return sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held)
+        cut = sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held, log, True)
+    else:
+        cut = sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held, log, False)
+    return cut

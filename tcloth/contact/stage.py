@@ -105,8 +105,10 @@ class ContactStage:
             # the projection's Jacobi passes on GPUs: a particle's corrections and their sum
             self.work = (ti.field(ti.i32, shape=n), ti.Vector.field(3, real, shape=n))
             self.log = projection.Log(1)        # its full size once ``record`` is on
-        # the solver's end of the step, kept by ``end_step`` while ``record`` is on
+        # the solver's end of the step, kept by ``end_step`` while ``record`` is on, and
+        # the cuts of its first collider sweep
         self.solved, self.recording = None, False
+        self.sweep_log = guard.SweepLog(1) if self.colliders else None
         # x1 after the step's first collider sweep, where later sweeps start
         self.x_swept = ti.Vector.field(3, real, shape=n) \
             if self.colliders and self.table is not None else None
@@ -222,15 +224,19 @@ class ContactStage:
     # -- the guard ---------------------------------------------------------------------------
     def record(self, on):
         """Keep what a gradient takes of each step's guard (``tcloth/grad/frozen.py``):
-        the projection's corrections in order (``log``) and the step's end as the solver
-        left it (``solved``: x1, v1), from the next ``end_step`` on."""
-        if self.broad is None:          # (the colliders' sweeps alone: no projection)
-            return
+        the projection's corrections in order (``log``), the cuts of the first collider
+        sweep (``sweep_log``) and the step's end as the solver left it (``solved``: x1,
+        v1), from the next ``end_step`` on (a batch of substeps keeps none of them)."""
         if on and self.solved is None:
             n, real = self.model.particle_count, runtime.real()
             self.solved = tuple(ti.Vector.field(3, real, shape=n) for _ in range(2))
-            self.log = projection.Log()
-        self.log.on[None] = int(on)
+            if self.broad is not None:
+                self.log = projection.Log()
+            if self.colliders is not None:
+                self.sweep_log = guard.SweepLog(n)
+        for log in (self.log if self.broad is not None else None, self.sweep_log):
+            if log is not None:
+                log.on[None] = int(on)
         self.recording = bool(on)
 
     def end_step(self, x0, x1, v1, t0, dt):
@@ -251,7 +257,9 @@ class ContactStage:
         start = time.perf_counter()
         changed = 0
         if self.recording:
-            self.log.count[None] = 0
+            for log in (self.log if self.broad is not None else None, self.sweep_log):
+                if log is not None:
+                    log.count[None] = 0
             self.solved[0].copy_from(x1)
             self.solved[1].copy_from(v1)
         if self.obstacle is not None:
@@ -325,7 +333,7 @@ class ContactStage:
         if self.colliders is None:
             return 0
         cut = int(guard.sweep_colliders_kernel(self.colliders, self.inv_mass, x0, x1, v1, t0,
-                                               dt, self.held, first))
+                                               dt, self.held, first, self.sweep_log))
         self.stats["collider_paths_cut"] += cut
         if self.obstacle is not None and obstacle:
             if cut or not first:        # x1 moved since ``begin`` computed the planes
@@ -400,7 +408,7 @@ class ContactStage:
         ``batch_begin``'s start to x, its cuts counted in ``batch_cuts`` (in all, in the
         last step); returns how many paths it cut."""
         cut = guard.sweep_colliders(self.colliders, self.inv_mass, self.x_start, x, v, t, dt,
-                                    self.held)
+                                    self.held, self.sweep_log, False)
         self.batch_cuts[0] += cut
         self.batch_cuts[1] = cut
         return cut

@@ -19,28 +19,37 @@ composition, and its transposed Jacobian is theirs in reverse order (``pull_back
 step's adjoint then takes the solver's end of the step, which the stage keeps
 (``ContactStage.record``).
 
-What is not differentiated. The colliders' sweep (a path cut where it enters a
-collider), the fail-safe, the mesh colliders' planes, the projection's Jacobi passes (on
-GPUs) and a step whose corrections overflow the log: at such a step the gradient takes
-the solver's step, not the guard's change; ``Trajectory.gradient`` reports those steps
-(``Result.guarded_steps``) and warns.
+The colliders' sweep. A path the step's first sweep cut (``guard.sweep_colliders``) ends
+where it meets the collider's offset surface, x0 + tau (x1 - x0) with phi(x) = the
+thickness (or at x0), its velocity into the collider removed along the normal there:
+the cuts (which particle, which collider, tau) are kept (``guard.SweepLog``), and the
+backward run differentiates each one, tau by the implicit function theorem and the
+normal through the surface's curvature (``sweep.SweepAdjoint``).
+
+What is not differentiated. The later sweeps of a step whose projection pushed a
+particle back into a collider, a particle cut twice in one sweep, the fail-safe, the
+mesh colliders' planes, the projection's Jacobi passes (on GPUs), a correction that a
+collider held to its surface, and a step whose corrections overflow the log: at such a
+step the gradient takes the solver's step, not the guard's change;
+``Trajectory.gradient`` reports those steps (``Result.guarded_steps``) and warns.
 """
 import numpy as np
 
 # the contact stage's counts (``contact.stage.STATS``) of the guard's changes that the
 # gradient does not take, and of its projection's, which it does
-NOT_TAKEN = ("failsafe_vertices", "collider_paths_cut", "obstacle_corrections",
-             "obstacle_carried")
+NOT_TAKEN = ("failsafe_vertices", "obstacle_corrections", "obstacle_carried")
 PROJECTED = "guard_corrections"
+CUT = "collider_paths_cut"
 
 
 class StepRecord:
     """Per step of a run (``before(n)`` and ``after(n)`` around step n): the repelling
     self-contact rows its forward step read (``rows[n]``: ids (r, 4) and kinds (r,)), the
-    guard's projection where it changed the step (``projections[n]``: its corrections
-    and the solver's x1, v1), each where ``keep`` is set; the steps whose guard changed
-    them in a way the gradient does not take (``guarded``) and those whose projection
-    it takes (``projected``)."""
+    guard's changes where it changed the step (``projections[n]``: the projection's
+    corrections or None, the first collider sweep's cuts or None, and the solver's x1,
+    v1), each where ``keep`` is set; the steps whose guard changed them in a way the
+    gradient does not take (``guarded``) and those whose changes it takes
+    (``projected``)."""
 
     def __init__(self, model):
         self.stage = model.contact
@@ -73,26 +82,45 @@ class StepRecord:
         if self.stage is None:
             return
         stats = self.stage.stats
+        projected = stats[PROJECTED] != self._counts[PROJECTED]
+        cut = stats[CUT] - self._counts[CUT]
         if any(stats[key] != self._counts[key] for key in NOT_TAKEN):
             self.guarded.add(n)
-        elif stats[PROJECTED] != self._counts[PROJECTED]:
-            log = self.stage.log
-            kept = int(log.count[None])
-            entries = log.entries() if 0 < kept <= log.capacity else None
-            if entries is None or not along_normals(entries):
-                self.guarded.add(n)       # Jacobi passes, an overflow, a held vertex
+        elif projected or cut:
+            entries = self._corrections() if projected else None
+            cuts = self._cuts(cut) if cut else None
+            if (projected and entries is None) or (cut and cuts is None):
+                self.guarded.add(n)
                 return
             self.projected.add(n)
             if self.keep:
-                self.projections[n] = (entries, *(f.to_numpy().astype(np.float64)
-                                                  for f in self.stage.solved))
+                self.projections[n] = (entries, cuts, *(f.to_numpy().astype(np.float64)
+                                                        for f in self.stage.solved))
+
+    def _corrections(self):
+        """The projection's corrections of the step, or None where the gradient does not
+        take them (Jacobi passes, an overflow of the log, a vertex a collider held)."""
+        log = self.stage.log
+        kept = int(log.count[None])
+        entries = log.entries() if 0 < kept <= log.capacity else None
+        return entries if entries is not None and along_normals(entries) else None
+
+    def _cuts(self, cut):
+        """The first collider sweep's cuts of the step, or None where the step's sweeps
+        cut more paths than it (later rounds' sweeps) or one particle twice."""
+        entries = self.stage.sweep_log.entries()
+        particles = entries[0]
+        if len(particles) != cut or len(np.unique(particles)) != cut:
+            return None
+        return entries
 
     @property
     def nbytes(self):
         """The memory the rows and projections kept take."""
         rows = sum(ids.nbytes + kinds.nbytes for ids, kinds in self.rows.values())
-        return rows + sum(sum(a.nbytes for a in entries) + x1.nbytes + v1.nbytes
-                          for entries, x1, v1 in self.projections.values())
+        return rows + sum(sum(a.nbytes for part in (entries, cuts) if part is not None
+                              for a in part) + x1.nbytes + v1.nbytes
+                          for entries, cuts, x1, v1 in self.projections.values())
 
 
 def pull_back(entries, inv_mass, x_bar, v_bar):

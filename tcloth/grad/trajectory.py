@@ -26,6 +26,7 @@ from ..sim.simulator import Simulator
 from ..validate import as_int
 from .adjoint import StepAdjoint, unsupported
 from .frozen import StepRecord, pull_back
+from .sweep import SweepAdjoint
 from .parameters import MEMBRANE, bending_gradient, masses_gradient, membrane_gradient
 from .steps import StepAdjoints
 
@@ -119,6 +120,7 @@ class Trajectory(StepAdjoints):
         self.adjoint = StepAdjoint(self.sim.model, self.implicit, self.projective)
         self.adjoint.load()
         self.record = StepRecord(self.sim.model)
+        self._sweep = None          # the collider sweep's adjoint, built at its first cut
         self.pinned = np.flatnonzero(scene.pinned)
         self.free = np.flatnonzero(~scene.pinned)
         self.initial = {"positions": scene.positions.astype(np.float64),
@@ -264,6 +266,8 @@ class Trajectory(StepAdjoints):
         sim.set_state(*state)
         states = []
         self.record.start(keep)
+        batching = sim.settings["batch"]
+        sim.set_batching(False)         # the contact stage sees every step's sweep
         for n in range(start, stop):
             self._apply_control(n)
             states.append(self._state())
@@ -273,6 +277,7 @@ class Trajectory(StepAdjoints):
             if self.projective:
                 self._forward_residual = max(self._forward_residual,
                                              sim.integrator.stats["residual"])
+        sim.set_batching(batching)
         states.append(self._state())
         return states
 
@@ -343,13 +348,10 @@ class Trajectory(StepAdjoints):
                 (x, v), (x1, _) = states[m - start], states[m + 1 - start]
                 if m in self.record.rows:
                     adj.set_contacts(self.record.rows[m])
-                planes = None
+                planes = swept = None
                 if m in self.record.projections:    # the guard's, then the solver's step
-                    corrections, x1, _ = self.record.projections[m]
-                    x_bar, v_bar, inv_bar, planes = pull_back(corrections, self._inv_mass,
-                                                              x_bar, v_bar)
-                    if self._mass_bar is not None:
-                        self._mass_bar -= self._inv_mass ** 2 * inv_bar
+                    x1, x_bar, v_bar, planes, swept = self._guard_back(
+                        self.record.projections[m], x, x_bar, v_bar)
                 if self.implicit:
                     adjoint = (self._projective_adjoint if self.projective
                                else self._implicit_adjoint)
@@ -360,6 +362,8 @@ class Trajectory(StepAdjoints):
                     x_bar, v_bar = self._explicit_adjoint(x, v, x_bar, v_bar, h, m)
                 if planes is not None:      # the guard's planes, from the step's start
                     x_bar = x_bar + adj.plane_vjp(x, planes)
+                if swept is not None:       # the sweep's paths, from the step's start
+                    x_bar = x_bar + swept
                 if self.controls is not None and len(self.pinned):
                     controls_bar[m] = v_bar[self.pinned]
                     v_bar[self.pinned] = 0.0
@@ -377,6 +381,26 @@ class Trajectory(StepAdjoints):
                       forward_residual=self._forward_residual,
                       guarded_steps=list(self.guarded_steps),
                       projected_steps=list(self.projected_steps))
+
+    def _guard_back(self, changes, x, x_bar, v_bar):
+        """The adjoints of the solver's end of a step from those of the guard's, through
+        the guard's changes as ``StepRecord`` kept them (the projection's corrections,
+        the colliders' first sweep's cuts, the solver's x1 and v1); the masses' share
+        added to ``_mass_bar``. Returns (the solver's x1, x_bar, v_bar, the planes'
+        adjoints for ``plane_vjp`` or None, the step start's share of the cuts or
+        None)."""
+        corrections, cuts, x1, v1 = changes
+        planes = swept = None
+        if corrections is not None:
+            x_bar, v_bar, inv_bar, planes = pull_back(corrections, self._inv_mass, x_bar,
+                                                      v_bar)
+            if self._mass_bar is not None:
+                self._mass_bar -= self._inv_mass ** 2 * inv_bar
+        if cuts is not None:
+            if self._sweep is None:
+                self._sweep = SweepAdjoint(self.adjoint.table, self.scene.num_particles)
+            x_bar, v_bar, swept = self._sweep.vjp(cuts, x, x1, v1, x_bar, v_bar)
+        return x1, x_bar, v_bar, planes, swept
 
     def _reduce(self, wrt, x_bar, v_bar, controls_bar):
         adj, grads = self.adjoint, {}

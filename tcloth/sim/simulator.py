@@ -346,6 +346,13 @@ class Simulator(LiveParameters):
         self.settings["strain_limiting"] = bool(enabled)
         self._fusion = None
 
+    def set_batching(self, enabled):
+        """Let ``step(n)`` run its substeps in one kernel launch where it can (True), or
+        launch each step's kernels from Python (False: the contact stage then sees every
+        step, as a gradient's runs need)."""
+        self.settings["batch"] = bool(enabled)
+        self._fusion = None
+
     def grab(self, particle, target, stiffness=None, damping=None):
         """Pull particle ``particle`` towards ``target`` (3,) m with a zero-rest-length
         spring (``terms/grab.py``) until ``release``; the simulator must be made with
