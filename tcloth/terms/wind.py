@@ -68,7 +68,13 @@ class Wind(Term):
             v_rel = wind - (v[a] + v[b] + v[c]) / 3.0
             u = v_rel.dot(n)
             vt = v_rel - u * n
-            force = area * (params[8] * u * abs(u) * n + params[10] * vt.norm() * vt
+            # |vt| only where vt is not 0 (a wind along the normal: its derivative is 0/0
+            # there, and |vt| vt's is 0)
+            speed = 0.0
+            s2 = vt.dot(vt)
+            if s2 > 0.0:
+                speed = ti.sqrt(s2)
+            force = area * (params[8] * u * abs(u) * n + params[10] * speed * vt
                             + params[9] * abs(u) * vt)
         return force
 
