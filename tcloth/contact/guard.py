@@ -201,50 +201,82 @@ def violations(cl: ti.template(), pl: ti.template(), count: ti.i32,
 
 
 @ti.func
-def _cut(x0, x1, n, plane, side, inv_mass, t_out, p):
-    """Lower t_out[p] so that vertex p (on ``side`` = +1 or -1 of the plane n . y =
-    plane) stops KEEP of its way to the plane."""
+def dividing_plane(ids, kind, n, x0, x1):
+    """(whether a plane normal to n divides the candidate's two sides at x0, its offset,
+    the size of the first side): between the sides' extents along n at x0, placed by how
+    fast each side approaches the other from x0 to x1."""
+    first = 1 if kind == POINT_TRIANGLE else 2
+    low_a, high_b = 1e30, -1e30
+    a_speed, b_speed = 0.0, 0.0
+    for k in ti.static(range(4)):
+        along = n.dot(x0[ids[k]])
+        if k < first:
+            low_a = ti.min(low_a, along)
+            a_speed = ti.max(a_speed, -n.dot(x1[ids[k]] - x0[ids[k]]))
+        else:
+            high_b = ti.max(high_b, along)
+            b_speed = ti.max(b_speed, n.dot(x1[ids[k]] - x0[ids[k]]))
+    divided = low_a - high_b > LEAST_GAP
+    plane = 0.0
+    if divided:
+        share = 0.5
+        if a_speed + b_speed > 0.0:
+            share = ti.math.clamp(b_speed / (a_speed + b_speed), 0.05, 0.95)
+        plane = high_b + share * (low_a - high_b)
+    return divided, plane, first
+
+
+@ti.func
+def stop_fraction(x0, x1, n, plane, side, p):
+    """The fraction of its path at which vertex p (on ``side`` = +1 or -1 of the plane
+    n . y = plane) stops, KEEP of its way to the plane; 1 where it does not come that
+    near."""
     start = side * (n.dot(x0[p]) - plane)
     approach = -side * n.dot(x1[p] - x0[p])
-    if inv_mass[p] > 0.0 and approach > (1.0 - KEEP) * start:
-        ti.atomic_min(t_out[p], KEEP * start / approach)
+    t = 1.0
+    if approach > (1.0 - KEEP) * start:
+        t = KEEP * start / approach
+    return t
 
 
 @ti.kernel
 def truncate(cl: ti.template(), pl: ti.template(), count: ti.i32, x0: ti.template(),
              x1: ti.template(), v1: ti.template(), inv_mass: ti.template(),
-             t_out: ti.template()) -> ti.i32:
+             t_out: ti.template(), log: ti.template()) -> ti.i32:
     """The fail-safe (module docstring): every vertex kept on its side of the dividing
-    plane of every candidate with a normal (``planes``). Returns how many vertices were
-    cut short."""
+    plane of every candidate with a normal (``planes``); where ``log`` (a
+    ``TruncationLog``) is on, each cut vertex's plane kept. Returns how many vertices
+    were cut short."""
     ti.loop_config(serialize=ti.static(serial(x1)))
     for p in range(x1.shape[0]):
         t_out[p] = 1.0
+        log.claimed[p] = 0
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
         ids, kind = cl.ids[c], cl.kind[c]
         if pl.delta[c] != 0.0:
             n = pl.n[c]
-            first = 1 if kind == POINT_TRIANGLE else 2
-            # the sides' extents along n at x0, and how fast each approaches the other
-            low_a, high_b = 1e30, -1e30
-            a_speed, b_speed = 0.0, 0.0
-            for k in ti.static(range(4)):
-                along = n.dot(x0[ids[k]])
-                if k < first:
-                    low_a = ti.min(low_a, along)
-                    a_speed = ti.max(a_speed, -n.dot(x1[ids[k]] - x0[ids[k]]))
-                else:
-                    high_b = ti.max(high_b, along)
-                    b_speed = ti.max(b_speed, n.dot(x1[ids[k]] - x0[ids[k]]))
-            if low_a - high_b > LEAST_GAP:      # a plane normal to n divides the sides
-                share = 0.5
-                if a_speed + b_speed > 0.0:
-                    share = ti.math.clamp(b_speed / (a_speed + b_speed), 0.05, 0.95)
-                plane = high_b + share * (low_a - high_b)
+            divided, plane, first = dividing_plane(ids, kind, n, x0, x1)
+            if divided:
                 for k in ti.static(range(4)):
-                    _cut(x0, x1, n, plane, 1.0 if k < first else -1.0, inv_mass, t_out,
-                         ids[k])
+                    if inv_mass[ids[k]] > 0.0:
+                        ti.atomic_min(t_out[ids[k]], stop_fraction(
+                            x0, x1, n, plane, 1.0 if k < first else -1.0, ids[k]))
+    ti.loop_config(serialize=ti.static(serial(cl.ids)))
+    for c in range(count):      # which plane stopped each vertex (the gradient's)
+        ids, kind = cl.ids[c], cl.kind[c]
+        if log.on[None] and pl.delta[c] != 0.0:
+            n = pl.n[c]
+            divided, plane, first = dividing_plane(ids, kind, n, x0, x1)
+            if divided:
+                for k in ti.static(range(4)):
+                    t = stop_fraction(x0, x1, n, plane, 1.0 if k < first else -1.0, ids[k])
+                    if inv_mass[ids[k]] > 0.0 and t < 1.0 and \
+                            ti.abs(t - t_out[ids[k]]) <= 1e-12 * t:
+                        # one plane a vertex (where planes tie, as a flat layer's do
+                        # for a vertex above it, whichever comes first)
+                        if ti.atomic_add(log.claimed[ids[k]], 1) == 0:
+                            log.keep(ids[k], ids, kind, k)
     cut = 0
     ti.loop_config(serialize=ti.static(serial(x1)))
     for p in range(x1.shape[0]):
@@ -256,6 +288,39 @@ def truncate(cl: ti.template(), pl: ti.template(), count: ti.i32, x0: ti.templat
     return cut
 
 
+def _kept(log, capacity, columns):
+    """A log's common parts: its ``capacity``, ``columns`` (the fields of a row), ``count``
+    (of every row it was given; past the capacity none is kept), ``on`` (whether it
+    keeps), and ``entries()``, the kept rows as NumPy arrays, a column each."""
+    log.capacity, log.columns = capacity, columns
+    log.count = ti.field(ti.i32, shape=())
+    log.on = ti.field(ti.i32, shape=())
+    log.entries = lambda: tuple(f.to_numpy()[:min(int(log.count[None]), capacity)]
+                                for f in columns)
+
+
+@ti.data_oriented
+class TruncationLog:
+    """The fail-safe's cuts of one step, kept where ``on`` is set (a gradient's runs:
+    ``tcloth/grad/frozen.py``): each cut vertex (``particle``), the candidate whose
+    dividing plane stopped it (``ids``, ``kind``) and its slot in it (``slot``), one a
+    vertex (``claimed``, n particles). ``count`` counts them all; past ``capacity``
+    they are not kept."""
+
+    def __init__(self, capacity, n):
+        self.claimed = ti.field(ti.i32, shape=n)
+        self.particle, self.kind, self.slot = (ti.field(ti.i32, shape=capacity)
+                                               for _ in range(3))
+        self.ids = ti.Vector.field(4, ti.i32, shape=capacity)
+        _kept(self, capacity, (self.particle, self.ids, self.kind, self.slot))
+
+    @ti.func
+    def keep(self, p, ids, kind, slot):
+        c = ti.atomic_add(self.count[None], 1)
+        if c < self.capacity:
+            self.particle[c], self.ids[c], self.kind[c], self.slot[c] = p, ids, kind, slot
+
+
 @ti.data_oriented
 class SweepLog:
     """The cuts of a step's first collider sweep, kept where ``on`` is set (a gradient's
@@ -265,18 +330,10 @@ class SweepLog:
     ``count`` counts them all; past ``capacity`` they are not kept."""
 
     def __init__(self, capacity):
-        self.capacity = capacity
         self.particle, self.row, self.kind = (ti.field(ti.i32, shape=capacity)
                                               for _ in range(3))
         self.tau = ti.field(runtime.real(), shape=capacity)
-        self.count = ti.field(ti.i32, shape=())
-        self.on = ti.field(ti.i32, shape=())
-
-    def entries(self):
-        """The kept cuts as NumPy arrays: (particle, row, kind, tau)."""
-        k = min(int(self.count[None]), self.capacity)
-        return tuple(f.to_numpy()[:k] for f in (self.particle, self.row, self.kind,
-                                                self.tau))
+        _kept(self, capacity, (self.particle, self.row, self.kind, self.tau))
 
     @ti.func
     def keep(self, p, row, kind, tau):

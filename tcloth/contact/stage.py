@@ -105,9 +105,11 @@ class ContactStage:
             # the projection's Jacobi passes on GPUs: a particle's corrections and their sum
             self.work = (ti.field(ti.i32, shape=n), ti.Vector.field(3, real, shape=n))
             self.log = projection.Log(1)        # its full size once ``record`` is on
+            self.truncation_log = guard.TruncationLog(1, n)
         # the solver's end of the step, kept by ``end_step`` while ``record`` is on, and
         # the cuts of its first collider sweep
         self.solved, self.recording = None, False
+        self.truncated = None
         self.sweep_log = guard.SweepLog(1) if self.colliders else None
         # x1 after the step's first collider sweep, where later sweeps start
         self.x_swept = ti.Vector.field(3, real, shape=n) \
@@ -225,19 +227,27 @@ class ContactStage:
     def record(self, on):
         """Keep what a gradient takes of each step's guard (``tcloth/grad/frozen.py``):
         the projection's corrections in order (``log``), the cuts of the first collider
-        sweep (``sweep_log``) and the step's end as the solver left it (``solved``: x1,
+        sweep (``sweep_log``) and of the fail-safe (``truncation_log``, and the motion it
+        cut: ``truncated``), and the step's end as the solver left it (``solved``: x1,
         v1), from the next ``end_step`` on (a batch of substeps keeps none of them)."""
         if on and self.solved is None:
             n, real = self.model.particle_count, runtime.real()
             self.solved = tuple(ti.Vector.field(3, real, shape=n) for _ in range(2))
             if self.broad is not None:
                 self.log = projection.Log()
+                self.truncation_log = guard.TruncationLog(n, n)
+                self.truncated = tuple(ti.Vector.field(3, real, shape=n) for _ in range(2))
             if self.colliders is not None:
                 self.sweep_log = guard.SweepLog(n)
-        for log in (self.log if self.broad is not None else None, self.sweep_log):
-            if log is not None:
-                log.on[None] = int(on)
+        for log in self._logs():
+            log.on[None] = int(on)
         self.recording = bool(on)
+
+    def _logs(self):
+        """The logs ``record`` keeps: the projection's and the fail-safe's (with
+        self-collision), the first collider sweep's (with colliders)."""
+        logs = [self.log, self.truncation_log] if self.broad is not None else []
+        return logs + ([self.sweep_log] if self.sweep_log is not None else [])
 
     def end_step(self, x0, x1, v1, t0, dt):
         """The guard on the motion x0 -> x1 (v1 changed with x1); afterwards the proximity
@@ -257,9 +267,8 @@ class ContactStage:
         start = time.perf_counter()
         changed = 0
         if self.recording:
-            for log in (self.log if self.broad is not None else None, self.sweep_log):
-                if log is not None:
-                    log.count[None] = 0
+            for log in self._logs():
+                log.count[None] = 0
             self.solved[0].copy_from(x1)
             self.solved[1].copy_from(v1)
         if self.obstacle is not None:
@@ -320,8 +329,11 @@ class ContactStage:
             cl, count = self._still_covering(cl, count, x0, x1)
             if guard.violations(cl, self.planes_of(cl), count, x1):
                 self.stats["failsafe_steps"] += 1
+                if self.recording:          # the motion the fail-safe cuts
+                    self.truncated[0].copy_from(x1)
+                    self.truncated[1].copy_from(v1)
                 cut = int(guard.truncate(cl, self.planes_of(cl), count, x0, x1, v1,
-                                         self.inv_mass, self.cut))
+                                         self.inv_mass, self.cut, self.truncation_log))
                 self.stats["failsafe_vertices"] += cut
                 changed += cut + self._sweep(x0, x1, v1, t0, dt, False)
         return changed

@@ -26,28 +26,36 @@ the cuts (which particle, which collider, tau) are kept (``guard.SweepLog``), an
 backward run differentiates each one, tau by the implicit function theorem and the
 normal through the surface's curvature (``sweep.SweepAdjoint``).
 
+The fail-safe. Where the rounds left a pair too close, ``guard.truncate`` cuts each
+vertex's path at KEEP of its way to the nearest dividing plane of its candidates, x0 + t
+(x1 - x0), and scales its velocity by t: the cut vertices and the plane that stopped
+each (the candidate and the vertex's slot) are kept (``guard.TruncationLog``) with the
+motion they cut, and the backward run differentiates t through the plane (its normal at
+x0, its place between the sides' extents and by their speeds: ``sweep.TruncationAdjoint``).
+
 What is not differentiated. The later sweeps of a step whose projection pushed a
-particle back into a collider, a particle cut twice in one sweep, the fail-safe, the
-mesh colliders' planes, the projection's Jacobi passes (on GPUs), a correction that a
-collider held to its surface, and a step whose corrections overflow the log: at such a
-step the gradient takes the solver's step, not the guard's change;
+particle back into a collider, a particle cut twice in one sweep, a vertex two planes
+stop at the same fraction, the mesh colliders' planes, the projection's Jacobi passes
+(on GPUs), a correction that a collider held to its surface, and a step whose
+corrections overflow the log: at such a step the gradient takes the solver's step, not the guard's change;
 ``Trajectory.gradient`` reports those steps (``Result.guarded_steps``) and warns.
 """
 import numpy as np
 
 # the contact stage's counts (``contact.stage.STATS``) of the guard's changes that the
 # gradient does not take, and of its projection's, which it does
-NOT_TAKEN = ("failsafe_vertices", "obstacle_corrections", "obstacle_carried")
+NOT_TAKEN = ("obstacle_corrections", "obstacle_carried")
 PROJECTED = "guard_corrections"
 CUT = "collider_paths_cut"
+FAILSAFE = "failsafe_vertices"
 
 
 class StepRecord:
     """Per step of a run (``before(n)`` and ``after(n)`` around step n): the repelling
     self-contact rows its forward step read (``rows[n]``: ids (r, 4) and kinds (r,)), the
     guard's changes where it changed the step (``projections[n]``: the projection's
-    corrections or None, the first collider sweep's cuts or None, and the solver's x1,
-    v1), each where ``keep`` is set; the steps whose guard changed them in a way the
+    corrections, the first collider sweep's cuts and the fail-safe's, each or None, and
+    the solver's x1, v1), each where ``keep`` is set; the steps whose guard changed them in a way the
     gradient does not take (``guarded``) and those whose changes it takes
     (``projected``)."""
 
@@ -84,18 +92,22 @@ class StepRecord:
         stats = self.stage.stats
         projected = stats[PROJECTED] != self._counts[PROJECTED]
         cut = stats[CUT] - self._counts[CUT]
+        failsafe = stats[FAILSAFE] - self._counts[FAILSAFE]
         if any(stats[key] != self._counts[key] for key in NOT_TAKEN):
             self.guarded.add(n)
-        elif projected or cut:
+        elif projected or cut or failsafe:
             entries = self._corrections() if projected else None
             cuts = self._cuts(cut) if cut else None
-            if (projected and entries is None) or (cut and cuts is None):
+            truncation = self._truncation(failsafe) if failsafe else None
+            if ((projected and entries is None) or (cut and cuts is None)
+                    or (failsafe and truncation is None)):
                 self.guarded.add(n)
                 return
             self.projected.add(n)
             if self.keep:
-                self.projections[n] = (entries, cuts, *(f.to_numpy().astype(np.float64)
-                                                        for f in self.stage.solved))
+                self.projections[n] = (entries, cuts, truncation,
+                                       *(f.to_numpy().astype(np.float64)
+                                         for f in self.stage.solved))
 
     def _corrections(self):
         """The projection's corrections of the step, or None where the gradient does not
@@ -104,6 +116,16 @@ class StepRecord:
         kept = int(log.count[None])
         entries = log.entries() if 0 < kept <= log.capacity else None
         return entries if entries is not None and along_normals(entries) else None
+
+    def _truncation(self, cut):
+        """The fail-safe's cuts of the step with the motion they cut ((particle, ids,
+        kind, slot), x1, v1), one plane a vertex (where planes tie, one branch of the
+        minimum, as reverse mode takes one of a max), or None where not every cut
+        vertex found its plane again."""
+        entries = self.stage.truncation_log.entries()
+        if len(entries[0]) != cut:
+            return None
+        return entries, *(f.to_numpy().astype(np.float64) for f in self.stage.truncated)
 
     def _cuts(self, cut):
         """The first collider sweep's cuts of the step, or None where the step's sweeps
@@ -118,9 +140,11 @@ class StepRecord:
     def nbytes(self):
         """The memory the rows and projections kept take."""
         rows = sum(ids.nbytes + kinds.nbytes for ids, kinds in self.rows.values())
-        return rows + sum(sum(a.nbytes for part in (entries, cuts) if part is not None
-                              for a in part) + x1.nbytes + v1.nbytes
-                          for entries, cuts, x1, v1 in self.projections.values())
+        def size(part):         # (a tuple of arrays, tuples or None)
+            if part is None or isinstance(part, np.ndarray):
+                return 0 if part is None else part.nbytes
+            return sum(size(a) for a in part)
+        return rows + sum(size(changes) for changes in self.projections.values())
 
 
 def pull_back(entries, inv_mass, x_bar, v_bar):

@@ -1,6 +1,9 @@
-"""The adjoint of a step's first collider sweep (``contact/guard.py``,
-``sweep_colliders``), from its cuts as the forward run kept them (``guard.SweepLog``).
+"""The adjoints of the guard's cuts of a step's paths (``contact/guard.py``), from the cuts
+as the forward run kept them: the first collider sweep's (``sweep_colliders``,
+``guard.SweepLog``: ``SweepAdjoint``) and the fail-safe's (``truncate``,
+``guard.TruncationLog``: ``TruncationAdjoint``).
 
+The sweep.
 A cut of kind PATH ends the particle's path x0 -> x1 at e = x0 + tau r (r = x1 - x0)
 where it meets the collider's offset surface, phi(e) = T with T = max(min(thickness,
 phi(x0)), BACK_OFF); tau is the root of phi(x0 + tau r) - T, so by the implicit function
@@ -17,8 +20,31 @@ import numpy as np
 import taichi as ti
 
 from .. import runtime
-from ..contact.guard import BACK_OFF, PATH
+from ..contact.guard import BACK_OFF, PATH, dividing_plane, normal_margin, stop_fraction
 from ..geometry.shapes import SHAPES
+
+
+def run_cuts(adjoint, columns, x0, x1, v1, x_out_bar, v_out_bar):
+    """One cut adjoint's reverse run: its records (``columns``: (field, values) pairs,
+    padded to the fields), the step's start and the motion cut (x0, x1, v1: their
+    gradients zeroed), and the outputs' adjoints (one row a record) as the seed of its
+    ``_cut`` kernel's reverse mode; the inputs' adjoints are then in x0.grad, x1.grad,
+    v1.grad."""
+    npr, k = runtime.numpy_real(), len(x_out_bar)
+    for field, values in columns:
+        padded = np.zeros((field.shape[0],) + values.shape[1:], dtype=values.dtype)
+        padded[:k] = values
+        field.from_numpy(padded)
+    adjoint.count[None] = k
+    for field, values in ((adjoint.x0, x0), (adjoint.x1, x1), (adjoint.v1, v1)):
+        field.from_numpy(values.astype(npr))
+        field.grad.fill(0)
+    for field, values in ((adjoint.x_out, x_out_bar), (adjoint.v_out, v_out_bar)):
+        seed = np.zeros((field.shape[0], 3))
+        seed[:k] = values
+        field.grad.from_numpy(seed.astype(npr))
+    adjoint._cut()
+    adjoint._cut.grad()
 
 
 @ti.data_oriented
@@ -43,25 +69,8 @@ class SweepAdjoint:
         x1, v1 the solver's end of the step. Returns (x1_bar, v1_bar, x0_bar): a particle
         the sweep did not cut passes its adjoints through."""
         particle, row, kind, tau = cuts
-        npr, k = runtime.numpy_real(), len(particle)
-        for field, values in ((self.particle, particle), (self.row, row), (self.kind, kind),
-                              (self.tau, tau)):
-            padded = np.zeros(field.shape[0], dtype=values.dtype)
-            padded[:k] = values
-            field.from_numpy(padded)
-        self.count[None] = k
-        for field, values in ((self.x0, x0), (self.x1, x1), (self.v1, v1)):
-            field.from_numpy(values.astype(npr))
-            field.grad.fill(0)
-        seeds = []
-        for values in (x_bar, v_bar):
-            seed = np.zeros_like(values)
-            seed[:k] = values[particle]
-            seeds.append(seed.astype(npr))
-        self.x_out.grad.from_numpy(seeds[0])
-        self.v_out.grad.from_numpy(seeds[1])
-        self._cut()
-        self._cut.grad()
+        run_cuts(self, ((self.particle, particle), (self.row, row), (self.kind, kind),
+                        (self.tau, tau)), x0, x1, v1, x_bar[particle], v_bar[particle])
         x1_bar, v1_bar = x_bar.copy(), v_bar.copy()
         x1_bar[particle] = self.x1.grad.to_numpy()[particle]
         v1_bar[particle] = self.v1.grad.to_numpy()[particle]
@@ -98,3 +107,50 @@ class SweepAdjoint:
                     v -= vn * n
                 self.x_out[c] = end
                 self.v_out[c] = v
+
+
+@ti.data_oriented
+class TruncationAdjoint:
+    """The vector-Jacobian product of one step's fail-safe (``vjp``) for n particles of
+    a self-collision ``table``: a vertex p stopped by candidate (ids, kind) ends at x0 +
+    t (x1 - x0) with velocity t v1, t = KEEP (its distance to the dividing plane at x0) /
+    (its approach to it), the plane normal to the candidate's n (its closest points at
+    x0, ``guard.normal_margin``) between the sides' extents, placed by their speeds
+    (``guard.dividing_plane``), all differentiated by Taichi's reverse mode."""
+
+    def __init__(self, table, n):
+        real = runtime.real()
+        self.thickness = table.params
+        self.x0, self.x1, self.v1, self.x_out, self.v_out = (
+            ti.Vector.field(3, real, shape=n, needs_grad=True) for _ in range(5))
+        self.particle, self.kind, self.slot = (ti.field(ti.i32, shape=n) for _ in range(3))
+        self.ids = ti.Vector.field(4, ti.i32, shape=n)
+        self.capacity = n
+        self.count = ti.field(ti.i32, shape=())
+
+    def vjp(self, truncation, x0, x_bar, v_bar):
+        """The adjoints of the fail-safe's input (the motion it cut, x1 and v1, kept with
+        its cuts: ``frozen.StepRecord``) from those of its output, and the step start's
+        share. Returns (x1_bar, v1_bar, x0_bar)."""
+        (particle, ids, kind, slot), x1, v1 = truncation
+        run_cuts(self, ((self.particle, particle), (self.ids, ids), (self.kind, kind),
+                        (self.slot, slot)), x0, x1, v1, x_bar[particle], v_bar[particle])
+        x1_bar, v1_bar = x_bar.copy(), v_bar.copy()
+        x1_bar[particle] = 0.0
+        v1_bar[particle] = 0.0
+        x1_bar += self.x1.grad.to_numpy()
+        v1_bar += self.v1.grad.to_numpy()
+        return x1_bar, v1_bar, self.x0.grad.to_numpy().astype(np.float64)
+
+    @ti.kernel
+    def _cut(self):
+        """Each kept cut c: the vertex's end x_out[c] and velocity v_out[c] (class)."""
+        for c in range(self.capacity):
+            if c < self.count[None]:
+                p, ids, kind, slot = self.particle[c], self.ids[c], self.kind[c], self.slot[c]
+                n, _, _ = normal_margin(ids, kind, self.x0, self.thickness[0])
+                _, plane, first = dividing_plane(ids, kind, n, self.x0, self.x1)
+                side = 1.0 if slot < first else -1.0
+                t = stop_fraction(self.x0, self.x1, n, plane, side, p)
+                self.x_out[c] = self.x0[p] + t * (self.x1[p] - self.x0[p])
+                self.v_out[c] = t * self.v1[p]

@@ -26,7 +26,7 @@ from ..sim.simulator import Simulator
 from ..validate import as_int
 from .adjoint import StepAdjoint, unsupported
 from .frozen import StepRecord, pull_back
-from .sweep import SweepAdjoint
+from .sweep import SweepAdjoint, TruncationAdjoint
 from .parameters import MEMBRANE, bending_gradient, masses_gradient, membrane_gradient
 from .steps import StepAdjoints
 
@@ -121,6 +121,7 @@ class Trajectory(StepAdjoints):
         self.adjoint.load()
         self.record = StepRecord(self.sim.model)
         self._sweep = None          # the collider sweep's adjoint, built at its first cut
+        self._truncation = None     # the fail-safe's, likewise
         self.pinned = np.flatnonzero(scene.pinned)
         self.free = np.flatnonzero(~scene.pinned)
         self.initial = {"positions": scene.positions.astype(np.float64),
@@ -385,12 +386,17 @@ class Trajectory(StepAdjoints):
     def _guard_back(self, changes, x, x_bar, v_bar):
         """The adjoints of the solver's end of a step from those of the guard's, through
         the guard's changes as ``StepRecord`` kept them (the projection's corrections,
-        the colliders' first sweep's cuts, the solver's x1 and v1); the masses' share
-        added to ``_mass_bar``. Returns (the solver's x1, x_bar, v_bar, the planes'
-        adjoints for ``plane_vjp`` or None, the step start's share of the cuts or
-        None)."""
-        corrections, cuts, x1, v1 = changes
+        the colliders' first sweep's cuts, the fail-safe's cuts, the solver's x1 and
+        v1), the last first; the masses' share added to ``_mass_bar``. Returns (the
+        solver's x1, x_bar, v_bar, the planes' adjoints for ``plane_vjp`` or None, the
+        step start's share of the cuts or None)."""
+        corrections, cuts, truncation, x1, v1 = changes
         planes = swept = None
+        if truncation is not None:
+            if self._truncation is None:
+                self._truncation = TruncationAdjoint(self.sim.model.self_collision,
+                                                     self.scene.num_particles)
+            x_bar, v_bar, swept = self._truncation.vjp(truncation, x, x_bar, v_bar)
         if corrections is not None:
             x_bar, v_bar, inv_bar, planes = pull_back(corrections, self._inv_mass, x_bar,
                                                       v_bar)
@@ -399,7 +405,8 @@ class Trajectory(StepAdjoints):
         if cuts is not None:
             if self._sweep is None:
                 self._sweep = SweepAdjoint(self.adjoint.table, self.scene.num_particles)
-            x_bar, v_bar, swept = self._sweep.vjp(cuts, x, x1, v1, x_bar, v_bar)
+            x_bar, v_bar, start = self._sweep.vjp(cuts, x, x1, v1, x_bar, v_bar)
+            swept = start if swept is None else swept + start
         return x1, x_bar, v_bar, planes, swept
 
     def _reduce(self, wrt, x_bar, v_bar, controls_bar):
