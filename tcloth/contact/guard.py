@@ -288,19 +288,24 @@ def truncate(cl: ti.template(), pl: ti.template(), count: ti.i32, x0: ti.templat
     return cut
 
 
-def _kept(log, capacity, columns):
-    """A log's common parts: its ``capacity``, ``columns`` (the fields of a row), ``count``
-    (of every row it was given; past the capacity none is kept), ``on`` (whether it
-    keeps), and ``entries()``, the kept rows as NumPy arrays, a column each."""
-    log.capacity, log.columns = capacity, columns
-    log.count = ti.field(ti.i32, shape=())
-    log.on = ti.field(ti.i32, shape=())
-    log.entries = lambda: tuple(f.to_numpy()[:min(int(log.count[None]), capacity)]
-                                for f in columns)
+class _CutLog:
+    """A log of a step's cuts: ``columns`` (the fields of a row, ``capacity`` rows),
+    ``count`` (every row it was given; past the capacity none is kept) and ``on``
+    (whether it keeps)."""
+
+    def __init__(self, capacity, columns):
+        self.capacity, self.columns = capacity, columns
+        self.count = ti.field(ti.i32, shape=())
+        self.on = ti.field(ti.i32, shape=())
+
+    def entries(self):
+        """The kept rows as NumPy arrays, a column each."""
+        k = min(int(self.count[None]), self.capacity)
+        return tuple(f.to_numpy()[:k] for f in self.columns)
 
 
 @ti.data_oriented
-class TruncationLog:
+class TruncationLog(_CutLog):
     """The fail-safe's cuts of one step, kept where ``on`` is set (a gradient's runs:
     ``tcloth/grad/frozen.py``): each cut vertex (``particle``), the candidate whose
     dividing plane stopped it (``ids``, ``kind``) and its slot in it (``slot``), one a
@@ -312,7 +317,7 @@ class TruncationLog:
         self.particle, self.kind, self.slot = (ti.field(ti.i32, shape=capacity)
                                                for _ in range(3))
         self.ids = ti.Vector.field(4, ti.i32, shape=capacity)
-        _kept(self, capacity, (self.particle, self.ids, self.kind, self.slot))
+        super().__init__(capacity, (self.particle, self.ids, self.kind, self.slot))
 
     @ti.func
     def keep(self, p, ids, kind, slot):
@@ -322,7 +327,7 @@ class TruncationLog:
 
 
 @ti.data_oriented
-class SweepLog:
+class SweepLog(_CutLog):
     """The cuts of a step's first collider sweep, kept where ``on`` is set (a gradient's
     runs: ``tcloth/grad/frozen.py``): each cut's particle, collider row, kind (PATH: the
     particle ends at x0 + tau (x1 - x0), where the path meets the collider's offset
@@ -333,7 +338,7 @@ class SweepLog:
         self.particle, self.row, self.kind = (ti.field(ti.i32, shape=capacity)
                                               for _ in range(3))
         self.tau = ti.field(runtime.real(), shape=capacity)
-        _kept(self, capacity, (self.particle, self.row, self.kind, self.tau))
+        super().__init__(capacity, (self.particle, self.row, self.kind, self.tau))
 
     @ti.func
     def keep(self, p, row, kind, tau):

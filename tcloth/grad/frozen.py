@@ -33,12 +33,15 @@ each (the candidate and the vertex's slot) are kept (``guard.TruncationLog``) wi
 motion they cut, and the backward run differentiates t through the plane (its normal at
 x0, its place between the sides' extents and by their speeds: ``sweep.TruncationAdjoint``).
 
+Where planes tie (a flat layer's do for a vertex above it), the log keeps one of them:
+the gradient is one branch of the minimum, as reverse mode takes one of a max.
+
 What is not differentiated. The later sweeps of a step whose projection pushed a
-particle back into a collider, a particle cut twice in one sweep, a vertex two planes
-stop at the same fraction, the mesh colliders' planes, the projection's Jacobi passes
-(on GPUs), a correction that a collider held to its surface, and a step whose
-corrections overflow the log: at such a step the gradient takes the solver's step, not the guard's change;
-``Trajectory.gradient`` reports those steps (``Result.guarded_steps``) and warns.
+particle back into a collider, a particle cut twice in one sweep, the mesh colliders'
+planes, the projection's Jacobi passes (on GPUs), a correction that a collider held to
+its surface, and a step whose corrections overflow the log: at such a step the gradient
+takes the solver's step, not the guard's change; ``Trajectory.gradient`` reports those
+steps (``Result.guarded_steps``) and warns.
 """
 import numpy as np
 
@@ -55,8 +58,8 @@ class StepRecord:
     self-contact rows its forward step read (``rows[n]``: ids (r, 4) and kinds (r,)), the
     guard's changes where it changed the step (``projections[n]``: the projection's
     corrections, the first collider sweep's cuts and the fail-safe's, each or None, and
-    the solver's x1, v1), each where ``keep`` is set; the steps whose guard changed them in a way the
-    gradient does not take (``guarded``) and those whose changes it takes
+    the solver's x1, v1), each where ``keep`` is set; the steps whose guard changed them
+    in a way the gradient does not take (``guarded``) and those whose changes it takes
     (``projected``)."""
 
     def __init__(self, model):

@@ -269,16 +269,18 @@ class Trajectory(StepAdjoints):
         self.record.start(keep)
         batching = sim.settings["batch"]
         sim.set_batching(False)         # the contact stage sees every step's sweep
-        for n in range(start, stop):
-            self._apply_control(n)
-            states.append(self._state())
-            self.record.before(n)
-            sim.step(1)
-            self.record.after(n)
-            if self.projective:
-                self._forward_residual = max(self._forward_residual,
-                                             sim.integrator.stats["residual"])
-        sim.set_batching(batching)
+        try:
+            for n in range(start, stop):
+                self._apply_control(n)
+                states.append(self._state())
+                self.record.before(n)
+                sim.step(1)
+                self.record.after(n)
+                if self.projective:
+                    self._forward_residual = max(self._forward_residual,
+                                                 sim.integrator.stats["residual"])
+        finally:                        # (a step that raises leaves it as it was)
+            sim.set_batching(batching)
         states.append(self._state())
         return states
 
@@ -349,9 +351,9 @@ class Trajectory(StepAdjoints):
                 (x, v), (x1, _) = states[m - start], states[m + 1 - start]
                 if m in self.record.rows:
                     adj.set_contacts(self.record.rows[m])
-                planes = swept = None
+                planes = start_bar = None
                 if m in self.record.projections:    # the guard's, then the solver's step
-                    x1, x_bar, v_bar, planes, swept = self._guard_back(
+                    x1, x_bar, v_bar, planes, start_bar = self._guard_back(
                         self.record.projections[m], x, x_bar, v_bar)
                 if self.implicit:
                     adjoint = (self._projective_adjoint if self.projective
@@ -363,8 +365,8 @@ class Trajectory(StepAdjoints):
                     x_bar, v_bar = self._explicit_adjoint(x, v, x_bar, v_bar, h, m)
                 if planes is not None:      # the guard's planes, from the step's start
                     x_bar = x_bar + adj.plane_vjp(x, planes)
-                if swept is not None:       # the sweep's paths, from the step's start
-                    x_bar = x_bar + swept
+                if start_bar is not None:   # the guard's cuts, from the step's start
+                    x_bar = x_bar + start_bar
                 if self.controls is not None and len(self.pinned):
                     controls_bar[m] = v_bar[self.pinned]
                     v_bar[self.pinned] = 0.0
@@ -391,12 +393,12 @@ class Trajectory(StepAdjoints):
         solver's x1, x_bar, v_bar, the planes' adjoints for ``plane_vjp`` or None, the
         step start's share of the cuts or None)."""
         corrections, cuts, truncation, x1, v1 = changes
-        planes = swept = None
+        planes = start_bar = None
         if truncation is not None:
             if self._truncation is None:
                 self._truncation = TruncationAdjoint(self.sim.model.self_collision,
                                                      self.scene.num_particles)
-            x_bar, v_bar, swept = self._truncation.vjp(truncation, x, x_bar, v_bar)
+            x_bar, v_bar, start_bar = self._truncation.vjp(truncation, x, x_bar, v_bar)
         if corrections is not None:
             x_bar, v_bar, inv_bar, planes = pull_back(corrections, self._inv_mass, x_bar,
                                                       v_bar)
@@ -406,8 +408,8 @@ class Trajectory(StepAdjoints):
             if self._sweep is None:
                 self._sweep = SweepAdjoint(self.adjoint.table, self.scene.num_particles)
             x_bar, v_bar, start = self._sweep.vjp(cuts, x, x1, v1, x_bar, v_bar)
-            swept = start if swept is None else swept + start
-        return x1, x_bar, v_bar, planes, swept
+            start_bar = start if start_bar is None else start_bar + start
+        return x1, x_bar, v_bar, planes, start_bar
 
     def _reduce(self, wrt, x_bar, v_bar, controls_bar):
         adj, grads = self.adjoint, {}

@@ -230,3 +230,14 @@ def add_or_set(out: ti.template(), p, value, first: ti.template()):
         out[p] = value
     else:
         out[p] += value
+
+
+@ti.func
+def norm_above(v, floor):
+    """|v| where it exceeds ``floor`` (>= 0), else ``floor``: the norm only where its
+    derivative exists (at v = 0 Taichi's reverse mode takes 0/0 there, a NaN)."""
+    s2 = v.dot(v)
+    length = floor
+    if s2 > floor * floor:
+        length = ti.sqrt(s2)
+    return length

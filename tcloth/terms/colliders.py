@@ -34,7 +34,7 @@ import taichi as ti
 from .. import runtime
 from ..geometry.meshstore import QUERY_WORK
 from ..runtime import serial
-from .base import Term, particle_energy
+from .base import Term, norm_above, particle_energy
 
 
 @ti.func
@@ -47,12 +47,7 @@ def contact_force(depth, v_rel, n, k, cd, mu, eps):
     vn = v_rel.dot(n)
     fn = ti.max(k * depth - cd * vn, 0.0)
     vt = v_rel - vn * n
-    # the norm only where it exceeds eps: its derivative at rest is 0/0 (reverse mode)
-    speed = eps
-    s2 = vt.dot(vt)
-    if s2 > eps * eps:
-        speed = ti.sqrt(s2)
-    return fn * n - mu * fn / speed * vt
+    return fn * n - mu * fn / norm_above(vt, eps) * vt
 
 
 @ti.func

@@ -15,7 +15,7 @@ import taichi as ti
 
 from ..features.wind import WIND, pack, wind_velocity
 from ..runtime import serial
-from .base import Term
+from .base import Term, norm_above
 
 
 @ti.data_oriented
@@ -68,13 +68,9 @@ class Wind(Term):
             v_rel = wind - (v[a] + v[b] + v[c]) / 3.0
             u = v_rel.dot(n)
             vt = v_rel - u * n
-            # |vt| only where vt is not 0 (a wind along the normal: its derivative is 0/0
-            # there, and |vt| vt's is 0)
-            speed = 0.0
-            s2 = vt.dot(vt)
-            if s2 > 0.0:
-                speed = ti.sqrt(s2)
-            force = area * (params[8] * u * abs(u) * n + params[10] * speed * vt
+            # (|vt| vt's derivative is 0 where a wind along the normal leaves vt = 0)
+            force = area * (params[8] * u * abs(u) * n
+                            + params[10] * norm_above(vt, 0.0) * vt
                             + params[9] * abs(u) * vt)
         return force
 
