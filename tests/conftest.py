@@ -143,6 +143,7 @@ LONG = {
 # ``extended``: .ci/run runs them after the quick set (about 12 minutes there). Each family
 # keeps its cheapest cases in the quick set.
 EXTENDED = {
+    "test_implicit::test_anderson_acceleration_reaches_the_same_step_in_fewer_iterations",
     "test_grad::test_checkpoints_change_the_memory_not_the_gradient",
     "test_grad::test_the_fabric_fit_recovers_a_known_fabric",
     "test_grad_contact::test_gradients_through_self_contact_match_central_differences[backward_euler]",

@@ -279,6 +279,37 @@ def test_projective_converges_to_the_backward_euler_step(f64):
     assert np.abs(runs[10][0] - exact.positions()).max() < 0.1 * gaps[0]
 
 
+def test_anderson_acceleration_reaches_the_same_step_in_fewer_iterations(f64):
+    """Anderson acceleration (``integrators/anderson.py``) converges to the fixed point of
+    Liu's iterations, the backward Euler step, further in the same iterations: on the
+    swinging 16 x 16 cloth, with the V-cycle's global step and with CG's (measured: 30
+    accelerated iterations 0.12 and 0.09 of the plain ones' distance from the step, as
+    far as 300 plain ones; 300 accelerated 3.7e-5 and 9.2e-6 of 300 plain ones')."""
+    scene, x0, v0 = swinging(16, kd=0.0)
+    be = one_step(scene, x0, v0, "backward_euler", newton_tol=1e-12, cg_tol=1e-13,
+                  newton_iterations=60)
+    for solver in ("multigrid", "cg"):
+        gaps = {}
+        for depth in (0, 5):
+            pd = tcloth.Simulator(scene(), "projective", dt=1 / 60, anderson=depth,
+                                  linear_solver=solver, cg_tol=1e-8)
+            for iterations in (30, 300):
+                pd.set_integrator_options(iterations=iterations)
+                pd.set_state(positions=x0, velocities=v0)
+                pd.step()
+                gaps[depth, iterations] = np.abs(pd.positions() - be.positions()).max()
+        assert gaps[5, 30] < 0.25 * gaps[0, 30]
+        assert gaps[5, 300] < 1e-3 * gaps[0, 300]
+
+
+def test_anderson_is_checked():
+    scene = tcloth.Scene()
+    scene.add_cloth(resolution=(4, 4), size=(1, 1))
+    for depth in (-1, 2.5, True):
+        with pytest.raises(tcloth.SceneError, match=f"anderson.*{depth!r}"):
+            tcloth.Simulator(scene, "projective", anderson=depth)
+
+
 def test_projective_converges_to_backward_euler_with_axial_spring_damping(f64):
     """The fixed point solves M (x - x0 - h v0) / h^2 = f(x, (x - x0) / h) with the
     lecture's axial damping (NumPy forces), not a damping of the whole relative velocity."""

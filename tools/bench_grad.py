@@ -3,7 +3,8 @@ an n x n cloth held at two corners, --steps steps, a loss on its final positions
 gradient with respect to every parameter. The cloth starts on a sphere (mu 0.3) it drapes
 over; symplectic Euler at dt 2e-4, backward Euler at dt 1/60 (newton_tol and adjoint_tol
 --tol, cg_tol 1e-6: the gradient of converged steps), projective dynamics at dt 1/60
-(--iterations local/global iterations a step, adjoint_tol --tol; the largest residual they
+(--iterations local/global iterations a step, Anderson acceleration of depth --anderson,
+adjoint_tol --tol; the largest residual they
 leave, relative to the first, is reported: the gradient is the converged step's). Side by
 side in one run, medians of --repeats:
 
@@ -22,7 +23,8 @@ gradient / forward and gradient / trajectory, the checkpoints' memory against st
 state) and writes <out>/grad_bench.csv.
 
 Usage: python tools/bench_grad.py [--sizes 32] [--steps 120] [--repeats 3] [--tol 1e-8]
-                                  [--iterations 100] [--integrators all]
+                                  [--iterations 100] [--anderson 0]
+                                  [--integrators all]
                                   [--self-collision 0] [--precision f64] [--out docs]
                                   [--arch cpu]
 """
@@ -49,10 +51,11 @@ def cloth(n, collider=True, layer=0.0):
     return scene
 
 
-def measure(integrator, n, steps, repeats, tol, iterations, layer):
+def measure(integrator, n, steps, repeats, tol, iterations, anderson, layer):
     dt = 2e-4 if integrator == "symplectic_euler" else 1.0 / 60.0
     options = {"backward_euler": {"newton_tol": tol, "cg_tol": 1e-6, "adjoint_tol": tol},
-               "projective": {"iterations": iterations, "adjoint_tol": tol}}.get(integrator, {})
+               "projective": {"iterations": iterations, "anderson": anderson,
+                              "adjoint_tol": tol}}.get(integrator, {})
     scene = cloth(n, True, layer)
     trajectory = grad.Trajectory(scene, steps=steps, dt=dt, integrator=integrator, **options)
     target = scene.positions + np.array([0.0, -0.05, 0.0])
@@ -99,6 +102,8 @@ def main():
     parser.add_argument("--tol", type=float, default=1e-8)
     parser.add_argument("--iterations", type=int, default=100,
                         help="projective dynamics' iterations a step")
+    parser.add_argument("--anderson", type=int, default=0,
+                        help="projective dynamics' Anderson acceleration (0: off)")
     parser.add_argument("--integrators", default=",".join(grad.INTEGRATORS))
     parser.add_argument("--self-collision", type=float, default=0.0,
                         help="the cloth's self-collision thickness, m (0: none)")
@@ -111,6 +116,7 @@ def main():
     for n in (int(s) for s in args.sizes.split(",") if s):
         for integrator in args.integrators.split(","):
             row = measure(integrator, n, args.steps, args.repeats, args.tol, args.iterations,
+                          args.anderson,
                           args.self_collision)
             rows.append(row)
             for key, value in row.items():
