@@ -78,9 +78,9 @@ class Projective(Integrator):
     anderson (0): the history of Anderson acceleration (``anderson.py``), 0 for Liu's
         plain iterations; 5 converges a frame-rate step about ten times further in the
         same iterations (docs/realtime.md).
-    After each step ``stats`` holds iterations, cg_iterations (total, 0 with multigrid)
-    and residual: |g| at the last iteration relative to |g| at the first (how far the
-    iterations got).
+    After each step ``stats`` holds iterations, cg_iterations (total, 0 with multigrid),
+    residual: |g| at the last iteration relative to |g| at the first (how far the
+    iterations got), and anderson_restarts (the acceleration's history dropped).
     """
     name = "projective"
     defaults = {"iterations": 10, "linear_solver": "auto", "cg_tol": 1e-3,
