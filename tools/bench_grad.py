@@ -4,9 +4,8 @@ gradient with respect to every parameter. The cloth starts on a sphere (mu 0.3) 
 over; symplectic Euler at dt 2e-4, backward Euler at dt 1/60 (newton_tol and adjoint_tol
 --tol, cg_tol 1e-6: the gradient of converged steps), projective dynamics at dt 1/60
 (--iterations local/global iterations a step, Anderson acceleration of depth --anderson,
-adjoint_tol --tol; the largest residual they
-leave, relative to the first, is reported: the gradient is the converged step's). Side by
-side in one run, medians of --repeats:
+adjoint_tol --tol; the largest residual they leave, relative to the first, is reported:
+the gradient is the converged step's). Side by side in one run, medians of --repeats:
 
   - forward: the simulator's steps alone (``Simulator.step(steps)``);
   - trajectory: the same steps as the gradient's forward run takes them (one at a time,
@@ -116,8 +115,7 @@ def main():
     for n in (int(s) for s in args.sizes.split(",") if s):
         for integrator in args.integrators.split(","):
             row = measure(integrator, n, args.steps, args.repeats, args.tol, args.iterations,
-                          args.anderson,
-                          args.self_collision)
+                          args.anderson, args.self_collision)
             rows.append(row)
             for key, value in row.items():
                 if key not in ("integrator", "n"):
