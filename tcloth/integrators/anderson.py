@@ -19,7 +19,6 @@ and the iteration goes on from that iterate plainly (``restarts`` counts them in
 step). A restart wherever it grew at all dropped the history in one iteration of six on
 a cloth draping over a sphere at one step per frame and converged less (docs/realtime.md).
 """
-import numpy as np
 import taichi as ti
 
 from .. import runtime
@@ -57,7 +56,7 @@ class Anderson:
                                                  for _ in range(3))
         self.d_f, self.d_g = (ti.Vector.field(3, real, shape=(depth, n)) for _ in range(2))
         self.gram = ti.field(ti.f64, shape=(depth, depth + 1))
-        self.gamma = ti.field(real, shape=depth)
+        self.gamma = ti.field(ti.f64, shape=depth)
         self.count = self.iteration = self.slot = self.restarts = 0
         self.last_residual = None
 
@@ -86,14 +85,7 @@ class Anderson:
             self.count = min(self.count + 1, self.depth)
         if self.count == 0:
             return
-        self._gram(self.count)
-        gram = self.gram.to_numpy()[:self.count, :self.count + 1]
-        matrix, rhs = gram[:, :self.count], gram[:, self.count]
-        matrix = matrix + REGULARISATION * max(np.trace(matrix), 1e-300) * np.eye(self.count)
-        gamma = np.zeros(self.depth)
-        gamma[:self.count] = np.linalg.solve(matrix, rhs)
-        self.gamma.from_numpy(gamma.astype(runtime.numpy_real()))
-        self._combine(x, v, x0, h, self.count)
+        self._accelerate(x, v, x0, h, self.count)
 
     @ti.kernel
     def _differences(self, x: ti.template(), slot: ti.i32, stored: ti.i32):
@@ -109,23 +101,41 @@ class Anderson:
             self.g_last[p] = x[p]
 
     @ti.kernel
-    def _gram(self, count: ti.i32):
-        """dF^T dF and dF^T f_k (its last column), the columns the history holds."""
-        for a, b in ti.ndrange(self.depth, self.depth + 1):
-            self.gram[a, b] = 0.0
-        for a, b, p in ti.ndrange(count, count + 1, self.f_last.shape[0]):
-            other = self.f_last[p]
-            if b < count:
-                other = self.d_f[b, p]
-            self.gram[a, b] += ti.cast(self.d_f[a, p].dot(other), ti.f64)
-
-    @ti.kernel
-    def _combine(self, x: ti.template(), v: ti.template(), x0: ti.template(), h: float,
-                 count: ti.i32):
+    def _accelerate(self, x: ti.template(), v: ti.template(), x0: ti.template(), h: float,
+                    count: ti.i32):
+        """The normal equations dF^T dF gamma = dF^T f_k (one thread an entry of the
+        Gram matrix, summing over the particles), regularised, solved by Gaussian
+        elimination (count <= depth unknowns, one thread), and the combination."""
+        for a, b in ti.ndrange(count, count + 1):
+            total = ti.cast(0.0, ti.f64)
+            for p in range(self.f_last.shape[0]):
+                other = self.f_last[p]
+                if b < count:
+                    other = self.d_f[b, p]
+                total += ti.cast(self.d_f[a, p].dot(other), ti.f64)
+            self.gram[a, b] = total
+        ti.loop_config(serialize=True)
+        for _ in range(1):
+            trace = ti.cast(0.0, ti.f64)
+            for a in range(count):
+                trace += self.gram[a, a]
+            for a in range(count):
+                self.gram[a, a] += ti.max(REGULARISATION * trace, 1e-30)
+            for a in range(count):
+                for r in range(a + 1, count):
+                    factor = self.gram[r, a] / self.gram[a, a]
+                    for c in range(a, count + 1):
+                        self.gram[r, c] -= factor * self.gram[a, c]
+            for i in range(count):
+                a = count - 1 - i
+                value = self.gram[a, count]
+                for c in range(a + 1, count):
+                    value -= self.gram[a, c] * self.gamma[c]
+                self.gamma[a] = value / self.gram[a, a]
         ti.loop_config(serialize=ti.static(serial(x)))
         for p in range(x.shape[0]):
             y = self.g_last[p]
             for a in range(count):
-                y -= self.gamma[a] * self.d_g[a, p]
+                y -= ti.cast(self.gamma[a], float) * self.d_g[a, p]
             x[p] = y
             v[p] = (y - x0[p]) / h
