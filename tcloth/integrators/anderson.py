@@ -57,11 +57,11 @@ class Anderson:
         self.d_f, self.d_g = (ti.Vector.field(3, real, shape=(depth, n)) for _ in range(2))
         self.gram = ti.field(ti.f64, shape=(depth, depth + 1))
         self.gamma = ti.field(ti.f64, shape=depth)
-        self.count = self.iteration = self.slot = self.restarts = 0
+        self.count = self.slot = self.restarts = 0
         self.last_residual = None
 
     def start(self):
-        self.count = self.iteration = self.slot = self.restarts = 0
+        self.count = self.slot = self.restarts = 0
         self.last_residual = None
 
     @ti.kernel
@@ -71,15 +71,13 @@ class Anderson:
             self.before[p] = x[p]
 
     def mix(self, x, v, x0, h, residual):
-        restart = (self.count > 0 and self.last_residual is not None
-                   and residual > GROWTH * self.last_residual)
+        restart = self.count > 0 and residual > GROWTH * self.last_residual
         if restart:
             self.count = self.slot = 0
             self.restarts += 1
+        stored = self.last_residual is not None and not restart
         self.last_residual = residual
-        stored = self.iteration > 0 and not restart
         self._differences(x, self.slot, stored)
-        self.iteration += 1
         if stored:
             self.slot = (self.slot + 1) % self.depth
             self.count = min(self.count + 1, self.depth)
