@@ -154,6 +154,7 @@ EXTENDED = {
     "test_grad_contact::test_the_guards_projection_is_differentiated_as_its_corrections",
     "test_grad_contact::test_steps_the_gradient_does_not_take_are_reported",
     "test_grad_contact::test_the_fail_safe_is_differentiated_as_its_cuts",
+    "test_grad_contact::test_projectives_self_contact_projection_has_its_gradient",
     "test_grad::test_a_wind_along_the_cloths_normal_has_its_gradient[backward_euler]",
     # (the sphere's: 24 s in the quick set beside the others, which it took to 9:35)
     "test_grad_colliders::test_the_collider_sweeps_cuts_are_differentiated[symplectic_euler-sphere]",

@@ -58,24 +58,31 @@ class StepRecord:
     self-contact rows its forward step read (``rows[n]``: ids (r, 4) and kinds (r,)), the
     guard's changes where it changed the step (``projections[n]``: the projection's
     corrections, the first collider sweep's cuts and the fail-safe's, each or None, and
-    the solver's x1, v1), each where ``keep`` is set; the steps whose guard changed them
-    in a way the gradient does not take (``guarded``) and those whose changes it takes
-    (``projected``)."""
+    the solver's x1, v1), projective dynamics' self-contact projection's corrections
+    (``corrections[n]``: ``ProjectionLog.entries``), each where ``keep`` is set; the
+    steps whose guard changed them in a way the gradient does not take, or whose
+    projection made more corrections than its log keeps (``guarded``), and those whose
+    guard's changes it takes (``projected``)."""
 
-    def __init__(self, model):
+    def __init__(self, model, projection=None):
         self.stage = model.contact
-        self.self_contact = model.self_collision is not None
-        self.rows, self.projections = {}, {}
+        # the rows the solve reads (projective dynamics projects its self-contacts instead:
+        # ``projection``, the self-contact term whose corrections are kept)
+        self.self_contact = model.self_collision is not None and projection is None
+        self.projection = projection
+        self.rows, self.projections, self.corrections = {}, {}, {}
         self.guarded, self.projected = set(), set()
         self.keep = False
         self._counts = {}
         if self.stage is not None:
             self.stage.record(True)
+        if projection is not None:
+            projection.record(True)
 
     def start(self, keep):
         """A new run (its rows and projections kept where ``keep``: a segment of the
         backward run)."""
-        self.rows, self.projections = {}, {}
+        self.rows, self.projections, self.corrections = {}, {}, {}
         self.guarded, self.projected = set(), set()
         self.keep = keep
 
@@ -90,6 +97,12 @@ class StepRecord:
                             cl.kind.to_numpy()[:count][repels])
 
     def after(self, n):
+        if self.projection is not None:
+            entries = self.projection.log.entries()
+            if entries is None:         # more corrections than the log keeps
+                self.guarded.add(n)
+            elif self.keep and len(entries[0]):
+                self.corrections[n] = entries
         if self.stage is None:
             return
         stats = self.stage.stats
@@ -147,7 +160,8 @@ class StepRecord:
             if part is None or isinstance(part, np.ndarray):
                 return 0 if part is None else part.nbytes
             return sum(size(a) for a in part)
-        return rows + sum(size(changes) for changes in self.projections.values())
+        return rows + sum(size(changes) for changes in (*self.projections.values(),
+                                                         *self.corrections.values()))
 
 
 def pull_back(entries, inv_mass, x_bar, v_bar):

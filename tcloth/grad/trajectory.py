@@ -26,6 +26,7 @@ from ..sim.simulator import Simulator
 from ..validate import as_int
 from .adjoint import StepAdjoint, unsupported
 from .frozen import StepRecord, pull_back
+from .projected import ProjectionAdjoint, before
 from .sweep import SweepAdjoint, TruncationAdjoint
 from .parameters import MEMBRANE, bending_gradient, masses_gradient, membrane_gradient
 from .steps import StepAdjoints
@@ -110,16 +111,17 @@ class Trajectory(StepAdjoints):
         # update and the guard's corrections read them) and their share of dL/dm
         self._inv_mass = self._mass_bar = None
         why = unsupported(scene)
-        if why is None and self.projective and scene.self_collision is not None:
-            why = ("projective dynamics' self-contact projection is not differentiated "
-                   "(backward_euler and symplectic_euler take self-collision)")
         if why is not None:
             raise SceneError(f"tcloth.grad: {why}")
         self.sim = Simulator(scene, integrator=integrator, dt=dt, **options)
         self.scene = scene
         self.adjoint = StepAdjoint(self.sim.model, self.implicit, self.projective)
         self.adjoint.load()
-        self.record = StepRecord(self.sim.model)
+        projection = next((term for term in getattr(self.sim.integrator, "projections", ())
+                           if term.name == "self_contact"), None)
+        self.record = StepRecord(self.sim.model, projection)
+        self._projection = (ProjectionAdjoint(projection.table, projection.log.capacity)
+                            if projection is not None else None)
         self._sweep = None          # the collider sweep's adjoint, built at its first cut
         self._truncation = None     # the fail-safe's, likewise
         self.pinned = np.flatnonzero(scene.pinned)
@@ -355,6 +357,9 @@ class Trajectory(StepAdjoints):
                 if m in self.record.projections:    # the guard's, then the solver's step
                     x1, x_bar, v_bar, planes, start_bar = self._guard_back(
                         self.record.projections[m], x, x_bar, v_bar)
+                if m in self.record.corrections:    # projective's self-contact projection
+                    x1, x_bar, v_bar = self._projection_back(self.record.corrections[m], x1,
+                                                             x_bar, v_bar)
                 if self.implicit:
                     adjoint = (self._projective_adjoint if self.projective
                                else self._implicit_adjoint)
@@ -410,6 +415,16 @@ class Trajectory(StepAdjoints):
             x_bar, v_bar, start = self._sweep.vjp(cuts, x, x1, v1, x_bar, v_bar)
             start_bar = start if start_bar is None else start_bar + start
         return x1, x_bar, v_bar, planes, start_bar
+
+    def _projection_back(self, entries, x1, x_bar, v_bar):
+        """The solver's x1 before projective dynamics' self-contact projection, and the
+        adjoints of its end before it from those after (``projected.py``); the masses'
+        share added to ``_mass_bar``."""
+        x_bar, v_bar, inv_bar = self._projection.pull_back(entries, self._inv_mass, x_bar,
+                                                           v_bar)
+        if self._mass_bar is not None:
+            self._mass_bar -= self._inv_mass ** 2 * inv_bar
+        return before(entries, x1), x_bar, v_bar
 
     def _reduce(self, wrt, x_bar, v_bar, controls_bar):
         adj, grads = self.adjoint, {}

@@ -40,12 +40,14 @@ particles: the diagonal blocks in the block-Jacobi preconditioner, the couplings
 them applied matrix-free in CG's products (``add_product``). Projective dynamics projects after its
 iterations: Gauss-Seidel passes over the penetrating contacts moving the particles apart to
 distance T (an impulse along the contact's weights, inverse-mass weighted: momentum is
-kept), then removing approaching normal velocity and cutting tangential velocity by mu
-times that (Coulomb).
+kept), then one over the contacts within T (those left at T included) removing
+approaching normal velocity and cutting tangential velocity by mu times that (Coulomb).
+Each correction can be kept (``ProjectionLog``) for the gradient (``grad/projected.py``).
 """
 import taichi as ti
 
 from .. import runtime
+from ..contact.projection import LOG_CAPACITY
 from ..contact.search import POINT_TRIANGLE
 from ..features.self_collision import SELF_COLLISION
 from ..runtime import serial
@@ -53,6 +55,10 @@ from .base import Term
 from .colliders import add_dissipation, contact_force
 
 PROJECTION_PASSES = 4
+# the velocity pass reaches the thickness times (1 + this): the position passes leave their
+# contacts at the thickness, where rounding put about half of them outside it (their
+# approaching velocity kept, and a step's outcome split by perturbations of 1e-9)
+VELOCITY_REACH = 1e-6
 
 
 @ti.func
@@ -293,42 +299,95 @@ def _couplings(cl: ti.template(), lag: ti.template(), count: ti.i32, v: ti.templ
 
 
 # -- projective dynamics ---------------------------------------------------------------------
+@ti.func
+def projection_impulse(prm, g, w, v_rel, velocity: ti.template()):
+    """(fires, impulse) of one projection correction of a contact with gap g, inverse
+    effective mass w and relative velocity v_rel: where it is closer than the thickness,
+    the impulse that moves it apart to the thickness or (``velocity``) removes its
+    approaching normal velocity and cuts the tangential by Coulomb; particle k of the
+    contact then moves by alpha_k / m_k times it."""
+    d = g.norm()
+    reach = prm[0] * (1.0 + VELOCITY_REACH) if ti.static(velocity) else prm[0]
+    fires = d > 0.0 and d < reach and w > 0.0
+    impulse = ti.Vector.zero(float, 3)
+    if fires:
+        n = _normal(g, d)
+        if ti.static(velocity):
+            vn = v_rel.dot(n)
+            fires = vn < 0.0
+            if fires:
+                vt = v_rel - vn * n
+                speed = vt.norm()
+                jn = -vn / w
+                jt = ti.min(prm[2] * jn, speed / w)
+                impulse = jn * n - jt * vt / ti.max(speed, 1e-30)
+        else:
+            impulse = (prm[0] - d) / w * n
+    return fires, impulse
+
+
+@ti.data_oriented
+class ProjectionLog:
+    """The projection's corrections of one step in their order, kept where ``on`` is set (a
+    gradient's runs: ``tcloth/grad/projected.py`` differentiates each): the contact's
+    particles (``ids``) and ``kind``, whether it was a velocity pass (``velocity``), and
+    the four particles' positions and velocities before it (``x``, ``v``: (capacity, 4)).
+    ``count`` counts them all; past ``capacity`` they are not kept."""
+
+    def __init__(self, capacity):
+        real = runtime.real()
+        self.capacity = capacity
+        self.ids = ti.Vector.field(4, ti.i32, shape=capacity)
+        self.kind, self.velocity = (ti.field(ti.i32, shape=capacity) for _ in range(2))
+        self.x, self.v = (ti.Vector.field(3, real, shape=(capacity, 4)) for _ in range(2))
+        self.count, self.on = (ti.field(ti.i32, shape=()) for _ in range(2))
+
+    @ti.func
+    def keep(self, ids, kind, velocity, x, v):
+        if self.on[None]:
+            e = ti.atomic_add(self.count[None], 1)
+            if e < self.capacity:
+                self.ids[e], self.kind[e], self.velocity[e] = ids, kind, velocity
+                for j in ti.static(range(4)):
+                    self.x[e, j], self.v[e, j] = x[ids[j]], v[ids[j]]
+
+    def entries(self):
+        """The kept corrections as NumPy arrays (ids, kind, velocity, x, v), or None where
+        the step made more than the log keeps."""
+        if int(self.count[None]) > self.capacity:
+            return None
+        k = int(self.count[None])
+        return tuple(f.to_numpy()[:k] for f in (self.ids, self.kind, self.velocity, self.x,
+                                                 self.v))
+
+
 @ti.kernel
 def _project_pass(cl: ti.template(), count: ti.i32, x: ti.template(), v: ti.template(),
-                  velocity: ti.template()):
+                  velocity: ti.template(), log: ti.template()):
     """One Gauss-Seidel pass over the contacts (on one thread, in list order): positions
     apart to the thickness, or (``velocity``) approaching normal velocity removed and
-    tangential velocity cut by Coulomb. Each correction is an impulse along the contact's
-    weights, alpha_k / m_k on particle k: equal and opposite, so momentum is kept."""
-    prm = ti.static(cl.table.params)
+    tangential velocity cut by Coulomb (``projection_impulse``). Each correction is an
+    impulse along the contact's weights, alpha_k / m_k on particle k: equal and
+    opposite, so momentum is kept. ``log`` keeps each correction (where on)."""
     ti.loop_config(serialize=True)
     for c in range(count):
-        ids = cl.ids[c]
-        alpha, g = cl.gap(ids, cl.kind[c], x)
-        d = g.norm()
-        w = cl.inverse_mass(ids, alpha)
-        if cl.repels[c] and d > 0.0 and d < prm[0] and w > 0.0:
-            n = _normal(g, d)
-            impulse = ti.Vector.zero(float, 3)
-            if ti.static(velocity):
-                v_rel = ti.Vector.zero(float, 3)
-                for j in ti.static(range(4)):
-                    v_rel += alpha[j] * v[ids[j]]
-                vn = v_rel.dot(n)
-                if vn < 0.0:
-                    vt = v_rel - vn * n
-                    speed = vt.norm()
-                    jn = -vn / w
-                    jt = ti.min(prm[2] * jn, speed / w)
-                    impulse = jn * n - jt * vt / ti.max(speed, 1e-30)
-            else:
-                impulse = (prm[0] - d) / w * n
+        ids, kind = cl.ids[c], cl.kind[c]
+        alpha, g = cl.gap(ids, kind, x)
+        v_rel = ti.Vector.zero(float, 3)
+        if ti.static(velocity):
             for j in ti.static(range(4)):
-                q = ids[j]
-                if ti.static(velocity):
-                    v[q] += cl.inv_mass[q] * alpha[j] * impulse
-                else:
-                    x[q] += cl.inv_mass[q] * alpha[j] * impulse
+                v_rel += alpha[j] * v[ids[j]]
+        if cl.repels[c]:
+            fires, impulse = projection_impulse(ti.static(cl.table.params), g,
+                                                cl.inverse_mass(ids, alpha), v_rel, velocity)
+            if fires:
+                log.keep(ids, kind, int(velocity), x, v)
+                for j in ti.static(range(4)):
+                    q = ids[j]
+                    if ti.static(velocity):
+                        v[q] += cl.inv_mass[q] * alpha[j] * impulse
+                    else:
+                        x[q] += cl.inv_mass[q] * alpha[j] * impulse
 
 
 @ti.data_oriented
@@ -357,6 +416,7 @@ class SelfContact(Term):
         self.inv_mass = model.inv_mass
         self._scratch = {}
         self.lag = None             # ``Lagged``, as long as the stage's list at least
+        self.log = ProjectionLog(1)     # its full size once ``record`` is on
 
     def _field(self, key, make):
         if key not in self._scratch:
@@ -407,6 +467,15 @@ class SelfContact(Term):
     def project(self, x, v, t):
         """Gauss-Seidel passes moving penetrating contacts apart to the thickness, then one
         removing their approaching normal velocity with Coulomb friction (momentum kept)."""
+        cl, count = self.stage.candidates, self.stage.count
+        self.log.count[None] = 0
         for _ in range(PROJECTION_PASSES):
-            _project_pass(self.stage.candidates, self.stage.count, x, v, False)
-        _project_pass(self.stage.candidates, self.stage.count, x, v, True)
+            _project_pass(cl, count, x, v, False, self.log)
+        _project_pass(cl, count, x, v, True, self.log)
+
+    def record(self, on):
+        """Keep the projection's corrections of each step (``log``) from now on (``on``),
+        for a gradient (``tcloth/grad/projected.py``)."""
+        if on and self.log.capacity < LOG_CAPACITY:
+            self.log = ProjectionLog(LOG_CAPACITY)
+        self.log.on[None] = int(on)

@@ -1,0 +1,131 @@
+"""The adjoint of projective dynamics' self-contact projection (``ProjectionAdjoint``).
+
+After its iterations, projective dynamics projects the penetrating contacts
+(``terms/self_contact.py``): Gauss-Seidel passes, each correction moving a contact's four
+particles by alpha_k / m_k times an impulse (apart to the thickness, or removing the
+approaching normal velocity with Coulomb friction). A correction is a function of its
+four particles' positions, velocities and inverse masses before it; the closest points
+(alpha), the normal and the depth move with the positions. The forward run keeps each
+correction's inputs (``self_contact.ProjectionLog``), and the backward run:
+
+  - replays every correction from its inputs in one kernel (the term's own
+    ``projection_impulse``) and forms its Jacobian by Taichi's reverse mode, one seeded
+    launch per output component (24), all corrections at once;
+  - pulls the adjoints back through the corrections in reverse order, the Jacobians'
+    transposes applied one after the other (``pull_back``).
+
+This is the derivative of what the forward run computed: the corrections that fired are
+the active set (frozen), each one's branch (the closest points' region, static or
+kinetic friction) the one it took. The solver's end of the step before the projection is
+the corrections' first inputs (``before``).
+"""
+import numpy as np
+import taichi as ti
+
+from .. import runtime
+from ..geometry.proximity import contact_weights
+from ..terms.self_contact import projection_impulse
+
+OUTPUTS = 24        # a correction's four positions and four velocities after it
+
+
+@ti.data_oriented
+class ProjectionAdjoint:
+    """Vector-Jacobian products of one step's projection (``pull_back``) over the
+    self-collision table ``table`` (its thickness and friction), for logs of up to
+    ``capacity`` corrections."""
+
+    def __init__(self, table, capacity):
+        real = runtime.real()
+        self.table, self.capacity = table, capacity
+        self.kind, self.velocity = (ti.field(ti.i32, shape=capacity) for _ in range(2))
+        self.x, self.v, self.x_out, self.v_out = (
+            ti.Vector.field(3, real, shape=(capacity, 4), needs_grad=True) for _ in range(4))
+        self.inv = ti.field(real, shape=(capacity, 4), needs_grad=True)
+        self.count = ti.field(ti.i32, shape=())
+
+    @ti.kernel
+    def _replay(self):
+        """Each kept correction again from its inputs: x_out, v_out."""
+        for e in range(self.count[None]):
+            alpha = contact_weights(self.kind[e], self.x[e, 0], self.x[e, 1], self.x[e, 2],
+                                    self.x[e, 3])
+            g, v_rel, w = ti.Vector.zero(float, 3), ti.Vector.zero(float, 3), 0.0
+            for j in ti.static(range(4)):
+                g += alpha[j] * self.x[e, j]
+                v_rel += alpha[j] * self.v[e, j]
+                w += alpha[j] * alpha[j] * self.inv[e, j]
+            prm = ti.static(self.table.params)
+            impulse = ti.Vector.zero(float, 3)
+            if self.velocity[e]:
+                _, impulse = projection_impulse(prm, g, w, v_rel, True)
+            else:
+                _, impulse = projection_impulse(prm, g, w, v_rel, False)
+            s = ti.cast(self.velocity[e], float)
+            for j in ti.static(range(4)):
+                change = self.inv[e, j] * alpha[j] * impulse
+                self.x_out[e, j] = self.x[e, j] + (1.0 - s) * change
+                self.v_out[e, j] = self.v[e, j] + s * change
+
+    @ti.kernel
+    def _seed(self, out: ti.template(), j: ti.i32, axis: ti.i32):
+        """out's adjoint: 1 in component ``axis`` of particle slot j of every correction."""
+        for e, k in out:
+            unit = ti.Vector.zero(float, 3)
+            if k == j:
+                unit[axis] = 1.0
+            out.grad[e, k] = unit
+
+    def jacobians(self, entries, inv_mass):
+        """Each correction's Jacobian (k, 24, 28): its outputs (four positions, then four
+        velocities) in its inputs (four positions, four velocities, four inverse masses)."""
+        ids, kind, velocity, x, v = entries
+        k, npr = len(kind), runtime.numpy_real()
+        for field, values in ((self.kind, kind), (self.velocity, velocity), (self.x, x),
+                              (self.v, v), (self.inv, inv_mass[ids])):
+            padded = np.zeros((self.capacity,) + values.shape[1:],
+                              dtype=npr if values.dtype.kind == "f" else values.dtype)
+            padded[:k] = values
+            field.from_numpy(padded)
+        self.count[None] = k
+        self._replay()
+        jac = np.empty((k, OUTPUTS, 28))
+        for row in range(OUTPUTS):
+            out, other = (self.x_out, self.v_out) if row < 12 else (self.v_out, self.x_out)
+            for field in (self.x, self.v, self.inv):
+                field.grad.fill(0)
+            other.grad.fill(0)
+            self._seed(out, row % 12 // 3, row % 3)
+            self._replay.grad()
+            jac[:, row, :12] = self.x.grad.to_numpy()[:k].reshape(k, 12)
+            jac[:, row, 12:24] = self.v.grad.to_numpy()[:k].reshape(k, 12)
+            jac[:, row, 24:] = self.inv.grad.to_numpy()[:k]
+        return jac
+
+    def pull_back(self, entries, inv_mass, x_bar, v_bar):
+        """The adjoints of the projection's input (the solver's x1, v1) from those of its
+        output, its corrections' in reverse order, and of the inverse masses: (x_bar,
+        v_bar, inv_mass_bar)."""
+        ids = entries[0]
+        jac = self.jacobians(entries, inv_mass)
+        x_bar, v_bar = x_bar.copy(), v_bar.copy()
+        inv_bar = np.zeros(len(inv_mass))
+        for e in range(len(ids) - 1, -1, -1):
+            q = ids[e]
+            y = np.concatenate((x_bar[q].ravel(), v_bar[q].ravel()))
+            z = y @ jac[e]
+            x_bar[q] = z[:12].reshape(4, 3)
+            v_bar[q] = z[12:24].reshape(4, 3)
+            inv_bar[q] += z[24:]
+        return x_bar, v_bar, inv_bar
+
+
+def before(entries, end, velocities=False):
+    """The solver's end of the step before the projection, its positions (or its
+    velocities), from the projection's end (``end``) and the corrections' inputs: each
+    particle's where its first correction found it."""
+    ids, _, _, x, v = entries
+    particles, first = np.unique(ids.ravel(), return_index=True)
+    start = end.copy()
+    start[particles] = (v if velocities else x).reshape(-1, 3)[first]
+    return start
