@@ -302,10 +302,11 @@ def _couplings(cl: ti.template(), lag: ti.template(), count: ti.i32, v: ti.templ
 @ti.func
 def projection_impulse(prm, g, w, v_rel, velocity: ti.template()):
     """(fires, impulse) of one projection correction of a contact with gap g, inverse
-    effective mass w and relative velocity v_rel: where it is closer than the thickness,
-    the impulse that moves it apart to the thickness or (``velocity``) removes its
-    approaching normal velocity and cuts the tangential by Coulomb; particle k of the
-    contact then moves by alpha_k / m_k times it."""
+    effective mass w and relative velocity v_rel: where it is closer than the thickness
+    (the velocity pass: within VELOCITY_REACH beyond it), the impulse that moves it apart
+    to the thickness or (``velocity``) removes its approaching normal velocity and cuts
+    the tangential by Coulomb; particle k of the contact then moves by alpha_k / m_k
+    times it."""
     d = g.norm()
     reach = prm[0] * (1.0 + VELOCITY_REACH) if ti.static(velocity) else prm[0]
     fires = d > 0.0 and d < reach and w > 0.0
