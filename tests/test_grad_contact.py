@@ -13,14 +13,15 @@ import tcloth
 from tcloth import grad
 from tcloth.contact import projection, stage
 from tcloth.grad import frozen, projected
+from tcloth.terms.self_contact import ProjectionLog
 
 from conftest import check_gradients, check_step_terms, use_runtime
 
 STEPS = 60
 DT = {"symplectic_euler": 5e-4, "backward_euler": 5e-3, "projective": 5e-3}
 # projective dynamics converged (its gradient is the converged step's): 100 iterations
-# with Anderson acceleration leave the steps' residuals below 5e-13 (plain ones: 2e-5;
-# 400 plain ones: 2e-13), the default 10 at 2e-5
+# with Anderson acceleration leave the steps' residuals below 5e-13 (100 plain ones: up
+# to 2.3e-5; 400 plain ones: 2e-13)
 OPTIONS = {"backward_euler": {"newton_tol": 1e-12, "cg_tol": 1e-10, "newton_iterations": 100},
            "projective": {"iterations": 100, "anderson": 5, "cg_tol": 1e-12}}
 THICKNESS = 0.01
@@ -233,13 +234,15 @@ def test_the_fail_safe_is_differentiated_as_its_cuts(f64, monkeypatch):
 
 def test_projectives_self_contact_projection_has_its_gradient(f64, prepared):
     """Projective dynamics on the stack over 60 steps of 5 ms: its self-contact projection
-    corrects contacts at every step (positions apart to the thickness, approaching
-    velocity removed with friction), and the guard changes some steps after it. The
+    corrects contacts at each step of the first segment (the record keeps the segment
+    run last: steps 0-6; positions apart to the thickness, approaching velocity removed
+    with friction), and the guard changes some steps after it. The
     projection's pull-back is the transpose of its own kernel's Jacobian (central
     differences of ``SelfContact.project`` from the solver's end of the first step,
     which ``projected.before`` recovers from the log), and the trajectory's gradient
     matches central differences within 1e-5 (measured 4.6e-8, 2.5e-9 and 1.2e-9 for
-    positions, velocities and masses)."""
+    positions, velocities and masses). A log too small for a step's corrections makes
+    the step guarded, and the gradient says so."""
     trajectory, loss, result = prepared("projective")
     assert not result.guarded_steps and result.forward_residual < 1e-10
     record, sim = trajectory.record, trajectory.sim
@@ -274,3 +277,11 @@ def test_projectives_self_contact_projection_has_its_gradient(f64, prepared):
     assert abs((x_bar * p).sum() + (v_bar * q).sum() - fd) <= 1e-6 * abs(fd)
     check_gradients(trajectory, loss, result, ("positions", "velocities", "masses"),
                     np.random.default_rng(2), 1e-7)
+    term.log = ProjectionLog(4)             # fewer than most steps' corrections
+    term.log.on[None] = 1
+    try:
+        with pytest.warns(tcloth.GradientWarning, match="more corrections than its log"):
+            guarded = trajectory.gradient(loss).guarded_steps
+    finally:
+        term.record(True)                   # its full size again
+    assert 0 in guarded

@@ -324,8 +324,9 @@ class Trajectory(StepAdjoints):
         if self.guarded_steps:
             warnings.warn(
                 f"the contact stage's guard changed {len(self.guarded_steps)} of the "
-                f"{self.steps} steps (the first: step {self.guarded_steps[0]}): the gradient "
-                "takes the solver's step there, not the guard's change "
+                f"{self.steps} steps (the first: step {self.guarded_steps[0]}), or "
+                "projective dynamics' projection made more corrections than its log keeps: "
+                "the gradient takes the solver's step there, not that change "
                 "(Result.guarded_steps)", GradientWarning, stacklevel=2)
         n, h = self.scene.num_particles, self.sim.dt
         adj = self.adjoint
