@@ -324,12 +324,11 @@ class Trajectory(StepAdjoints):
         if self.guarded_steps:
             warnings.warn(
                 f"the contact stage's guard changed {len(self.guarded_steps)} of the "
-                f"{self.steps} steps (the first: step {self.guarded_steps[0]}), or "
-                "projective dynamics' projection made more corrections than its log keeps: "
-                "the gradient takes the solver's step there, not that change "
-                "(Result.guarded_steps)", GradientWarning, stacklevel=2)
-        n, h = self.scene.num_particles, self.sim.dt
-        adj = self.adjoint
+                f"{self.steps} steps (the first: step {self.guarded_steps[0]}), or projective"
+                " dynamics' projection made more corrections than its log keeps: the gradient"
+                " takes the solver's step there (Result.guarded_steps)", GradientWarning,
+                stacklevel=2)
+        n, h, adj = self.scene.num_particles, self.sim.dt, self.adjoint
         adj.zero_parameter_grads()
         self._inv_mass = self.sim.model.inv_mass.to_numpy().astype(np.float64)
         self._mass_bar = np.zeros(n) if "masses" in wrt else None
