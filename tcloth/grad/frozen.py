@@ -98,11 +98,12 @@ class StepRecord:
 
     def after(self, n):
         if self.projection is not None:
-            entries = self.projection.log.entries()
-            if entries is None:         # more corrections than the log keeps
+            log = self.projection.log
+            made = int(log.count[None])
+            if made > log.capacity:     # more corrections than the log keeps
                 self.guarded.add(n)
-            elif self.keep and len(entries[0]):
-                self.corrections[n] = entries
+            elif self.keep and made:    # (the forward run reads the count alone)
+                self.corrections[n] = log.entries()
         if self.stage is None:
             return
         stats = self.stage.stats
