@@ -371,7 +371,7 @@ class StepAdjoint:
         """Projective dynamics' penalty and normal damping of particle p at (x1p, v1p)."""
         x1p, v1p, h, fall = ctx
         return plane_contact_force(col, self._gap(col, x, p, phi, n, x1p, h, fall), n, v1p,
-                                   self.mass[p])
+                                   self.mass[p], h)
 
     @ti.func
     def _coulomb_body(self, col, c, x, p, phi, n, ctx):
