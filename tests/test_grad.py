@@ -2,6 +2,8 @@
 the simulator's own trajectories, in float64; one backward Euler step's adjoint against its
 Jacobian formed column by column, one projective step's along random directions; the
 adjoint's kernels against the simulator's terms."""
+import warnings
+
 import numpy as np
 import pytest
 
@@ -93,6 +95,7 @@ def test_every_parameters_gradient_matches_central_differences(f64, run):
     trajectory.forward(loss)
     assert trajectory.sim.contact_stats()["collider"] >= 3      # particles on the sphere
     assert result.forward_residual < 1e-8           # projective: every step converged
+    assert result.unconverged_steps == []
     check_gradients(trajectory, loss, result, trajectory.names, rng, 1e-7)
 
 
@@ -158,6 +161,31 @@ def test_a_backward_euler_steps_adjoint_is_its_jacobians_transpose(f64, backward
     v0 = 0.3 * rng.standard_normal((n, 3))
     adjoint, expected, _ = _one_step(trajectory, x0, v0, np.eye(6 * n), 1e-6, rng)
     np.testing.assert_allclose(adjoint, expected, rtol=1e-6, atol=1e-6 * np.abs(expected).max())
+
+
+def test_projective_steps_left_unconverged_are_named_and_warned_of(f64, projective):
+    """Three iterations a step instead of a hundred: steps are left above forward_tol, the
+    gradient names them and warns that it is not the run's; with forward_tol above the
+    largest residual, none are named and nothing is warned of."""
+    trajectory, loss, _ = projective
+    sim = trajectory.sim
+    sim.set_integrator_options(iterations=3)
+    try:
+        with pytest.warns(tcloth.GradientWarning, match="above forward_tol"):
+            result = trajectory.gradient(loss, wrt=["gravity"])
+        worst = result.forward_residual
+        assert worst > trajectory.forward_tol
+        assert result.unconverged_steps == sorted(set(result.unconverged_steps))
+        assert 0 < len(result.unconverged_steps) <= trajectory.steps
+        assert 0 <= result.unconverged_steps[0] and result.unconverged_steps[-1] < trajectory.steps
+        trajectory.forward_tol = 2.0 * worst
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", tcloth.GradientWarning)
+            again = trajectory.gradient(loss, wrt=["gravity"])
+        assert again.unconverged_steps == [] and again.forward_residual == worst
+    finally:
+        trajectory.forward_tol = 1e-6
+        sim.set_integrator_options(iterations=OPTIONS["projective"]["iterations"])
 
 
 def test_a_projective_steps_adjoint_is_its_jacobians_transpose(f64, projective):

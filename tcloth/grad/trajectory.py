@@ -50,7 +50,8 @@ class Result:
     gradient does not take: it is the solver's step's there, not the trajectory's);
     projected_steps (those whose end the guard's projection changed, differentiated as
     the projections they are: the corrections that fired frozen, their planes through
-    the step's start; ``frozen.py``).
+    the step's start; ``frozen.py``); unconverged_steps (projective dynamics' steps left
+    above ``forward_tol``).
     """
 
     def __init__(self, loss, grad, **stats):
@@ -90,10 +91,15 @@ class Trajectory(StepAdjoints):
     sqrt(steps), which keeps 2 sqrt(steps) states and runs each step twice); an attribute,
     which may be changed between runs, as may the number of steps (``set_steps``).
     adjoint_tol: the relative residual of the implicit integrators' adjoint solves.
+    forward_tol: projective dynamics' steps whose residual (``stats["residual"]``) the
+    forward run left above this are listed (``Result.unconverged_steps``) and warned of:
+    the adjoint is the converged step's, linearised where the iterations stopped, and
+    far from convergence that is not a derivative of anything the run computed
+    (docs/grad.md measures one 1e9 off central differences).
     """
 
     def __init__(self, scene, steps, dt, integrator="symplectic_euler", checkpoint_every=None,
-                 adjoint_tol=1e-10, **options):
+                 adjoint_tol=1e-10, forward_tol=1e-6, **options):
         if integrator not in INTEGRATORS:
             raise SceneError(f"integrator must be one of {INTEGRATORS} for gradients (got "
                              f"{integrator!r})")
@@ -102,11 +108,12 @@ class Trajectory(StepAdjoints):
         if checkpoint_every is None:
             checkpoint_every = max(1, int(round(np.sqrt(self.steps))))
         self.checkpoint_every = as_int("checkpoint_every", checkpoint_every, 1)
-        self.adjoint_tol = float(adjoint_tol)
+        self.adjoint_tol, self.forward_tol = float(adjoint_tol), float(forward_tol)
         self.implicit = integrator in ("backward_euler", "projective")
         self.projective = integrator == "projective"
         self._forward_residual = 0.0
         self.guarded_steps, self.projected_steps = [], []     # the last forward run's
+        self.unconverged_steps = []
         # during a gradient: the model's inverse masses in NumPy (symplectic Euler's
         # update and the guard's corrections read them) and their share of dL/dm
         self._inv_mass = self._mass_bar = None
@@ -279,8 +286,10 @@ class Trajectory(StepAdjoints):
                 sim.step(1)
                 self.record.after(n)
                 if self.projective:
-                    self._forward_residual = max(self._forward_residual,
-                                                 sim.integrator.stats["residual"])
+                    residual = sim.integrator.stats["residual"]
+                    self._forward_residual = max(self._forward_residual, residual)
+                    if not keep and residual > self.forward_tol:
+                        self.unconverged_steps.append(n)
         finally:                        # (a step that raises leaves it as it was)
             sim.set_batching(batching)
         states.append(self._state())
@@ -291,7 +300,7 @@ class Trajectory(StepAdjoints):
         the guard changed in ``guarded_steps`` and ``projected_steps`` (``Result``)."""
         k, steps = self.checkpoint_every, self.steps
         self._forward_residual = 0.0
-        self.guarded_steps, self.projected_steps = [], []
+        self.guarded_steps, self.projected_steps, self.unconverged_steps = [], [], []
         state = self.initial["positions"], self.initial["velocities"]
         checkpoints, value = {0: state}, 0.0
         reads = set(loss.steps)
@@ -321,13 +330,7 @@ class Trajectory(StepAdjoints):
         t0 = time.perf_counter()
         value, checkpoints = self.forward(loss)
         t1 = time.perf_counter()
-        if self.guarded_steps:
-            warnings.warn(
-                f"the contact stage's guard changed {len(self.guarded_steps)} of the "
-                f"{self.steps} steps (the first: step {self.guarded_steps[0]}), or projective"
-                " dynamics' projection made more corrections than its log keeps: the gradient"
-                " takes the solver's step there (Result.guarded_steps)", GradientWarning,
-                stacklevel=2)
+        self._warn()
         n, h, adj = self.scene.num_particles, self.sim.dt, self.adjoint
         adj.zero_parameter_grads()
         self._inv_mass = self.sim.model.inv_mass.to_numpy().astype(np.float64)
@@ -388,7 +391,27 @@ class Trajectory(StepAdjoints):
                       adjoint_iterations=iterations, adjoint_residual=worst,
                       forward_residual=self._forward_residual,
                       guarded_steps=list(self.guarded_steps),
+                      unconverged_steps=list(self.unconverged_steps),
                       projected_steps=list(self.projected_steps))
+
+    def _warn(self):
+        """The forward run's steps whose derivative the gradient does not take."""
+        if self.guarded_steps:
+            warnings.warn(
+                f"the contact stage's guard changed {len(self.guarded_steps)} of the "
+                f"{self.steps} steps (the first: step {self.guarded_steps[0]}), or projective"
+                " dynamics' projection made more corrections than its log keeps: the gradient"
+                " takes the solver's step there (Result.guarded_steps)", GradientWarning,
+                stacklevel=3)
+        if self.unconverged_steps:
+            warnings.warn(
+                f"projective dynamics left {len(self.unconverged_steps)} of the {self.steps}"
+                f" steps above forward_tol {self.forward_tol:g} (the first: step "
+                f"{self.unconverged_steps[0]}; the largest residual "
+                f"{self._forward_residual:.3g}): the gradient is the converged steps' "
+                "linearised where the iterations stopped, not the run's; more iterations, "
+                "a smaller dt or backward Euler (Result.unconverged_steps)", GradientWarning,
+                stacklevel=3)
 
     def _guard_back(self, changes, x, x_bar, v_bar):
         """The adjoints of the solver's end of a step from those of the guard's, through
