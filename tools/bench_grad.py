@@ -1,11 +1,12 @@
 """The cost of a gradient through the simulation (tcloth.grad) against the forward run:
 an n x n cloth held at two corners, --steps steps, a loss on its final positions, the
 gradient with respect to every parameter. The cloth starts on a sphere (mu 0.3) it drapes
-over; symplectic Euler at dt 2e-4, backward Euler at dt 1/60 (newton_tol and adjoint_tol
---tol, cg_tol 1e-6: the gradient of converged steps), projective dynamics at dt 1/60
-(--iterations local/global iterations a step, Anderson acceleration of depth --anderson,
-adjoint_tol --tol; the largest residual they leave, relative to the first, is reported:
-the gradient is the converged step's). Side by side in one run, medians of --repeats:
+over; symplectic Euler at dt 2e-4, backward Euler at dt --implicit-dt (1/60; newton_tol
+and adjoint_tol --tol, cg_tol 1e-6: the gradient of converged steps), projective dynamics
+at the same dt (--iterations local/global iterations a step, Anderson acceleration of
+depth --anderson, adjoint_tol --tol; the largest residual they leave, relative to the
+first, and the steps left above forward_tol 1e-6 are reported: the gradient is the
+converged step's). Side by side in one run, medians of --repeats:
 
   - forward: the simulator's steps alone (``Simulator.step(steps)``);
   - trajectory: the same steps as the gradient's forward run takes them (one at a time,
@@ -17,12 +18,18 @@ the gradient is the converged step's). Side by side in one run, medians of --rep
 does not take it); the steps the guard's projection changed and those the gradient
 does not take are reported (``projected_steps``, ``guarded_steps``).
 
+--check adds whether the gradient is right: the loss's central difference in gravity's
+vertical component (a step of 1e-3 of its value) against the gradient's component
+(``gravity_y_adjoint``, ``gravity_y_difference``, their ``gravity_y_error`` relative to
+the difference).
+
 Prints greppable lines ``grad.<integrator>.<n>x<n>.<metric>: value`` (seconds, the ratios
 gradient / forward and gradient / trajectory, the checkpoints' memory against storing every
 state) and writes <out>/grad_bench.csv.
 
 Usage: python tools/bench_grad.py [--sizes 32] [--steps 120] [--repeats 3] [--tol 1e-8]
                                   [--iterations 100] [--anderson 0]
+                                  [--implicit-dt 0.016667] [--check]
                                   [--integrators all]
                                   [--self-collision 0] [--precision f64] [--out docs]
                                   [--arch cpu]
@@ -50,8 +57,24 @@ def cloth(n, collider=True, layer=0.0):
     return scene
 
 
-def measure(integrator, n, steps, repeats, tol, iterations, anderson, layer):
-    dt = 2e-4 if integrator == "symplectic_euler" else 1.0 / 60.0
+def check(trajectory, loss, result):
+    """The gradient's vertical gravity component against the loss's central difference."""
+    gravity = trajectory.value("gravity")
+    step = 1e-3 * abs(gravity[1])
+    values = []
+    for sign in (1.0, -1.0):
+        trajectory.set("gravity", gravity + sign * step * np.array([0.0, 1.0, 0.0]))
+        values.append(trajectory.forward(loss)[0])
+    trajectory.set("gravity", gravity)
+    difference = (values[0] - values[1]) / (2.0 * step)
+    adjoint = float(result.grad["gravity"][1])
+    return {"gravity_y_adjoint": adjoint, "gravity_y_difference": difference,
+            "gravity_y_error": abs(adjoint - difference) / abs(difference)}
+
+
+def measure(integrator, n, steps, repeats, tol, iterations, anderson, layer, implicit_dt,
+            checked):
+    dt = 2e-4 if integrator == "symplectic_euler" else implicit_dt
     options = {"backward_euler": {"newton_tol": tol, "cg_tol": 1e-6, "adjoint_tol": tol},
                "projective": {"iterations": iterations, "anderson": anderson,
                               "adjoint_tol": tol}}.get(integrator, {})
@@ -79,7 +102,8 @@ def measure(integrator, n, steps, repeats, tol, iterations, anderson, layer):
     stored = trajectory.gradient(loss).memory_bytes
     trajectory.checkpoint_every = every
     med = {key: float(np.median(value)) for key, value in times.items()}
-    return {"integrator": integrator, "n": n, "steps": steps, "dt": dt,
+    errors = check(trajectory, loss, result) if checked else {}
+    return {**{"integrator": integrator, "n": n, "steps": steps, "dt": dt,
             "forward_s": med["forward"], "trajectory_s": med["trajectory"],
             "gradient_s": med["gradient"],
             "ratio_forward": med["gradient"] / med["forward"],
@@ -90,7 +114,8 @@ def measure(integrator, n, steps, repeats, tol, iterations, anderson, layer):
             "adjoint_residual": result.adjoint_residual,
             "forward_residual": result.forward_residual,
             "projected_steps": len(result.projected_steps),
-            "guarded_steps": len(result.guarded_steps)}
+            "guarded_steps": len(result.guarded_steps),
+            "unconverged_steps": len(result.unconverged_steps)}, **errors}
 
 
 def main():
@@ -106,6 +131,10 @@ def main():
     parser.add_argument("--integrators", default=",".join(grad.INTEGRATORS))
     parser.add_argument("--self-collision", type=float, default=0.0,
                         help="the cloth's self-collision thickness, m (0: none)")
+    parser.add_argument("--implicit-dt", type=float, default=1.0 / 60.0,
+                        help="backward Euler's and projective dynamics' dt, s")
+    parser.add_argument("--check", action="store_true",
+                        help="the gravity gradient against central differences")
     parser.add_argument("--precision", default="f64")
     parser.add_argument("--out", default="docs")
     parser.add_argument("--arch", default="cpu")
@@ -115,7 +144,8 @@ def main():
     for n in (int(s) for s in args.sizes.split(",") if s):
         for integrator in args.integrators.split(","):
             row = measure(integrator, n, args.steps, args.repeats, args.tol, args.iterations,
-                          args.anderson, args.self_collision)
+                          args.anderson, args.self_collision, args.implicit_dt,
+                          args.check)
             rows.append(row)
             for key, value in row.items():
                 if key not in ("integrator", "n"):
