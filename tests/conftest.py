@@ -145,6 +145,7 @@ LONG = {
 EXTENDED = {
     "test_implicit::test_anderson_acceleration_reaches_the_same_step_in_fewer_iterations",
     "test_grad::test_checkpoints_change_the_memory_not_the_gradient",
+    "test_grad::test_projective_steps_left_unconverged_are_named_and_warned_of",
     "test_grad::test_the_fabric_fit_recovers_a_known_fabric",
     "test_grad_contact::test_gradients_through_self_contact_match_central_differences[backward_euler]",
     "test_grad_contact::test_the_adjoints_contact_terms_are_the_simulators[backward_euler]",

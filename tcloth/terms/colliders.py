@@ -140,8 +140,8 @@ def plane_contact_force(col, gap, n, vp, m, h):
     depth / (h |v_n|) of it in contact, so the step's damping impulse is c_d depth, not
     c_d |v_n| h. Without that cap the force jumped from 0 to c_d |v_n| as the iterate
     crossed the offset surface, the step had no fixed point, and Liu's iterations cycled
-    across it (a cloth landing at 1 m/s on a plane at dt 2e-3: a residual of 3.3 after
-    100 iterations where every other step reached 1e-10)."""
+    across it (a cloth thrown at 1 m/s onto a plane at dt 2e-3: a residual of 77 after
+    100 iterations where the other steps reached 1e-12; 3e-8 with the cap)."""
     f = ti.Vector.zero(float, 3)
     depth = col.thickness - gap
     if depth > 0.0:
