@@ -405,13 +405,7 @@ def numpy_forces(scene, x, v):
 def central_difference(trajectory, loss, name, direction, step):
     """The central difference of a ``tcloth.grad.Trajectory``'s loss along ``direction``
     of its parameter ``name`` (the parameter set back after)."""
-    value = trajectory.value(name)
-    results = []
-    for sign in (1.0, -1.0):
-        trajectory.set(name, value + sign * step * direction)
-        results.append(trajectory.forward(loss)[0])
-    trajectory.set(name, value)
-    return (results[0] - results[1]) / (2.0 * step)
+    return trajectory.central_difference(loss, name, direction, step)
 
 
 def check_gradients(trajectory, loss, result, names, rng, array_step):

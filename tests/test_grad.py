@@ -168,7 +168,7 @@ def test_projective_steps_left_unconverged_are_named_and_warned_of(f64, projecti
     gradient names them and warns that it is not the run's; with forward_tol above the
     largest residual, none are named and nothing is warned of."""
     trajectory, loss, _ = projective
-    sim, tol = trajectory.sim, trajectory.adjoint_tol
+    sim, tols = trajectory.sim, (trajectory.forward_tol, trajectory.adjoint_tol)
     sim.set_integrator_options(iterations=3)
     trajectory.adjoint_tol = 1e-2          # what is tested is the naming, not the solve
     try:
@@ -185,7 +185,7 @@ def test_projective_steps_left_unconverged_are_named_and_warned_of(f64, projecti
             again = trajectory.gradient(loss, wrt=["gravity"])
         assert again.unconverged_steps == [] and again.forward_residual == worst
     finally:
-        trajectory.forward_tol, trajectory.adjoint_tol = 1e-6, tol
+        trajectory.forward_tol, trajectory.adjoint_tol = tols
         sim.set_integrator_options(iterations=OPTIONS["projective"]["iterations"])
 
 

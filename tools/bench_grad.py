@@ -59,14 +59,9 @@ def cloth(n, collider=True, layer=0.0):
 
 def check(trajectory, loss, result):
     """The gradient's vertical gravity component against the loss's central difference."""
-    gravity = trajectory.value("gravity")
-    step = 1e-3 * abs(gravity[1])
-    values = []
-    for sign in (1.0, -1.0):
-        trajectory.set("gravity", gravity + sign * step * np.array([0.0, 1.0, 0.0]))
-        values.append(trajectory.forward(loss)[0])
-    trajectory.set("gravity", gravity)
-    difference = (values[0] - values[1]) / (2.0 * step)
+    step = 1e-3 * abs(trajectory.value("gravity")[1])
+    difference = trajectory.central_difference(loss, "gravity", np.array([0.0, 1.0, 0.0]),
+                                               step)
     adjoint = float(result.grad["gravity"][1])
     return {"gravity_y_adjoint": adjoint, "gravity_y_difference": difference,
             "gravity_y_error": abs(adjoint - difference) / abs(difference)}

@@ -210,6 +210,18 @@ class Trajectory(StepAdjoints):
                              f"{values.min():.6g} .. {values.max():.6g}): it needs one")
         return float(values[0])
 
+    def central_difference(self, loss, name, direction, step):
+        """The loss's central difference along ``direction`` of parameter ``name`` (a
+        step of ``step``; two forward runs), the parameter set back after: the check of
+        a gradient's component or directional derivative."""
+        value = self.value(name)
+        ends = []
+        for sign in (1.0, -1.0):
+            self.set(name, value + sign * step * direction)
+            ends.append(self.forward(loss)[0])
+        self.set(name, value)
+        return (ends[0] - ends[1]) / (2.0 * step)
+
     def set(self, name, value):
         """Change a parameter (see the class) for the next ``gradient``."""
         self._check_name(name)
