@@ -454,6 +454,36 @@ def test_projective_converges_where_a_cloth_lands_on_a_collider(f64):
         assert 0.005 < min(lowest) < 0.01
 
 
+def test_projectives_step_residual_is_the_steps_equation(f64):
+    """``Projective.step_residual``: two particles on a damped spring, with air drag,
+    falling: at any positions x it is m/h^2 (x0 + h v0 - x) + m g - c v + the spring's
+    force at (x, v = (x - x0) / h), written out in NumPy; at the step's end, which the
+    iterations converged, it is 0 to rounding."""
+    k, kd, c, h, m = 50.0, 0.3, 0.02, 1 / 60, 0.2
+    x0 = np.array([[0.0, 1.0, 0.0], [0.3, 1.1, 0.05]])
+    v0 = np.array([[0.2, 0.0, -0.1], [0.0, 0.5, 0.3]])
+    scene = tcloth.Scene(air_drag=c)
+    scene.add_particles(x0, mass=m, velocities=v0)
+    scene.add_springs([[0, 1]], k, kd, rest_length=0.25)
+    sim = tcloth.Simulator(scene, "projective", dt=h, iterations=200, linear_solver="cg",
+                           cg_tol=1e-12)
+    with pytest.raises(tcloth.SceneError, match="take a step first"):
+        sim.integrator.step_residual(x0)
+    sim.step()
+    scale = m / h ** 2 * np.abs(sim.positions() - x0).max()
+    assert np.abs(sim.integrator.step_residual(sim.positions())).max() < 1e-9 * scale
+    x = x0 + h * v0 + np.random.default_rng(0).normal(0.0, 0.01, x0.shape)
+    v = (x - x0) / h
+    d = x[0] - x[1]
+    length = np.linalg.norm(d)
+    d /= length
+    spring = -(k * (length - 0.25) + kd * (v[0] - v[1]) @ d) * d
+    expected = m / h ** 2 * (x0 + h * v0 - x) + m * np.array(scene.gravity) - c * v
+    expected += np.array([spring, -spring])
+    np.testing.assert_allclose(sim.integrator.step_residual(x), expected, rtol=1e-12,
+                               atol=1e-12 * np.abs(expected).max())
+
+
 @pytest.mark.parametrize("integrator", ["backward_euler", "projective"])
 def test_static_equilibrium_matches_a_long_explicit_run(f64, integrator):
     def hanging():

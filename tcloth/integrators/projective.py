@@ -52,6 +52,7 @@ Pinned particles follow x0 + h v0.
 import numpy as np
 import taichi as ti
 
+from ..errors import SceneError
 from ..model import grid as grid_layout
 from .. import runtime
 from .. import terms as term_modules
@@ -144,6 +145,9 @@ class Projective(Integrator):
         self.anderson = Anderson(n, depth) if depth else None
         self.stats = {}
         self._h = None
+        self._t1 = None
+        # step_residual's positions, velocities and residual
+        self._probe = tuple(ti.Vector.field(3, real, shape=n) for _ in range(3))
 
     def parameters_changed(self):
         """Spring parameters or drag changed: the constant matrix is rebuilt."""
@@ -195,7 +199,7 @@ class Projective(Integrator):
             self._friction(x, v, h)
         for term in self.projections:
             term.project(x, v, t1)
-        state_out.t = t1
+        state_out.t = self._t1 = t1
         self.stats = {"iterations": self.options["iterations"], "cg_iterations": cg_total,
                       "residual": float(np.sqrt(last / first)) if first else 0.0,
                       "hold_iterations": held,
@@ -221,6 +225,30 @@ class Projective(Integrator):
                 self._update(x, v, h)
         self.stage.end_hold()
         return self.options["iterations"], cg_total
+
+    def step_residual(self, x):
+        """The force residual g (module docstring) of the step just taken, at positions x
+        ((n, 3) NumPy) with the velocities (x - x0) / h: the step's equation, 0 at its
+        solution (the friction and projections after the iterations aside). For studies
+        of the step (``tools/step_convexity.py`` forms its Jacobian from it)."""
+        if self._h is None or "residual" not in self.stats:
+            raise SceneError("step_residual reads the step just taken: take a step first")
+        xs, vs, g = self._probe
+        x = np.asarray(x, dtype=runtime.numpy_real())
+        xs.from_numpy(x)
+        vs.from_numpy((x - self.x0.to_numpy()) / self._h)
+        self.residual_forces.compute(xs, vs, self._t1, self.f)
+        self._residual_into(xs, vs, self._h, g)
+        return g.to_numpy()
+
+    @ti.kernel
+    def _residual_into(self, x: ti.template(), v: ti.template(), h: float,
+                       out: ti.template()):
+        for p in range(x.shape[0]):
+            out[p] = self._force_residual(x, v, p, self.f[p], h)
+            if ti.static(self.has_hold):
+                f_hold, _ = self.hold.pull(p, x)
+                out[p] += f_hold
 
     # -- the matrix ------------------------------------------------------------------------
     def _build_matrix(self, model, h):
