@@ -422,7 +422,9 @@ class Trajectory(StepAdjoints):
                 f"{self.unconverged_steps[0]}; the largest residual "
                 f"{self._forward_residual:.3g}): the gradient is the converged steps' "
                 "linearised where the iterations stopped, not the run's; more iterations, "
-                "a smaller dt or backward Euler (Result.unconverged_steps)", GradientWarning,
+                "a smaller dt (no number of iterations converges a step that is not "
+                "convex: tools/step_convexity.py) or backward Euler "
+                "(Result.unconverged_steps)", GradientWarning,
                 stacklevel=3)
 
     def _guard_back(self, changes, x, x_bar, v_bar):
