@@ -470,6 +470,8 @@ def test_projectives_step_residual_is_the_steps_equation(f64):
     with pytest.raises(tcloth.SceneError, match="take a step first"):
         sim.integrator.step_residual(x0)
     sim.step()
+    with pytest.raises(tcloth.SceneError, match=r"shape \(2, 3\).*\(3, 3\)"):
+        sim.integrator.step_residual(np.zeros((3, 3)))
     scale = m / h ** 2 * np.abs(sim.positions() - x0).max()
     assert np.abs(sim.integrator.step_residual(sim.positions())).max() < 1e-9 * scale
     x = x0 + h * v0 + np.random.default_rng(0).normal(0.0, 0.01, x0.shape)

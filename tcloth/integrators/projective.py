@@ -235,6 +235,9 @@ class Projective(Integrator):
             raise SceneError("step_residual reads the step just taken: take a step first")
         xs, vs, g = self._probe
         x = np.asarray(x, dtype=runtime.numpy_real())
+        if x.shape != (g.shape[0], 3):
+            raise SceneError(f"step_residual takes positions of shape ({g.shape[0]}, 3) "
+                             f"(got x of shape {x.shape})")
         xs.from_numpy(x)
         vs.from_numpy((x - self.x0.to_numpy()) / self._h)
         self.residual_forces.compute(xs, vs, self._t1, self.f)
