@@ -278,6 +278,50 @@ def test_a_wind_along_the_cloths_normal_has_its_gradient(f64, integrator):
     check_gradients(trajectory, loss, result, ["wind"], rng, 1e-6)
 
 
+def test_a_loss_written_as_a_taichi_kernel_is_differentiated_by_its_reverse_mode(
+        f64, symplectic_euler):
+    """grad.KernelLoss: a nonlinear kernel's value and gradient against the closed form;
+    the module's symplectic Euler trajectory differentiated through a kernel of its
+    loss (1/2 |x - target|^2 at the same steps) gives the NumPy loss's gradient; a
+    function that is not a kernel is refused by name."""
+    import taichi as ti
+    trajectory, loss, result = symplectic_euler
+    n = trajectory.scene.num_particles
+    target = ti.Vector.field(3, ti.f64, shape=n)
+    target.from_numpy(loss.targets)
+
+    @ti.kernel
+    def squared(x: ti.template(), v: ti.template(), out: ti.template()):
+        for p in x:
+            out[None] += 0.5 * (x[p] - target[p]).norm_sqr()
+
+    @ti.kernel
+    def curved(x: ti.template(), v: ti.template(), out: ti.template()):
+        for p in x:
+            out[None] += x[p].y ** 3 * v[p].norm_sqr() + ti.sin(x[p].x)
+
+    rng = np.random.default_rng(7)
+    x, v = rng.standard_normal((n, 3)), rng.standard_normal((n, 3))
+    value, dx, dv = grad.KernelLoss(curved, 0, n).evaluate(0, x, v)
+    speed2 = (v * v).sum(axis=1)
+    assert value == pytest.approx(float((x[:, 1] ** 3 * speed2 + np.sin(x[:, 0])).sum()),
+                                  rel=1e-13)
+    expected_dx = np.zeros_like(x)
+    expected_dx[:, 0] = np.cos(x[:, 0])
+    expected_dx[:, 1] = 3.0 * x[:, 1] ** 2 * speed2
+    np.testing.assert_allclose(dx, expected_dx, rtol=1e-13, atol=1e-13)
+    np.testing.assert_allclose(dv, 2.0 * x[:, 1:2] ** 3 * v, rtol=1e-13, atol=1e-13)
+    kernel_result = trajectory.gradient(grad.KernelLoss(squared, loss.steps, n))
+    assert kernel_result.loss == pytest.approx(result.loss, rel=1e-12)
+    for name in trajectory.names:
+        np.testing.assert_allclose(kernel_result.grad[name], result.grad[name], rtol=1e-10,
+                                   atol=1e-12 * np.abs(result.grad[name]).max())
+    with pytest.raises(tcloth.SceneError, match="kernel must be a Taichi kernel"):
+        grad.KernelLoss(lambda x, v, out: None, 0, n)
+    with pytest.raises(tcloth.SceneError, match=r"n = 36 particles \(got x of shape \(2, 3\)"):
+        grad.KernelLoss(squared, 0, n).evaluate(0, np.zeros((2, 3)), np.zeros((2, 3)))
+
+
 def test_the_fabric_fits_measurements_have_their_gradients():
     """tools/fit_fabric.py's measurements of a specimen scene (grad.ChordAngle on the
     strips, grad.DrapeCoefficient inside the disc's projected rim, the bias strip's

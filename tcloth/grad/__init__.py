@@ -3,11 +3,12 @@
 ``Trajectory(scene, steps, dt, integrator)`` runs a scene and differentiates a loss
 (``losses``) over its states with respect to material, scene, initial-state and control
 parameters: the symplectic Euler step's exact adjoint and the converged backward Euler
-step's (the implicit function theorem, the adjoint solved by the integrator's own CG).
+and projective dynamics steps' (the implicit function theorem, the adjoint solved by the
+integrator's own CG, or by flexible GMRES).
 """
-from .losses import (ChordAngle, DrapeCoefficient, Loss, Measured, Sum, TargetCloud,
-                     TargetPositions)
+from .losses import (ChordAngle, DrapeCoefficient, KernelLoss, Loss, Measured, Sum,
+                     TargetCloud, TargetPositions)
 from .trajectory import INTEGRATORS, Result, Trajectory
 
-__all__ = ["Trajectory", "Result", "INTEGRATORS", "Loss", "Sum", "TargetPositions",
-           "TargetCloud", "Measured", "ChordAngle", "DrapeCoefficient"]
+__all__ = ["Trajectory", "Result", "INTEGRATORS", "Loss", "KernelLoss", "Sum",
+           "TargetPositions", "TargetCloud", "Measured", "ChordAngle", "DrapeCoefficient"]

@@ -3,13 +3,16 @@ each with its gradient.
 
 A loss gives ``steps`` (the steps it reads: 0 is the initial state, ``steps`` the last)
 and ``evaluate(step, x, v) -> (value, dL/dx, dL/dv or None)`` with x, v (n, 3) NumPy.
-``Loss(steps, function)`` wraps a user's function of that form; ``Sum`` adds losses.
+``Loss(steps, function)`` wraps a user's function of that form, ``KernelLoss`` a Taichi
+kernel that Taichi's reverse mode differentiates; ``Sum`` adds losses.
 ``Measured`` losses compare a measurement of the positions with a target, ((m(x) -
 target) / scale)^2: the textile tests' ``ChordAngle`` (Peirce's cantilever) and
 ``DrapeCoefficient`` (Cusick's drape); each gives ``measure(x) -> (m, dm/dx)`` too.
 """
 import numpy as np
+import taichi as ti
 
+from .. import runtime
 from ..errors import SceneError
 from ..validate import as_int, as_scalar
 
@@ -48,6 +51,44 @@ class Sum(Loss):
                 if lvv is not None:
                     dv = dv + lvv
         return value, dx, dv
+
+
+class KernelLoss(Loss):
+    """A loss written as a Taichi kernel: ``kernel(x, v, loss)`` adds its value at one of
+    ``steps`` to ``loss[None]`` (a scalar field) from the positions x and velocities v
+    (Vector fields of the scene's n particles) within Taichi's rules for reverse mode
+    (accumulate with ``+=``, write nothing to x or v); its gradient is the kernel's
+    ``grad`` (Taichi's reverse mode), so none is written by hand. The fields are made in
+    the runtime's precision at the first evaluation."""
+
+    def __init__(self, kernel, steps, n):
+        super().__init__(steps)
+        if not callable(getattr(kernel, "grad", None)):
+            raise SceneError(f"kernel must be a Taichi kernel, whose reverse mode gives the "
+                             f"gradient (got {kernel!r})")
+        self.kernel, self.n, self.fields = kernel, as_int("n", n, 1), None
+
+    def evaluate(self, step, x, v):
+        if x.shape != (self.n, 3) or v.shape != (self.n, 3):
+            raise SceneError(f"KernelLoss was made for n = {self.n} particles (got x of "
+                             f"shape {x.shape}, v of shape {v.shape})")
+        if self.fields is None:
+            real = runtime.real()
+            self.fields = (ti.Vector.field(3, real, shape=self.n, needs_grad=True),
+                           ti.Vector.field(3, real, shape=self.n, needs_grad=True),
+                           ti.field(real, shape=(), needs_grad=True))
+        xf, vf, loss = self.fields
+        npr = runtime.numpy_real()
+        xf.from_numpy(x.astype(npr))
+        vf.from_numpy(v.astype(npr))
+        loss[None] = 0.0
+        self.kernel(xf, vf, loss)
+        xf.grad.fill(0.0)
+        vf.grad.fill(0.0)
+        loss.grad[None] = 1.0
+        self.kernel.grad(xf, vf, loss)
+        return (float(loss[None]), xf.grad.to_numpy().astype(np.float64),
+                vf.grad.to_numpy().astype(np.float64))
 
 
 class TargetPositions(Loss):
