@@ -8,10 +8,10 @@ M^-1/2 h^2 (1 where the step is pure inertia; the springs' stiffness adds to it,
 compressed spring's transverse -k (l0 / l - 1) takes from it).
 
 Where its smallest eigenvalue is below 0 the step's energy is not convex there: the
-cloth buckles within the step (wrinkles as it drapes), Liu's iterations (a descent on that
-energy with a constant matrix) crawl along the buckling modes, and the implicit function
-theorem's derivative, which ``tcloth.grad`` gives for a converged step, is not defined
-there (docs/grad.md, Cost).
+cloth can buckle within the step (wrinkle as it drapes), and Liu's iterations (a descent
+with a constant, positive definite matrix) stall on those modes (measured: docs/grad.md,
+Cost), so the step is not converged and the implicit function theorem's derivative,
+which ``tcloth.grad`` gives for a converged step, is not the run's.
 
 Prints ``convexity.<dt>.step<k>.<metric>: value`` lines: residual (the step's, relative
 to its first iterate), smallest (the smallest eigenvalue above), negative (how many are
