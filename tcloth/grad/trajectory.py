@@ -422,8 +422,8 @@ class Trajectory(StepAdjoints):
                 f"{self.unconverged_steps[0]}; the largest residual "
                 f"{self._forward_residual:.3g}): the gradient is the converged steps' "
                 "linearised where the iterations stopped, not the run's; more iterations, "
-                "a smaller dt (no number of iterations converges a step that is not "
-                "convex: tools/step_convexity.py) or backward Euler "
+                "a smaller dt (the iterations stall on a step that is not convex: "
+                "tools/step_convexity.py) or backward Euler "
                 "(Result.unconverged_steps)", GradientWarning,
                 stacklevel=3)
 
