@@ -402,12 +402,6 @@ def numpy_forces(scene, x, v):
     return f
 
 
-def central_difference(trajectory, loss, name, direction, step):
-    """The central difference of a ``tcloth.grad.Trajectory``'s loss along ``direction``
-    of its parameter ``name`` (the parameter set back after)."""
-    return trajectory.central_difference(loss, name, direction, step)
-
-
 def check_gradients(trajectory, loss, result, names, rng, array_step):
     """Each parameter of ``names``: its gradient (a scalar's, or an array's directional
     derivative along a random direction) against central differences (a scalar's step
@@ -420,7 +414,7 @@ def check_gradients(trajectory, loss, result, names, rng, array_step):
         else:
             direction, step = rng.standard_normal(value.shape), array_step
             adjoint = float((result.grad[name] * direction).sum())
-        fd = central_difference(trajectory, loss, name, direction, step)
+        fd = trajectory.central_difference(loss, name, direction, step)
         assert abs(adjoint - fd) <= 1e-5 * abs(fd), (name, adjoint, fd)
 
 

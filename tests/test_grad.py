@@ -10,7 +10,7 @@ import pytest
 import tcloth
 from tcloth import grad
 
-from conftest import central_difference, check_gradients, check_step_terms, use_runtime
+from conftest import check_gradients, check_step_terms, use_runtime
 
 STEPS = 60
 # the integrators' options: converged steps, whose derivative the adjoint gives
@@ -401,5 +401,5 @@ def test_a_cloth_of_springs_alone(f64, integrator):
     loss = grad.TargetPositions(scene.positions - 0.01, steps=10)
     result = trajectory.gradient(loss, wrt=["gravity"])
     direction = np.array([0.3, -1.0, 0.2])
-    fd = central_difference(trajectory, loss, "gravity", direction, 1e-5)
+    fd = trajectory.central_difference(loss, "gravity", direction, 1e-5)
     assert abs(float(result.grad["gravity"] @ direction) - fd) <= 1e-6 * abs(fd)
