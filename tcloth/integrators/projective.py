@@ -248,10 +248,7 @@ class Projective(Integrator):
     def _residual_into(self, x: ti.template(), v: ti.template(), h: float,
                        out: ti.template()):
         for p in range(x.shape[0]):
-            out[p] = self._force_residual(x, v, p, self.f[p], h)
-            if ti.static(self.has_hold):
-                f_hold, _ = self.hold.pull(p, x)
-                out[p] += f_hold
+            out[p], _ = self._contact_residual(x, v, p, h)
 
     # -- the matrix ------------------------------------------------------------------------
     def _build_matrix(self, model, h):
@@ -341,6 +338,20 @@ class Projective(Integrator):
                 g += self.colliders.plane_force(p, x, v)
         return g
 
+    @ti.func
+    def _contact_residual(self, x, v, p, h):
+        """(g_p with the mesh colliders' hold, the stiffness of p's active contacts and
+        hold on A's diagonal; 0 without colliders): the residual of the CG path."""
+        g = self._force_residual(x, v, p, self.f[p], h)
+        w = 0.0
+        if ti.static(self.has_colliders):
+            w = self.colliders.plane_weight(p, x)
+            if ti.static(self.has_hold):
+                f_hold, w_hold = self.hold.pull(p, x)
+                g += f_hold
+                w += w_hold
+        return g, w
+
     @ti.kernel
     def _friction(self, x: ti.template(), v: ti.template(), h: float):
         """Coulomb friction after the iterations (module docstring), on the velocities (the
@@ -401,13 +412,8 @@ class Projective(Integrator):
         total = ti.cast(0.0, ti.f64)
         ti.loop_config(serialize=ti.static(serial(x)))
         for p in range(x.shape[0]):
-            g = self._force_residual(x, v, p, self.f[p], h)
+            g, w = self._contact_residual(x, v, p, h)
             if ti.static(self.has_colliders):
-                w = self.colliders.plane_weight(p, x)
-                if ti.static(self.has_hold):
-                    f_hold, w_hold = self.hold.pull(p, x)
-                    g += f_hold
-                    w += w_hold
                 self._set_diagonal(p, w)
                 if ti.static(self.gridded):
                     self.mg.set_fine_diagonal(p // self.grid.nx, p % self.grid.nx, w)
