@@ -63,6 +63,13 @@ class SweptSearch(CandidateSearch):
         return max(float(excess(self.table.points, self.origin, self.anchor, x))
                    for x in (x0, x1)) <= self.margin
 
+    def confine(self, x):
+        """Move each point of x that lies beyond the margin of its searched path's box
+        onto the box's face (a projection onto a convex set: a straight move from a
+        position inside stays inside, so ``holds`` the motion from the start to it).
+        Returns how many points moved."""
+        return int(_confine(self.table.points, self.origin, self.anchor, self.margin, x))
+
 @ti.func
 def _box(x0, x1, ids: ti.template(), grow):
     """The box of the start and end positions of particles ids, grown by ``grow``."""
@@ -141,6 +148,22 @@ def excess(points: ti.template(), x0: ti.template(), anchor: ti.template(),
         out = ti.max(lo - x[p], x[p] - hi, 0.0).max()
         ti.atomic_max(most, ti.cast(out, ti.f64))
     return most
+
+
+@ti.kernel
+def _confine(points: ti.template(), x0: ti.template(), anchor: ti.template(), margin: float,
+             x: ti.template()) -> ti.i32:
+    moved = 0
+    ti.loop_config(serialize=ti.static(serial_count(points.shape[0])))
+    for i in range(points.shape[0]):
+        p = points[i]
+        lo = ti.min(x0[p], anchor[p]) - margin
+        hi = ti.max(x0[p], anchor[p]) + margin
+        inside = ti.math.clamp(x[p], lo, hi)
+        if (inside != x[p]).any():
+            x[p] = inside
+            moved += 1
+    return moved
 
 
 def search_step(swept, x0, x1, thickness, margin):
