@@ -12,7 +12,7 @@ import pytest
 import taichi as ti
 
 import tcloth
-from tcloth.contact import guard, projection, stage as stage_module
+from tcloth.contact import guard, projection, stage as stage_module, swept as swept_module
 from tcloth.contact.search import POINT_TRIANGLE
 from tcloth.viewer import contact_lines
 
@@ -131,7 +131,8 @@ def test_a_solvers_cut_move_keeps_every_pair_outside_its_slab(f64):
     wholly through each other: every candidate with a plane ends at least its delta apart
     along its normal, or as far as it was where it was closer (NumPy over the rows);
     the cut cloths neither cross nor swap, and only vertices were cut, none moved
-    further."""
+    further. ``SweptSearch.confine`` (the same search's trial kept inside its boxes) is
+    NumPy's clip onto the boxes, after which the list holds the move."""
     sim, scene, x, v, cloths = flight((0.05, 0.1))
     s_in, s_out = sim._states
     x_free = x + v / 60.0
@@ -153,6 +154,19 @@ def test_a_solvers_cut_move_keeps_every_pair_outside_its_slab(f64):
     np.testing.assert_allclose(x1, x + t[:, None] * (x_free - x), atol=1e-15)
     sides = (side(x, centre(cloths[0]), cloths[1]), side(x, centre(cloths[1]), cloths[0]))
     assert count_crossings(x1, scene.triangles) == 0 and order_kept(x1, cloths, sides)
+    # a trial beyond the searched boxes is moved onto them (NumPy's clip), and then held
+    swept = sim.model.contact.swept
+    assert cl is swept.candidates
+    far = x_free + np.random.default_rng(3).normal(0.0, 0.02, x.shape)
+    s_out.x.from_numpy(far)
+    assert not swept.holds(s_in.x, s_out.x)
+    moved = swept.confine(s_out.x)
+    grow = swept_module.INSIDE * swept.margin
+    lo, hi = np.minimum(x, x_free) - grow, np.maximum(x, x_free) + grow
+    inside = np.clip(far, lo, hi)
+    np.testing.assert_allclose(s_out.x.to_numpy(), inside, atol=1e-15)
+    assert moved == int(np.any(inside != far, axis=1).sum()) > 0
+    assert swept.holds(s_in.x, s_out.x)
 
 
 @pytest.mark.parametrize("jacobi", [False, True])

@@ -35,6 +35,7 @@ import time
 import numpy as np
 
 import tcloth
+from benchcsv import integrator_spec
 from crossings import count_crossings, triangle_edges
 from tcloth.app.script import load_script
 
@@ -275,7 +276,9 @@ def run_case(name, integrator, dt, seconds=None, chunk=1, build=None, options=No
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", default=",".join(CASES))
-    ap.add_argument("--integrators", default="backward_euler,projective," + ",".join(EXPLICIT))
+    ap.add_argument("--integrators", default="backward_euler,projective," + ",".join(EXPLICIT),
+                    help="NAME or NAME:OPTION=VALUE (backward_euler:keep_apart=False), "
+                         "comma-separated")
     ap.add_argument("--dts", default="1/60,1/240", help="implicit integrators' steps")
     ap.add_argument("--seconds", type=float, default=None, help="shorter runs than CASES'")
     ap.add_argument("--precision", default="f32")
@@ -284,14 +287,16 @@ def main(argv=None):
     args = ap.parse_args(argv)
     tcloth.init(arch="cpu", precision=args.precision)
     for name in args.cases.split(","):
-        for integrator in args.integrators.split(","):
+        for spec in args.integrators.split(","):
+            integrator, options, solver = integrator_spec(spec)
             dts = [None] if integrator in EXPLICIT else [eval(d, {}) for d in args.dts.split(",")]
             for dt in dts:
                 chunk = args.explicit_chunk if dt is None and name != "twist" else 1
-                result = run_case(name, integrator, dt, args.seconds, chunk=chunk)
+                result = run_case(name, integrator, dt, args.seconds, chunk=chunk,
+                                  options=options)
                 label = "own" if dt is None else f"{dt:.4g}"
                 for key, value in result.items():
-                    print(f"contact.{name}.{integrator}.{label}.{key}: {value}")
+                    print(f"contact.{name}.{solver}.{label}.{key}: {value}")
                 sys.stdout.flush()
 
 

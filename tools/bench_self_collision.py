@@ -36,7 +36,6 @@ Usage: python tools/bench_self_collision.py [--sizes 64,128,256,512] [--steps 60
                                             [--state tools/data/fold_40x40.npz]
 """
 import argparse
-import ast
 import os
 import time
 
@@ -44,7 +43,7 @@ import numpy as np
 
 import tcloth
 from tcloth.app.script import load_script
-from benchcsv import write_csv
+from benchcsv import integrator_spec, write_csv
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 # a particle's springs' k_d in scenes/fold.py: 4 structural, 4 shear, 4 flexion
@@ -197,13 +196,7 @@ def main():
     x40, v40 = folded_state(module, args.state)
     if args.implicit:
         for spec in args.implicit.split(","):
-            # NAME or NAME:OPTION=VALUE (e.g. vbd:bounds=True), VALUE a Python literal
-            integrator, _, option = spec.partition(":")
-            options = {}
-            if option:
-                key, value = option.split("=")
-                options[key] = ast.literal_eval(value)
-            label = integrator + (f".{option}" if option else "")
+            integrator, options, label = integrator_spec(spec)
             for n in (int(s) for s in args.sizes.split(",")):
                 result = one_second(module, x40, v40, n, integrator, eval(args.dt, {}),
                                     args.seconds, options)

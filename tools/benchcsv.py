@@ -1,7 +1,19 @@
-"""CSV output shared by the benchmark tools (run as ``python tools/<tool>.py``, which puts
-this folder on the import path)."""
+"""CSV output and the solver specs shared by the benchmark tools (run as ``python
+tools/<tool>.py``, which puts this folder on the import path)."""
+import ast
 import csv
 import os
+
+
+def integrator_spec(spec):
+    """(integrator, its options, a label) of NAME or NAME:OPTION=VALUE (VALUE a Python
+    literal), e.g. ``vbd:bounds=True``."""
+    integrator, _, option = spec.partition(":")
+    options = {}
+    if option:
+        key, value = option.split("=")
+        options[key] = ast.literal_eval(value)
+    return integrator, options, integrator + (f".{option}" if option else "")
 
 
 def write_csv(path, rows):

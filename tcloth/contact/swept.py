@@ -31,6 +31,7 @@ from .candidates import ContactList
 from .hashgrid import BoxGrid
 from .search import CandidateSearch
 
+INSIDE = 0.999      # ``confine`` keeps points this fraction of the margin from the boxes
 
 def _box_grids(table, capacity):
     """The grids of the points' and the edges' swept boxes, ``capacity`` entries each."""
@@ -65,10 +66,12 @@ class SweptSearch(CandidateSearch):
 
     def confine(self, x):
         """Move each point of x that lies beyond the margin of its searched path's box
-        onto the box's face (a projection onto a convex set: a straight move from a
-        position inside stays inside, so ``holds`` the motion from the start to it).
-        Returns how many points moved."""
-        return int(_confine(self.table.points, self.origin, self.anchor, self.margin, x))
+        onto the face of that box grown by INSIDE times the margin (a projection onto a
+        convex set: a straight move from a position inside stays inside; the fraction
+        keeps rounding from taking it past what ``holds``). Returns how many points
+        moved."""
+        return int(_confine(self.table.points, self.origin, self.anchor,
+                            INSIDE * self.margin, x))
 
 @ti.func
 def _box(x0, x1, ids: ti.template(), grow):
