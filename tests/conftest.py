@@ -257,8 +257,6 @@ EXTENDED = {
     "test_render::test_cli_set_passes_build_parameters_and_names_unknown_ones",
     "test_cli_honesty::test_contact_stats_start_again_at_reset[True]",
     "test_implicit::test_linear_solver_is_checked[projective]",
-    # (50 s, most of it building backward Euler's contact kernels a second time)
-    "test_contact::test_self_collision_does_not_hold_a_falling_cloth_back[backward_euler]",
     "test_batch::test_a_bad_step_inside_a_batch_is_named_and_the_state_before_it_kept",
     "test_frame_rate_honesty::test_energy_stored_in_torn_springs_is_what_the_budget_sees",
     "test_mesh_collider::test_distance_normal_and_surface_velocity_match_a_brute_force[True]",

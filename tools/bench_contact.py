@@ -277,7 +277,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", default=",".join(CASES))
     ap.add_argument("--integrators", default="backward_euler,projective," + ",".join(EXPLICIT),
-                    help="NAME or NAME:OPTION=VALUE (backward_euler:keep_apart=False), "
+                    help="NAME or NAME:OPTION=VALUE (projective:anderson=5), "
                          "comma-separated")
     ap.add_argument("--dts", default="1/60,1/240", help="implicit integrators' steps")
     ap.add_argument("--seconds", type=float, default=None, help="shorter runs than CASES'")

@@ -201,12 +201,10 @@ def violations(cl: ti.template(), pl: ti.template(), count: ti.i32,
 
 
 @ti.func
-def slab(ids, kind, n, delta, x0, x1):
-    """(whether the candidate's two sides are apart along n at x0, the plane the second
-    side stays below, the one the first side stays above, the size of the first side):
-    a slab normal to n, delta thick (no thicker than the sides' distance along n at x0),
-    between the sides' extents at x0 and placed by how fast each side approaches the
-    other from x0 to x1. Sides kept outside it stay delta apart (the guard's planes)."""
+def dividing_plane(ids, kind, n, x0, x1):
+    """(whether a plane normal to n divides the candidate's two sides at x0, its offset,
+    the size of the first side): between the sides' extents along n at x0, placed by how
+    fast each side approaches the other from x0 to x1."""
     first = 1 if kind == POINT_TRIANGLE else 2
     low_a, high_b = 1e30, -1e30
     a_speed, b_speed = 0.0, 0.0
@@ -218,20 +216,13 @@ def slab(ids, kind, n, delta, x0, x1):
         else:
             high_b = ti.max(high_b, along)
             b_speed = ti.max(b_speed, n.dot(x1[ids[k]] - x0[ids[k]]))
-    share = 0.5
-    if a_speed + b_speed > 0.0:
-        share = ti.math.clamp(b_speed / (a_speed + b_speed), 0.05, 0.95)
-    apart = low_a - high_b
-    keep = ti.math.clamp(delta, 0.0, apart)
-    below = high_b + share * (apart - keep)
-    return apart > LEAST_GAP, below, below + keep, first
-
-
-@ti.func
-def dividing_plane(ids, kind, n, x0, x1):
-    """(whether a plane normal to n divides the candidate's two sides at x0, its offset,
-    the size of the first side): the ``slab`` of no thickness."""
-    divided, plane, _, first = slab(ids, kind, n, 0.0, x0, x1)
+    divided = low_a - high_b > LEAST_GAP
+    plane = 0.0
+    if divided:
+        share = 0.5
+        if a_speed + b_speed > 0.0:
+            share = ti.math.clamp(b_speed / (a_speed + b_speed), 0.05, 0.95)
+        plane = high_b + share * (low_a - high_b)
     return divided, plane, first
 
 
@@ -248,55 +239,6 @@ def stop_fraction(x0, x1, n, plane, side, p):
     return t
 
 
-@ti.func
-def _stops(cl, pl, count, x0, x1, inv_mass, t_out, thick: ti.template()):
-    """Into t_out, each particle's fraction of its path x0 -> x1 that keeps it on its
-    side of the dividing plane (at x0, along the row's normal) of every candidate with a
-    normal (``stop_fraction``), or where ``thick``, outside its ``slab`` (the row's
-    delta); 1 where none comes near."""
-    ti.loop_config(serialize=ti.static(serial(x1)))
-    for p in range(x1.shape[0]):
-        t_out[p] = 1.0
-    ti.loop_config(serialize=ti.static(serial(cl.ids)))
-    for c in range(count):
-        ids, kind = cl.ids[c], cl.kind[c]
-        if pl.delta[c] != 0.0:
-            n = pl.n[c]
-            divided, below, above, first = slab(
-                ids, kind, n, pl.delta[c] * ti.static(1.0 if thick else 0.0), x0, x1)
-            if divided:
-                for k in ti.static(range(4)):
-                    if inv_mass[ids[k]] > 0.0:
-                        ti.atomic_min(t_out[ids[k]], stop_fraction(
-                            x0, x1, n, above if k < first else below,
-                            1.0 if k < first else -1.0, ids[k]))
-
-
-@ti.func
-def _cut_paths(x0, x1, t_out):
-    """x1 moved back along each path to its fraction t_out; how many moved."""
-    moved = 0
-    ti.loop_config(serialize=ti.static(serial(x1)))
-    for p in range(x1.shape[0]):
-        if t_out[p] < 1.0:
-            x1[p] = x0[p] + t_out[p] * (x1[p] - x0[p])
-            moved += 1
-    return moved
-
-
-@ti.kernel
-def cut(cl: ti.template(), pl: ti.template(), count: ti.i32, x0: ti.template(),
-        x1: ti.template(), inv_mass: ti.template(), t_out: ti.template()) -> ti.i32:
-    """A solver's move from its iterate x0 to x1 cut as the fail-safe cuts a step
-    (``truncate``, without velocities or log), but outside each candidate's ``slab``
-    at x0 (its plane's normal and delta, ``planes``, from the step's start) instead of
-    its dividing plane: a pair delta apart along its normal at x0 (or as far as it was)
-    is so at x1, and no pair crosses on the straight paths between. Returns how many
-    vertices were cut."""
-    _stops(cl, pl, count, x0, x1, inv_mass, t_out, True)
-    return _cut_paths(x0, x1, t_out)
-
-
 @ti.kernel
 def truncate(cl: ti.template(), pl: ti.template(), count: ti.i32, x0: ti.template(),
              x1: ti.template(), v1: ti.template(), inv_mass: ti.template(),
@@ -305,10 +247,21 @@ def truncate(cl: ti.template(), pl: ti.template(), count: ti.i32, x0: ti.templat
     plane of every candidate with a normal (``planes``); where ``log`` (a
     ``TruncationLog``) is on, each cut vertex's plane kept. Returns how many vertices
     were cut short."""
-    _stops(cl, pl, count, x0, x1, inv_mass, t_out, False)
     ti.loop_config(serialize=ti.static(serial(x1)))
     for p in range(x1.shape[0]):
+        t_out[p] = 1.0
         log.claimed[p] = 0
+    ti.loop_config(serialize=ti.static(serial(cl.ids)))
+    for c in range(count):
+        ids, kind = cl.ids[c], cl.kind[c]
+        if pl.delta[c] != 0.0:
+            n = pl.n[c]
+            divided, plane, first = dividing_plane(ids, kind, n, x0, x1)
+            if divided:
+                for k in ti.static(range(4)):
+                    if inv_mass[ids[k]] > 0.0:
+                        ti.atomic_min(t_out[ids[k]], stop_fraction(
+                            x0, x1, n, plane, 1.0 if k < first else -1.0, ids[k]))
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):      # which plane stopped each vertex (the gradient's)
         ids, kind = cl.ids[c], cl.kind[c]
@@ -324,11 +277,15 @@ def truncate(cl: ti.template(), pl: ti.template(), count: ti.i32, x0: ti.templat
                         # for a vertex above it, whichever comes first)
                         if ti.atomic_add(log.claimed[ids[k]], 1) == 0:
                             log.keep(ids[k], ids, kind, k)
+    cut = 0
     ti.loop_config(serialize=ti.static(serial(x1)))
     for p in range(x1.shape[0]):
         if t_out[p] < 1.0:
+            moved = x0[p] + t_out[p] * (x1[p] - x0[p])
             v1[p] *= t_out[p]
-    return _cut_paths(x0, x1, t_out)
+            x1[p] = moved
+            cut += 1
+    return cut
 
 
 class _CutLog:

@@ -46,9 +46,6 @@ SWEEPS = 20          # sweeps of the pairs' projection a round (projection.proje
 ROUNDS = 4           # rounds of the projection and the colliders' sweep before the fail-safe
 MARGIN = 0.5         # the swept boxes' margin for the guard's moves, in thicknesses
 SOLVE_MARGIN = 2.0   # the swept boxes' margin for a solve's iterates, in thicknesses
-# a solve searches again from its iterate where its last move left the boxes for at least
-# this share of the points (Offset Geometric Contact's rule, Chen et al. 2025)
-CONFINED_SHARE = 0.01
 OBSTACLE_MARGIN = 0.25  # the obstacle pairs' boxes' margin, in thicknesses
 FAR = 1e30           # m: a reach that keeps every candidate of the proximity list
 STATS = {
@@ -74,8 +71,6 @@ STATS = {
     "solve_searches": ("candidate searches for solvers' iterations (one at a step's start "
                        "where the proximity list does not cover its predicted motion, and "
                        "again where an iterate left what was searched)"),
-    "confined": ("points of backward Euler's trial iterates moved back into the boxes its "
-                 "solve's list was searched for, so far (ContactStage.confine_solve)"),
     "seconds": ("wall time spent in the stage so far (outside batch kernels, which run "
                 "the colliders' sweep inside)"),
 }
@@ -181,24 +176,6 @@ class ContactStage:
         held = (self.broad.covers(x0, x) if cl is self.broad.candidates
                 else self.swept.holds(x0, x))
         return (cl, self.planes_of(cl), count) if held else self.begin_solve(x0, x)
-
-    def confine_solve(self, x0, x):
-        """(list, its planes, rows, whether to search again) for a solver's trial
-        iterate x, kept where the solve's list holds the motion x0 -> x: a swept list's
-        points moved into their searched boxes (``SweptSearch.confine``); the proximity
-        list, which holds while particles move little relative to each other, searched
-        again instead where it no longer covers (``follow_solve``). Where at least
-        CONFINED_SHARE of the points were moved, a solver that accepts the iterate calls
-        ``begin_solve`` from it before its next trial (the boxes then hold its
-        neighbourhood); fewer stay capped by the boxes this step."""
-        cl, count = self.solve_list
-        if cl is self.broad.candidates:
-            return self.follow_solve(x0, x) + (False,)
-        moved = self.swept.confine(x)
-        if moved:
-            self.stats["confined"] += moved
-        return (cl, self.planes_of(cl), count,
-                moved >= CONFINED_SHARE * self.table.point_count)
 
     def planes_of(self, cl):
         """The guard's columns (``guard.Planes``) beside list cl, the proximity list or

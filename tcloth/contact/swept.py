@@ -31,7 +31,6 @@ from .candidates import ContactList
 from .hashgrid import BoxGrid
 from .search import CandidateSearch
 
-INSIDE = 0.999      # ``confine`` keeps points this fraction of the margin from the boxes
 
 def _box_grids(table, capacity):
     """The grids of the points' and the edges' swept boxes, ``capacity`` entries each."""
@@ -63,15 +62,6 @@ class SweptSearch(CandidateSearch):
         path between the ends stays within it too."""
         return max(float(excess(self.table.points, self.origin, self.anchor, x))
                    for x in (x0, x1)) <= self.margin
-
-    def confine(self, x):
-        """Move each point of x that lies beyond the margin of its searched path's box
-        onto the face of that box grown by INSIDE times the margin (a projection onto a
-        convex set: a straight move from a position inside stays inside; the fraction
-        keeps rounding from taking it past what ``holds``). Returns how many points
-        moved."""
-        return int(_confine(self.table.points, self.origin, self.anchor,
-                            INSIDE * self.margin, x))
 
 @ti.func
 def _box(x0, x1, ids: ti.template(), grow):
@@ -151,22 +141,6 @@ def excess(points: ti.template(), x0: ti.template(), anchor: ti.template(),
         out = ti.max(lo - x[p], x[p] - hi, 0.0).max()
         ti.atomic_max(most, ti.cast(out, ti.f64))
     return most
-
-
-@ti.kernel
-def _confine(points: ti.template(), x0: ti.template(), anchor: ti.template(), margin: float,
-             x: ti.template()) -> ti.i32:
-    moved = 0
-    ti.loop_config(serialize=ti.static(serial_count(points.shape[0])))
-    for i in range(points.shape[0]):
-        p = points[i]
-        lo = ti.min(x0[p], anchor[p]) - margin
-        hi = ti.max(x0[p], anchor[p]) + margin
-        inside = ti.math.clamp(x[p], lo, hi)
-        if (inside != x[p]).any():
-            x[p] = inside
-            moved += 1
-    return moved
 
 
 def search_step(swept, x0, x1, thickness, margin):

@@ -30,7 +30,6 @@ import taichi as ti
 
 from .. import runtime
 from ..errors import ConvergenceWarning, SceneError
-from ..contact import guard
 from ..runtime import serial
 from . import hessian, linalg
 from .base import Integrator
@@ -68,19 +67,14 @@ class BackwardEuler(Integrator):
         single cloth grid) or "cg" (block Jacobi). "auto" takes the multigrid for a
         single cloth grid and block Jacobi otherwise (measurements in docs/implicit.md);
         with self-collision block Jacobi, whose CG takes the contacts' couplings.
-    keep_apart (True): with self-collision, the start iterate and every trial of the line
-        search's direction are cut at the contact pairs' slabs (``guard.cut``, planar
-        Divide-and-Truncate: a vertex stops short of its pair's plane), so no iterate
-        takes cloth through cloth and the stage's guard after the step has nothing to do;
-        the search then runs along the cut move. False leaves crossings to the guard.
 
     After each step ``stats`` holds newton_iterations, cg_iterations (total), residual
     (the last CG relative residual), converged, fallbacks (iterations whose Newton
     direction lowered E by no step, replaced by the preconditioned gradient) and potential
     (E at the start and after each accepted iterate: it never rises by more than its
-    rounding error), cuts (the moves ``keep_apart`` cut, the start iterate's included), and
-    hold (None, or the iterations and E of a second Newton solve where the step ended
-    below a mesh collider's planes, with them as a penalty in E: ``contact/hold.py``). A step that reaches the cap unconverged keeps the iterate with the
+    rounding error), and hold (None, or the iterations and E of a second Newton solve
+    where the step ended below a mesh collider's planes, with them as a penalty in E:
+    ``contact/hold.py``). A step that reaches the cap unconverged keeps the iterate with the
     lowest E found, adds one to ``unconverged`` and, the first time, warns
     (``tcloth.ConvergenceWarning``): it is not the backward Euler step, and may gain
     energy. With ``newton_iterations=1`` (Baraff & Witkin's single solve) nothing is
@@ -89,7 +83,7 @@ class BackwardEuler(Integrator):
     name = "backward_euler"
     defaults = {"newton_iterations": 20, "newton_tol": 1e-4, "cg_tol": 1e-2,
                 "cg_max_iterations": 500, "line_search": True, "linear_solver": "auto",
-                "exact_hessian": None, "keep_apart": True}
+                "exact_hessian": None}
     live_options = frozenset({"newton_iterations", "newton_tol", "cg_tol", "cg_max_iterations"})
 
     def __init__(self, model, **options):
@@ -114,12 +108,6 @@ class BackwardEuler(Integrator):
         self.x_try = ti.Vector.field(3, model.mass.dtype, shape=model.particle_count)
         # mesh colliders: the stage's planes as a penalty after the solve (``hold.py``)
         self.stage = model.contact if self.potential.hold is not None else None
-        # self-collision inside the solve: the pairs' planes cut every iterate
-        self.contact = (model.contact if model.self_collision is not None
-                        and self.options["keep_apart"] else None)
-        self.stops = (ti.field(model.mass.dtype, shape=model.particle_count)
-                      if self.contact is not None else None)
-        self.planes, self.cuts = None, 0
         self.stats = {}
         self.unconverged = 0
         self._eps = float(np.finfo(runtime.numpy_real()).eps)
@@ -129,10 +117,7 @@ class BackwardEuler(Integrator):
         opt = self.options
         x, e = state_out.x, self.potential
         e.begin(state_in.x, state_in.v, h, state_in.t, x)
-        self._fallbacks, self.cuts, self._confined = 0, 0, False
-        if self.contact is not None:
-            self.planes = self.contact.begin_solve(state_in.x, x)
-            self.cuts = int(guard.cut(*self.planes, e.x0, x, e.inv_mass, self.stops) > 0)
+        self._fallbacks = 0
         # a full Newton step below this is converged: newton_tol of the velocities, or
         # the positions' own rounding (in float32 at dt = 1e-4 that is 6e-4 m/s)
         tol = max(opt["newton_tol"] * h * (1.0 + linalg.max_norm(state_in.v)),
@@ -149,7 +134,7 @@ class BackwardEuler(Integrator):
         _velocities(e.x0, x, 1.0 / h, state_out.v)
         state_out.t = t1
         self.stats = {"newton_iterations": it, "cg_iterations": cg_total, "residual": residual,
-                      "converged": converged, "fallbacks": self._fallbacks, "cuts": self.cuts,
+                      "converged": converged, "fallbacks": self._fallbacks,
                       "potential": energies,
                       "hold": None if held is None else {"newton_iterations": held[0],
                                                          "potential": held[4]}}
@@ -214,33 +199,19 @@ class BackwardEuler(Integrator):
         the decrease is below it, and the test would compare rounding). Returns (alpha, E
         at x + alpha dx), with ``potential.grad`` the gradient there; (0, E) when no
         alpha >= MIN_STEP lowers E: E never rises across an accepted iterate by more
-        than its rounding error. With ``keep_apart`` the full step is first kept where
-        the solve's contact list holds it (``ContactStage.confine_solve``) and cut at the
-        pairs' slabs, and dx becomes that move: every point of it keeps the pairs apart
-        (each vertex stays in a box and in half-spaces), so the search stays on it. After
-        a confined move the next search finds the candidates around the new iterate."""
-        dx, e = self.hessian.dx, self.potential
-        if self.planes is not None:
-            if self._confined:      # the last move left the boxes: search around x
-                self.planes = self.contact.begin_solve(e.x0, x)
-            linalg.axpy_into(self.x_try, x, 1.0, dx)
-            cl, pl, count, self._confined = self.contact.confine_solve(e.x0, self.x_try)
-            self.planes = (cl, pl, count)
-            cut = guard.cut(cl, pl, count, x, self.x_try, e.inv_mass, self.stops)
-            self.cuts += cut > 0
-            linalg.axpy_into(dx, self.x_try, -1.0, x)
+        than its rounding error."""
+        dx = self.hessian.dx
         # an ascent direction (a rounding-level slope at convergence) may still take a
         # step that changes E by rounding only, never more
-        slope = min(linalg.dot(e.grad, dx), 0.0)
+        slope = min(linalg.dot(self.potential.grad, dx), 0.0)
         alpha = 1.0
         while alpha >= MIN_STEP:
             linalg.axpy_into(self.x_try, x, alpha, dx)
-            trial, rounding = e.evaluate(self.x_try, h, t, True)
+            trial, rounding = self.potential.evaluate(self.x_try, h, t, True)
             if trial <= energy + 1e-4 * alpha * slope + rounding:
                 return alpha, trial
             alpha *= 0.5
         return 0.0, energy
-
     def hessian_product(self, x, p, h, t=0.0):
         """H p at positions x (fields) within the step begun last; for tests and tools.
         Returns (N,3) NumPy."""
