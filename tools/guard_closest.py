@@ -26,7 +26,9 @@ DT = 1.0 / 60.0
 
 
 def guard_once(res, masses, speed):
-    """The scene, the start (x, v) and the stage's end of the free-flight step (x1, v1)."""
+    """The contact stage run once on one free-flight step of two res x res grids of
+    ``masses`` closing at ``speed``: (scene, the two cloths, the start x and v, the
+    stage's end x1 and v1, the stage's statistics)."""
     scene = tcloth.Scene(gravity=(0.0, 0.0, 0.0))
     cloths = [scene.add_cloth(resolution=(res, res), size=(0.5, 0.5), center=(0.0, y, 0.0),
                               mass=m, **CLOTH)
@@ -57,6 +59,8 @@ def main(argv=None):
     masses = tuple(float(m) for m in args.masses.split(","))
     if len(masses) != 2 or min(masses) <= 0.0:
         ap.error(f"--masses must be two positive masses (got {args.masses!r})")
+    if args.res < 2:
+        ap.error(f"--res must be at least 2 (got {args.res})")
     if args.speed * DT <= GAP + THICKNESS:
         ap.error(f"--speed must take the grids through each other in one step of {DT:.4g} s "
                  f"(above {(GAP + THICKNESS) / DT:.3g} m/s; got {args.speed})")
