@@ -9,7 +9,6 @@ import sys
 
 import numpy as np
 import pytest
-import taichi as ti
 
 import tcloth
 from tcloth.contact import projection, stage as stage_module
@@ -17,8 +16,8 @@ from tcloth.viewer import contact_lines
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "tools"))
-from bench_contact import (CLOTH, centre, falling, order_kept, run_case, side,  # noqa: E402
-                           signed_distances, thrown)
+from bench_contact import (CLOTH, centre, falling, guard_step, order_kept, run_case,  # noqa: E402
+                           side, signed_distances, thrown)
 from crossings import count_crossings, crossing_pairs, triangle_edges  # noqa: E402
 
 
@@ -71,19 +70,6 @@ def flight(masses, res=12):
     sim = tcloth.Simulator(scene, "symplectic_euler", dt=1.0 / 60.0)
     sim.set_state(positions=x, velocities=v)
     return sim, scene, x, v, cloths
-
-
-def guard_step(sim, x, v, dt):
-    """The contact stage on the free-flight motion x -> x + dt v; returns (x1, v1). The
-    fields are the simulator's two states' (the stage's kernels compile once a
-    simulator, as for its own steps)."""
-    real = sim.state.x.dtype
-    s_in, s_out = sim._states
-    fields = (s_in.x, s_out.x, s_out.v)
-    for f, value in zip(fields, (x, x + dt * v, v)):
-        f.from_numpy(value.astype(np.float64 if real == ti.f64 else np.float32))
-    sim.model.contact.end_step(*fields, 0.0, dt)
-    return fields[1].to_numpy().astype(np.float64), fields[2].to_numpy().astype(np.float64)
 
 
 @pytest.mark.parametrize("jacobi", [False, True])

@@ -33,6 +33,7 @@ import sys
 import time
 
 import numpy as np
+import taichi as ti
 
 import tcloth
 from benchcsv import integrator_spec
@@ -205,6 +206,19 @@ def order_kept(x, cloths, sides):
     other in one step shows no crossing at either end, but is on the other side."""
     a, b = cloths[0], cloths[1]
     return (side(x, centre(a), b), side(x, centre(b), a)) == sides
+
+
+def guard_step(sim, x, v, dt):
+    """The contact stage on the free-flight motion x -> x + dt v; returns (x1, v1). The
+    fields are the simulator's two states' (the stage's kernels compile once a
+    simulator, as for its own steps)."""
+    real = sim.state.x.dtype
+    s_in, s_out = sim._states
+    fields = (s_in.x, s_out.x, s_out.v)
+    for f, value in zip(fields, (x, x + dt * v, v)):
+        f.from_numpy(value.astype(np.float64 if real == ti.f64 else np.float32))
+    sim.model.contact.end_step(*fields, 0.0, dt)
+    return fields[1].to_numpy().astype(np.float64), fields[2].to_numpy().astype(np.float64)
 
 
 def run_case(name, integrator, dt, seconds=None, chunk=1, build=None, options=None):

@@ -17,9 +17,8 @@ import argparse
 import numpy as np
 
 import tcloth
+from bench_contact import CLOTH, guard_step
 
-CLOTH = {"structural": (400.0, 0.05), "shear": (80.0, 0.02), "flexion": (10.0, 0.005),
-         "pinned": []}
 THICKNESS = 0.006
 GAP = 0.1
 DT = 1.0 / 60.0
@@ -40,12 +39,7 @@ def guard_once(res, masses, speed):
     for c, sign in zip(cloths, (-1.0, 1.0)):
         v[c.particles.ravel(), 1] = sign * speed / 2
     sim.set_state(positions=x, velocities=v)
-    s_in, s_out = sim._states
-    dtype = s_in.x.to_numpy().dtype
-    for field, value in ((s_in.x, x), (s_out.x, x + DT * v), (s_out.v, v)):
-        field.from_numpy(value.astype(dtype))
-    sim.model.contact.end_step(s_in.x, s_out.x, s_out.v, 0.0, DT)
-    x1, v1 = (f.to_numpy().astype(np.float64) for f in (s_out.x, s_out.v))
+    x1, v1 = guard_step(sim, x, v, DT)
     return scene, cloths, x, v, x1, v1, sim.contact_stats()
 
 
