@@ -143,6 +143,9 @@ LONG = {
 # ``extended``: .ci/run runs them after the quick set (about 12 minutes there). Each family
 # keeps its cheapest cases in the quick set.
 EXTENDED = {
+    # two runs of two 12 x 12 cloths thrown at each other, projective with and without
+    # its planes (about 2 minutes of one core)
+    "test_contact_planes::test_projective_holds_thrown_cloths_apart_inside_its_step",
     "test_implicit::test_anderson_acceleration_reaches_the_same_step_in_fewer_iterations",
     "test_grad::test_checkpoints_change_the_memory_not_the_gradient",
     "test_grad::test_projective_steps_left_unconverged_are_named_and_warned_of",

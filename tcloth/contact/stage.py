@@ -106,6 +106,7 @@ class ContactStage:
             self.work = (ti.field(ti.i32, shape=n), ti.Vector.field(3, real, shape=n))
             self.log = projection.Log(1)        # its full size once ``record`` is on
             self.truncation_log = guard.TruncationLog(1, n)
+            self.solve_cuts = guard.TruncationLog(1, n)     # a solve's (never kept)
         # the solver's end of the step, kept by ``end_step`` while ``record`` is on, and
         # the cuts of its first collider sweep
         self.solved, self.recording = None, False
@@ -122,6 +123,7 @@ class ContactStage:
         self.stats = {key: 0 for key in STATS}
         self.stats["seconds"] = 0.0
         self.solve_list = None      # the list a solve reads (``begin_solve``), or None
+        self.solve_start = None     # and the step's start it was searched from
         self._planes = {}           # the guard's ``Planes`` beside each list, by its owner
         self.obstacle = None
         if self.colliders is not None and self.colliders.meshes is not None:
@@ -166,7 +168,7 @@ class ContactStage:
             count = search_step(self.swept, x0, x_pred, self.thickness, margin)
             cl = self.swept.candidates
         guard.planes(cl, self.planes_of(cl), count, x0, x_pred, self.thickness, FAR)
-        self.solve_list = (cl, count)
+        self.solve_list, self.solve_start = (cl, count), x0
         return cl, self.planes_of(cl), count
 
     def follow_solve(self, x0, x):
@@ -176,6 +178,15 @@ class ContactStage:
         held = (self.broad.covers(x0, x) if cl is self.broad.candidates
                 else self.swept.holds(x0, x))
         return (cl, self.planes_of(cl), count) if held else self.begin_solve(x0, x)
+
+    def truncate_solve(self, x_from, x, v):
+        """A solve's move from its iterate x_from to x cut short where it would take a
+        vertex across the dividing plane of a pair of ``follow_solve``'s candidates for
+        x (``guard.truncate``, the fail-safe's cut: x = x_from + t (x - x_from), v scaled
+        by t). Returns how many vertices were cut."""
+        cl, pl, count = self.follow_solve(self.solve_start, x)
+        return int(guard.truncate(cl, pl, count, x_from, x, v, self.inv_mass, self.cut,
+                                  self.solve_cuts))
 
     def planes_of(self, cl):
         """The guard's columns (``guard.Planes``) beside list cl, the proximity list or

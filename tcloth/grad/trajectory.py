@@ -120,6 +120,8 @@ class Trajectory(StepAdjoints):
         why = unsupported(scene)
         if why is not None:
             raise SceneError(f"tcloth.grad: {why}")
+        if self.projective and options.setdefault("planes", False):
+            raise SceneError("tcloth.grad: projective's planes have no adjoint (got planes=True)")
         self.sim = Simulator(scene, integrator=integrator, dt=dt, **options)
         self.scene = scene
         self.adjoint = StepAdjoint(self.sim.model, self.implicit, self.projective)

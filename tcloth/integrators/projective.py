@@ -63,6 +63,7 @@ from ..terms.springs import grid_spring_sum, owned_grid_springs
 from . import linalg
 from .anderson import Anderson, check_depth
 from .base import Integrator
+from .contact_planes import PlaneConstraints
 from .multigrid import GridMultigrid, MultigridPCG, single_grid
 
 
@@ -79,13 +80,22 @@ class Projective(Integrator):
     anderson (0): the history of Anderson acceleration (``anderson.py``), 0 for Liu's
         plain iterations; with 5, a hundred iterations of a drape at one step per frame
         left a tenth of the plain ones' residual, in the same time (docs/realtime.md).
+    planes (True): with self-collision, the contact stage's separating planes as one-sided
+        constraints of the step (``contact_planes.py``: their forces in the residual,
+        their stiffness in the global matrix), so that the iterate arrives without
+        crossings; False leaves the contact work to the contact law's projection and to
+        the guard after the step (which tore cloths thrown at each other at 10 m/s, a
+        twisted cloth and the pile: ``docs/contact.md``).
     After each step ``stats`` holds iterations, cg_iterations (total, 0 with multigrid),
     residual: |g| at the last iteration relative to |g| at the first (how far the
-    iterations got), and anderson_restarts (the acceleration's history dropped).
+    iterations got), anderson_restarts (the acceleration's history dropped),
+    plane_pairs (the most vertex pairs the planes held at an iterate) and plane_cuts (the
+    vertices whose first iterate was cut short at the planes).
     """
     name = "projective"
     defaults = {"iterations": 10, "linear_solver": "auto", "cg_tol": 1e-3,
-                "cg_max_iterations": 200, "anderson": 0}
+                "cg_max_iterations": 200, "anderson": 0,
+                "planes": True}
     live_options = frozenset({"iterations", "cg_tol", "cg_max_iterations"})
 
     def __init__(self, model, **options):
@@ -108,10 +118,14 @@ class Projective(Integrator):
         self.stage = model.contact
         self.hold = self.stage.hold if self.stage is not None else None
         self.has_hold = self.hold is not None
-        # one V-cycle an iteration on a grid without colliders; else CG, preconditioned by
-        # the V-cycle on a grid (the colliders' diagonal changes at every iterate)
+        self.planes = (PlaneConstraints(n) if self.options["planes"]
+                       and model.self_collision is not None else None)
+        self.has_planes = self.planes is not None
+        # one V-cycle an iteration on a grid without colliders or planes; else CG,
+        # preconditioned by the V-cycle on a grid (the colliders' diagonal and the planes'
+        # couplings change at every iterate)
         self.gridded = self.grid is not None
-        self.vcycles = self.gridded and not self.has_colliders
+        self.vcycles = self.gridded and not (self.has_colliders or self.has_planes)
         self.stepped = ()
         if self.grid is not None:
             self.mg = GridMultigrid(self.grid.nx, self.grid.ny,
@@ -127,21 +141,22 @@ class Projective(Integrator):
             springs = self.residual_forces.springs or term_modules.Springs(model)
             self.adj_start, self.adj = springs.adjacency()
             self.weight = ti.field(real, shape=self.adj.shape[0])
-            self.diag, self.precond, self.base_diag, self.row_rest = (
-                ti.field(real, shape=n) for _ in range(4))
+            self.diag, self.precond, self.base_diag, self.row_rest, self.bound = (
+                ti.field(real, shape=n) for _ in range(5))
             # terms with a constant matrix (bending's Hessian, the membrane's bound)
             # enter A whole: their diagonal here, their couplings in CG's products
             self.constant = tuple(t.constant_matrix() for t in self.residual_forces.terms
                                   if t.has("constant_matrix"))
             # the pressure's stand-in changes with the step's start (``varies``: ``update``)
             self.stepped = tuple(m for m in self.constant if m.varies)
+            couplings = self.constant + ((self.planes,) if self.has_planes else ())
             if self.grid is not None:
                 self.solver = MultigridPCG(self.mg, n, self.diag, self.weight,
                                            self.adj_start, self.adj, model.inv_mass,
-                                           self.constant)
+                                           couplings)
             else:
                 self.solver = linalg.PCG(n, self.diag, self.weight, self.adj_start, self.adj,
-                                         self.precond, model.inv_mass, self.constant)
+                                         self.precond, model.inv_mass, couplings)
         self.anderson = Anderson(n, depth) if depth else None
         self.stats = {}
         self._h = None
@@ -169,6 +184,9 @@ class Projective(Integrator):
             self.field_forces.compute(state_in.x, state_in.v, state_in.t, self.f)
         self._begin(state_in.x, state_in.v, h, x, v)
         cg_total, first, last = 0, None, None
+        self._plane_pairs, self._plane_cuts = 0, 0
+        if self.has_planes:
+            self._begin_planes(state_in.x, x, v, h)
         aa = self.anderson
         if aa is not None:
             aa.start()
@@ -182,6 +200,8 @@ class Projective(Integrator):
                     last = self._grid_iteration(x, v, h)
                 else:
                     self.residual_forces.compute(x, v, t1, self.f)
+                    if self.has_planes:
+                        self._hold_planes(state_in.x, x)
                     last = self._residual(x, v, h)
                     if last > 0.0:
                         iters, _ = self.solver.solve(self.options["cg_tol"],
@@ -203,7 +223,36 @@ class Projective(Integrator):
         self.stats = {"iterations": self.options["iterations"], "cg_iterations": cg_total,
                       "residual": float(np.sqrt(last / first)) if first else 0.0,
                       "hold_iterations": held,
-                      "anderson_restarts": aa.restarts if aa is not None else 0}
+                      "anderson_restarts": aa.restarts if aa is not None else 0,
+                      "plane_pairs": self._plane_pairs, "plane_cuts": self._plane_cuts}
+
+    def _begin_planes(self, x0, x, v, h):
+        """The planes of the step (the stage's candidates of the motion from x0 to the
+        first iterate x, ``ContactStage.begin_solve``), and that iterate, x0 + h v0,
+        cut short at their dividing planes (``ContactStage.truncate_solve``): two
+        cloths thrown at each other at 10 m/s pass wholly through each other in it,
+        every vertex pair of their candidates was active, and the first global solve,
+        holding each at its plane, threw them 0.29 m apart."""
+        self.stage.begin_solve(x0, x)
+        self._plane_cuts = self.stage.truncate_solve(x0, x, v)
+        if self._plane_cuts:
+            self._velocities(x, v, h)
+
+    def _hold_planes(self, x0, x):
+        """The planes' active vertex pairs at the iterate x and their forces into f
+        (``contact_planes.py``), from the stage's candidates of the step's motion,
+        searched again where an iterate leaves them (``ContactStage.follow_solve``)."""
+        contacts = self.stage.follow_solve(x0, x)
+        found = self.planes.gather(contacts, x, self.inv_mass, self.bound)
+        self._plane_pairs = max(self._plane_pairs, found)
+        self.planes.add_forces(x, self.f)
+
+    @ti.kernel
+    def _velocities(self, x: ti.template(), v: ti.template(), h: float):
+        """v = (x - x0) / h, after the first iterate was cut short."""
+        ti.loop_config(serialize=ti.static(serial(x)))
+        for p in range(x.shape[0]):
+            v[p] = (x[p] - self.x0[p]) / h
 
     def _hold(self, state_in, x, v, h, t1):
         """Where the solve's motion ends below a mesh collider's half-spaces
@@ -300,6 +349,7 @@ class Projective(Integrator):
                 s = self.adj[k][0]
                 self.weight[k] = self.ks[s] + self.kd[s] / h
                 self.row_rest[p] += self.weight[k]
+            self.bound[p] = self.base_diag[p] + self.row_rest[p]
             self._set_diagonal(p, 0.0)
 
     @ti.func
