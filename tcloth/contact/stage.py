@@ -13,10 +13,12 @@ colliders, and updated only at named points, all called by the ``Simulator``:
     fail-safe. Afterwards the proximity list covers x1 (rebuilt at x1 if not, with
     the default skin).
   - ``begin_solve(x0, x_pred)`` and ``follow_solve(x0, x)``: called by a solver (XPBD,
-    VBD) at a step's start and after each iteration: the candidates its iterations keep
-    on their separating planes, searched once for the predicted motion and again only
-    where an iterate leaves what was searched (``stats["solve_searches"]``); the guard
-    takes them at the step's end where they still hold its motion.
+    VBD, projective) at a step's start and after each iteration: the candidates its
+    iterations keep on their separating planes, searched once for the predicted motion
+    and again only where an iterate leaves what was searched
+    (``stats["solve_searches"]``); the guard takes them at the step's end where they
+    still hold its motion. ``truncate_solve(x_from, x, v)``: an iterate's move cut short
+    at those pairs' dividing planes (projective dynamics' first iterate).
   - ``detect_bounds(bounds, x)``: called by a solver with displacement bounds (VBD's
     ``bounds=True``) at a step's start and after an iteration that clamped a move: the
     bounds from the proximity list, which it builds again at x where it has grown stale
