@@ -51,9 +51,8 @@ REACH = 1.1
 class PlaneConstraints:
     """The active vertex pairs of a projective step's planes at its current iterate
     (``gather``), their forces (``add_forces``) and their part of the global matrix
-    (``add_product``, a coupling of ``linalg.PCG``, called at every CG iteration: its
-    kernels read their fields from ``self.rows``, not as arguments, which cost Python
-    time at each launch)."""
+    (``add_product``, a coupling of ``linalg.PCG``, called at every CG iteration). The
+    rows and their kernels are a ``_Rows``, made again where the list grows."""
 
     def __init__(self, n):
         self.rows = _Rows(n, PAIRS_PER_PARTICLE * n)
@@ -64,7 +63,7 @@ class PlaneConstraints:
 
     def gather(self, contacts, x, inv_mass, diagonal):
         """The vertex pairs of ``contacts`` ((list, planes, rows), as the stage gives them)
-        closer along their plane's normal than its delta at x, with their weights from
+        closer along their plane's normal than REACH times its delta at x, weighted from
         ``diagonal`` (A's per-particle bound); the list grown where they overflow it.
         Returns how many."""
         cl, pl, count = contacts
