@@ -17,8 +17,8 @@ colliders, and updated only at named points, all called by the ``Simulator``:
     iterations keep on their separating planes, searched once for the predicted motion
     and again only where an iterate leaves what was searched
     (``stats["solve_searches"]``); the guard takes them at the step's end where they
-    still hold its motion. ``truncate_solve(x_from, x, v)``: an iterate's move cut short
-    at those pairs' dividing planes (projective dynamics' first iterate).
+    still hold its motion. ``truncate_solve(x0, x_pred, v)``: the predicted motion cut
+    short at those pairs' dividing planes (projective dynamics' first iterate).
   - ``detect_bounds(bounds, x)``: called by a solver with displacement bounds (VBD's
     ``bounds=True``) at a step's start and after an iteration that clamped a move: the
     bounds from the proximity list, which it builds again at x where it has grown stale
@@ -125,7 +125,6 @@ class ContactStage:
         self.stats = {key: 0 for key in STATS}
         self.stats["seconds"] = 0.0
         self.solve_list = None      # the list a solve reads (``begin_solve``), or None
-        self.solve_start = None     # and the step's start it was searched from
         self._planes = {}           # the guard's ``Planes`` beside each list, by its owner
         self.obstacle = None
         if self.colliders is not None and self.colliders.meshes is not None:
@@ -170,7 +169,7 @@ class ContactStage:
             count = search_step(self.swept, x0, x_pred, self.thickness, margin)
             cl = self.swept.candidates
         guard.planes(cl, self.planes_of(cl), count, x0, x_pred, self.thickness, FAR)
-        self.solve_list, self.solve_start = (cl, count), x0
+        self.solve_list = (cl, count)
         return cl, self.planes_of(cl), count
 
     def follow_solve(self, x0, x):
@@ -181,14 +180,14 @@ class ContactStage:
                 else self.swept.holds(x0, x))
         return (cl, self.planes_of(cl), count) if held else self.begin_solve(x0, x)
 
-    def truncate_solve(self, x_from, x, v):
-        """A solve's move from its iterate x_from to x cut short where it would take a
-        vertex across the dividing plane of a pair of ``follow_solve``'s candidates for
-        x (``guard.truncate``, the fail-safe's cut: x = x_from + t (x - x_from), v scaled
+    def truncate_solve(self, x0, x_pred, v):
+        """The predicted motion of the last ``begin_solve``, from x0 to x_pred, cut short
+        where it would take a vertex across the dividing plane of one of its candidates
+        (``guard.truncate``, the fail-safe's cut: x_pred = x0 + t (x_pred - x0), v scaled
         by t). Returns how many vertices were cut."""
-        cl, pl, count = self.follow_solve(self.solve_start, x)
-        return int(guard.truncate(cl, pl, count, x_from, x, v, self.inv_mass, self.cut,
-                                  self.solve_cuts))
+        cl, count = self.solve_list
+        return int(guard.truncate(cl, self.planes_of(cl), count, x0, x_pred, v,
+                                  self.inv_mass, self.cut, self.solve_cuts))
 
     def planes_of(self, cl):
         """The guard's columns (``guard.Planes``) beside list cl, the proximity list or

@@ -47,7 +47,6 @@ PAIRS_PER_PARTICLE = 32
 REACH = 1.1
 
 
-@ti.data_oriented
 class PlaneConstraints:
     """The active vertex pairs of a projective step's planes at its current iterate
     (``gather``), their forces (``add_forces``) and their part of the global matrix
