@@ -319,6 +319,62 @@ def test_kept_candidate_list_misses_no_contact(f64):
     assert stepping_rebuilds < 0.5 * 800, stepping_rebuilds
 
 
+def test_rows_skipped_as_far_are_beyond_the_thickness_all_along(f64):
+    """A consumer of the proximity list skips a row whose gap at the build less the
+    largest displacements of a particle of each side from the displacements' centre
+    (``broad.near``) is beyond the thickness. Against NumPy's distances: the gaps kept at
+    the build are the rows' gaps there, and after motions of up to twice the skin (some
+    particles still, some moving far) every skipped row is beyond the thickness at both
+    ends of the motion and halfway, while the bound skips a third of the rows at a tenth
+    of the skin."""
+    import taichi as ti
+    from tcloth.contact import broad as broad_phase
+
+    @ti.kernel
+    def near_rows(cl: ti.template(), count: ti.i32, ref_gap: ti.template(),
+                  far: ti.template(), distance: float, out: ti.types.ndarray()):
+        for c in range(count):
+            out[c] = int(broad_phase.near(cl, ref_gap, far, c, distance))
+
+    def gaps(x, ids, kinds):
+        return np.array([point_triangle(x[i[0]], *x[i[1:]]) if k == 0 else
+                         segment_segment(*x[i]) for i, k in zip(ids, kinds)])
+
+    rng = np.random.default_rng(7)
+    scene = tcloth.Scene(gravity=(0, 0, 0))
+    for k in range(3):
+        scene.add_cloth(resolution=(6, 6), size=(0.3, 0.3), center=(0, 0.02 * k, 0),
+                        plane="xz", **CLOTH)
+    thickness = skin = 0.015
+    scene.set_self_collision(thickness=thickness, skin=skin)
+    x_ref = scene.positions + rng.normal(scale=0.004, size=scene.positions.shape)
+    sim = tcloth.Simulator(scene)
+    sim.set_state(positions=x_ref)
+    broad = sim.model.contact.broad
+    cl, count = broad.candidates, broad.count
+    ids, kinds = cl.ids.to_numpy()[:count], cl.kind.to_numpy()[:count]
+    np.testing.assert_allclose(broad.ref_gap.to_numpy()[:count], gaps(x_ref, ids, kinds),
+                               rtol=1e-10)
+    ends = [sim.model.state() for _ in range(2)]
+    skipped = []
+    for trial, scale in enumerate((0.1, 0.3, 1.0, 2.0)):
+        still = rng.random(len(x_ref)) < 0.5
+        motions = [np.where(still[:, None], 0.0,
+                            rng.uniform(-1, 1, x_ref.shape) * scale * skin / np.sqrt(3))
+                   for _ in range(2)]
+        ys = [x_ref + 0.3 * trial + m for m in motions]        # a shared motion costs none
+        for end, y in zip(ends, ys):
+            end.x.from_numpy(y)
+        broad.moved(ends[0].x, ends[1].x)
+        out = np.zeros(count, dtype=np.int32)
+        near_rows(cl, count, broad.ref_gap, broad.far, thickness, out)
+        far_rows = out == 0
+        for y in (ys[0], ys[1], 0.5 * (ys[0] + ys[1])):
+            assert (gaps(y, ids[far_rows], kinds[far_rows]) > thickness).all()
+        skipped.append(int(far_rows.sum()))
+    assert skipped[0] > 0.3 * count and skipped[-1] < skipped[0], (skipped, count)
+
+
 def test_displacement_test_matches_numpy_on_one_thread_and_on_several():
     """The rebuild test's reduction (blocks of particles, then the blocks) gives what NumPy
     gives from the positions: twice the largest distance of a displacement since the last
@@ -356,6 +412,8 @@ def test_displacement_test_matches_numpy_on_one_thread_and_on_several():
                 assert got == pytest.approx(expected, rel=1e-12)
                 np.testing.assert_allclose(broad.centre.to_numpy(), centre, rtol=0,
                                            atol=1e-15)
+                each = np.linalg.norm(np.stack(ds) - centre, axis=2).max(axis=0)
+                np.testing.assert_allclose(broad.far.to_numpy(), each, rtol=1e-12)
                 results.append(got)
                 previous = x
     finally:

@@ -18,6 +18,14 @@ within the thickness in any of them, nor anywhere on a straight path between two
 them, since a displacement on the path lies between its ends'. A motion the particles
 share (a cloth falling) costs no rebuild.
 
+The list keeps each row's gap at x_ref (``ref_gap``). A gap is the distance between two
+convex hulls of the row's particles, so it shrinks by no more than the largest relative
+displacement of a particle of one side and one of the other: at any y a row's gap is at
+least its ref_gap less the largest distance from the displacements' centre of a
+particle of each side (``moved(y)`` leaves them in ``far``), and a consumer skips the
+rows that bound puts beyond the thickness without their closest points (``near``),
+which are what a step of an explicit integrator spends its contact time on.
+
 Cost of a build: O(particles + edges + table) for the sort; per triangle or edge, the
 cells its box covers (at most 4 and 5 per axis) times the items per cell, which is the
 number of layers of cloth within a cell of each other.
@@ -25,13 +33,16 @@ number of layers of cloth within a cell of each other.
 import taichi as ti
 
 from .. import runtime
-from ..runtime import serial_count
+from ..runtime import serial, serial_count
 from .candidates import ContactList, gap
 from .hashgrid import PointGrid, blocks_for
-from .search import CandidateSearch
+from .search import POINT_TRIANGLE, CandidateSearch
 
 # particles per block of the displacement test's reduction
 DISPLACEMENT_BLOCK = 1024
+# m: what rounding may take from a row's gap at x_ref against its bound (float32
+# coordinates near 1 m round to 6e-8 m; a gap is a few operations on them)
+GAP_ROUNDING = 1e-6
 
 
 @ti.kernel
@@ -40,8 +51,9 @@ def _spread(broad: ti.template(), ref: ti.template(), x: ti.template(), y: ti.te
     """Twice the largest distance of a displacement (x - ref, and y - ref when
     ``both``) from the middle of all the displacements' bounding box: no two particles
     have moved relative to each other by more, from x_ref to x or y or anywhere on the
-    straight path between them. Blocks of DISPLACEMENT_BLOCK particles reduce in parallel,
-    then one thread over the blocks: Taichi keeps no thread-local copy of a vector reduced
+    straight path between them; each particle's own distance into ``broad.far`` (two
+    particles moved by at most the sum of theirs). Blocks of DISPLACEMENT_BLOCK particles
+    reduce in parallel, then one thread over the blocks: Taichi keeps no thread-local copy of a vector reduced
     with atomics, so one vector for every particle would have the threads take turns on
     its compare-and-swaps."""
     P = ti.static(broad.table.point_count)
@@ -70,10 +82,11 @@ def _spread(broad: ti.template(), ref: ti.template(), x: ti.template(), y: ti.te
         farthest = ti.cast(0.0, ti.f64)
         for i in range(blk * DISPLACEMENT_BLOCK, ti.min((blk + 1) * DISPLACEMENT_BLOCK, P)):
             p = broad.table.points[i]
-            farthest = ti.max(farthest, (ti.cast(x[p] - ref[p], ti.f64) - c).norm_sqr())
+            far = (ti.cast(x[p] - ref[p], ti.f64) - c).norm_sqr()
             if ti.static(both):
-                farthest = ti.max(farthest,
-                                  (ti.cast(y[p] - ref[p], ti.f64) - c).norm_sqr())
+                far = ti.max(far, (ti.cast(y[p] - ref[p], ti.f64) - c).norm_sqr())
+            broad.far[p] = ti.cast(ti.sqrt(far), broad.far.dtype)
+            farthest = ti.max(farthest, far)
         broad.moved_far[blk] = farthest
     ti.loop_config(serialize=True)
     for _ in range(1):
@@ -123,12 +136,36 @@ def _rebuild(broad: ti.template(), search: ti.template(), cl: ti.template(),
     return search.run(cl)
 
 
+@ti.kernel
+def _ref_gaps(cl: ti.template(), count: ti.i32, x: ti.template(), out: ti.template()):
+    """Each row's gap at x into out."""
+    ti.loop_config(serialize=ti.static(serial(cl.ids)))
+    for c in range(count):
+        _, g = gap(cl.ids[c], cl.kind[c], x)
+        out[c] = g.norm()
+
+
+@ti.func
+def near(cl, ref_gap, far, c, distance):
+    """Whether row c of the proximity list cl (its ``ref_gap``) can be within
+    ``distance`` at the positions of the last ``moved`` (or anywhere on its path), whose
+    ``far`` that is (module docstring)."""
+    ids = cl.ids[c]
+    first, second = far[ids[0]], ti.max(far[ids[2]], far[ids[3]])
+    if cl.kind[c] == POINT_TRIANGLE:
+        second = ti.max(second, far[ids[1]])
+    else:
+        first = ti.max(first, far[ids[1]])
+    return ref_gap[c] - (first + second) <= distance + GAP_ROUNDING
+
+
 @ti.data_oriented
 class BroadPhase(CandidateSearch):
     """The candidate list of one model's self-contact and the positions it was built at.
 
     Attributes:
         candidates: the ``ContactList``; count: its rows in use.
+        ref_gap: each row's gap at x_ref (the module docstring; ``near``).
         skin: the margin of the last build, m (the list holds pairs within thickness +
             skin); rebuilds: how many builds so far.
     """
@@ -142,10 +179,12 @@ class BroadPhase(CandidateSearch):
         self.moved_lo = ti.Vector.field(3, ti.f64, shape=moved_blocks)
         self.moved_hi = ti.Vector.field(3, ti.f64, shape=moved_blocks)
         self.moved_far = ti.field(ti.f64, shape=moved_blocks)
+        self.far = ti.field(real, shape=particle_count)
         super().__init__(table, inv_mass, (PointGrid(table.point_count),
                                            PointGrid(table.edge_count)), self._within)
         self.skin = None
         self.rebuilds = 0
+        self.ref_gap = ti.field(real, shape=self.candidates.capacity)
 
     def _list(self, capacity):
         return ContactList(self.table, self.inv_mass, capacity)
@@ -156,13 +195,17 @@ class BroadPhase(CandidateSearch):
         _, g = gap(ids, kind, self.x_ref)
         return g.norm() <= self.reach[None]
 
+    def moved(self, x, y=None):
+        """How far particles moved relative to each other (at most) since the build: from
+        x_ref to x, to y, and to anywhere on the straight path from x to y; each
+        particle's share into ``far``, for ``near``."""
+        y = x if y is None else y
+        return _spread(self, self.x_ref, x, y, y is not x)
+
     def covers(self, x, y=None):
         """Whether the list holds every pair that can be within the thickness at x, at y,
         and on the straight path from x to y."""
-        if self.skin is None:
-            return False
-        y = x if y is None else y
-        return _spread(self, self.x_ref, x, y, y is not x) <= self.skin
+        return self.skin is not None and self.moved(x, y) <= self.skin
 
     def would_cover(self, x0, x1, skin):
         """Whether a list built at x0 with ``skin`` would cover the motion x0 -> x1 (no
@@ -172,13 +215,16 @@ class BroadPhase(CandidateSearch):
     def unlisted_distance(self, x):
         """A lower bound on the distance at x of every pair the list leaves out: its
         reach less how far particles moved relative to each other since the build
-        (``covers``)."""
-        return float(self.reach[None]) - _spread(self, self.x_ref, x, x, False)
+        (``moved``)."""
+        return float(self.reach[None]) - self.moved(x)
 
     def build(self, x, skin):
         """List the pairs within thickness + skin at x."""
         self.reach[None] = float(self.table.settings["thickness"] + skin)
-        self.fit(lambda: _rebuild(self, self.search, self.candidates, x))
+        count = self.fit(lambda: _rebuild(self, self.search, self.candidates, x))
+        if self.ref_gap.shape[0] != self.candidates.capacity:
+            self.ref_gap = ti.field(runtime.real(), shape=self.candidates.capacity)
+        _ref_gaps(self.candidates, count, x, self.ref_gap)
         self.skin = float(skin)
         self.rebuilds += 1
 

@@ -49,6 +49,7 @@ import taichi as ti
 from .. import runtime
 from ..runtime import jacobi_apply, jacobi_zero, serial
 from ..geometry.shapes import SHAPES
+from .broad import near
 from .candidates import gap
 from .search import POINT_TRIANGLE
 
@@ -132,13 +133,36 @@ def planes(cl: ti.template(), pl: ti.template(), count: ti.i32, x0: ti.template(
     motion, does not)."""
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
-        ids, kind = cl.ids[c], cl.kind[c]
-        n, d0, delta = normal_margin(ids, kind, x0, thickness)
-        closing = _relative_path(ids, kind, x0, x1)
-        pl.n[c] = n
-        pl.delta[c] = 0.0
-        if d0 > LEAST_GAP:
-            pl.delta[c] = delta if d0 - closing <= reach else FAR_APART
+        _plane(cl, pl, c, x0, x1, thickness, reach)
+
+
+@ti.kernel
+def near_planes(cl: ti.template(), pl: ti.template(), count: ti.i32, x0: ti.template(),
+                x1: ti.template(), thickness: float, ref_gap: ti.template(),
+                far: ti.template()):
+    """``planes`` of the proximity list (``broad.BroadPhase``: ``ref_gap``) for a motion
+    it covers (``far`` from its ``moved(x0, x1)``), with reach = thickness; a row that
+    the list's bound keeps beyond the thickness all along (``broad.near``) is FAR_APART
+    without its closest points, and without its normal, which the fail-safe's cuts need
+    (``planes`` them again first)."""
+    ti.loop_config(serialize=ti.static(serial(cl.ids)))
+    for c in range(count):
+        if near(cl, ref_gap, far, c, thickness):
+            _plane(cl, pl, c, x0, x1, thickness, thickness)
+        else:
+            pl.delta[c] = FAR_APART
+
+
+@ti.func
+def _plane(cl, pl, c, x0, x1, thickness, reach):
+    """``planes``' row c."""
+    ids, kind = cl.ids[c], cl.kind[c]
+    n, d0, delta = normal_margin(ids, kind, x0, thickness)
+    closing = _relative_path(ids, kind, x0, x1)
+    pl.n[c] = n
+    pl.delta[c] = 0.0
+    if d0 > LEAST_GAP:
+        pl.delta[c] = delta if d0 - closing <= reach else FAR_APART
 
 
 @ti.func

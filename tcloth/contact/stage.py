@@ -289,8 +289,10 @@ class ContactStage:
             changed = self._sweep(x0, x1, v1, t0, dt, True)
         else:
             cut = self._sweep(x0, x1, v1, t0, dt, True)
-            cl, count, covered = self._step_candidates(x0, x1)
+            cl, count, covered = self._step_candidates(x0, x1, near=True)
             if cut or guard.violations(cl, self.planes_of(cl), count, x1):
+                if covered:     # the rounds and the fail-safe take every row's plane
+                    guard.planes(cl, self.planes_of(cl), count, x0, x1, self.thickness, FAR)
                 if self.x_swept is not None:     # x1 as the first sweep left it
                     self.x_swept.copy_from(x1)
                 changed = cut + self._resolve(cl, count, x0, x1, v1, t0, dt)
@@ -389,22 +391,29 @@ class ContactStage:
         cl, count, _ = self._step_candidates(x0, x1)
         return cl, count
 
-    def _step_candidates(self, x0, x1):
+    def _step_candidates(self, x0, x1, near=False):
         """(list, rows, whether it is the proximity list) holding every pair that can come
         within the thickness on the motion x0 -> x1, with their separating planes at x0:
         the proximity list where it covers the motion (then it covers x1 too; built
         again at x0 where the motion is within the skin), else the
         swept search's, grown by MARGIN thicknesses for the guard's moves, less the pairs
         that cannot come within the thickness on this motion (``guard.planes``: the
-        rounds compute them again for the motion as it then is)."""
-        covered = self.broad.covers(x0, x1)
+        rounds compute them again for the motion as it then is). ``near``: the proximity
+        list's planes only for the rows that can come within the thickness (enough to
+        find the violations: ``guard.near_planes``)."""
+        covered = self.broad.covers(x0, x1)     # ``broad.far`` is the motion's
         if not covered and self.broad.would_cover(x0, x1, self.skin):
             # a step small against the skin (an explicit integrator's): the list built
             # at x0 covers it and x1, where a swept search and a build at x1 would cost two
             self.broad.build(x0, self.skin)
+            self.broad.moved(x0, x1)
             covered = True
         if covered:
             cl, count, reach = self.broad.candidates, self.broad.count, FAR
+            if near:
+                guard.near_planes(cl, self.planes_of(cl), count, x0, x1, self.thickness,
+                                  self.broad.ref_gap, self.broad.far)
+                return cl, count, covered
         else:
             reach = self.thickness
             solved = (self.solve_list is not None

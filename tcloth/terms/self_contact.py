@@ -47,6 +47,7 @@ Each correction can be kept (``ProjectionLog``) for the gradient (``grad/project
 import taichi as ti
 
 from .. import runtime
+from ..contact.broad import near
 from ..contact.projection import LOG_CAPACITY
 from ..contact.search import POINT_TRIANGLE
 from ..features.self_collision import SELF_COLLISION
@@ -94,31 +95,36 @@ def pair_force(cl, c, x, v):
 @ti.kernel
 def self_contact_forces(
         # Model:
-        cl: ti.template(), count: ti.i32,
+        cl: ti.template(), count: ti.i32, ref_gap: ti.template(),
         # State in:
-        x: ti.template(), v: ti.template(),
+        x: ti.template(), v: ti.template(), far: ti.template(),
         # Out:
         f_out: ti.template()):
-    """f_out += the self-contact forces of the first ``count`` candidates."""
+    """f_out += the self-contact forces of the first ``count`` candidates of the
+    proximity list (its ``ref_gap``; ``far`` from its ``moved(x)``: the rows that the
+    list's bound keeps beyond the thickness are skipped, ``broad.near``)."""
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
-        touches, ids, alpha, f = pair_force(cl, c, x, v)
-        if touches:
-            for j in ti.static(range(4)):
-                f_out[ids[j]] += alpha[j] * f
+        if near(cl, ref_gap, far, c, cl.table.params[0]):
+            touches, ids, alpha, f = pair_force(cl, c, x, v)
+            if touches:
+                for j in ti.static(range(4)):
+                    f_out[ids[j]] += alpha[j] * f
 
 
 @ti.kernel
-def _energy(cl: ti.template(), count: ti.i32, x: ti.template(),
-            out: ti.template()) -> ti.f64:
+def _energy(cl: ti.template(), count: ti.i32, ref_gap: ti.template(), x: ti.template(),
+            far: ti.template(), out: ti.template()) -> ti.f64:
+    """The penalty energy of the contacts (the rows skipped as by ``self_contact_forces``)."""
     prm = ti.static(cl.table.params)
     out[0] = 0
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
-        alpha, g = cl.gap(cl.ids[c], cl.kind[c], x)
-        depth = prm[0] - g.norm()
-        if cl.repels[c] and depth > 0.0:
-            out[0] += ti.cast(0.5 * prm[1] * depth * depth, out.dtype)
+        if near(cl, ref_gap, far, c, prm[0]):
+            alpha, g = cl.gap(cl.ids[c], cl.kind[c], x)
+            depth = prm[0] - g.norm()
+            if cl.repels[c] and depth > 0.0:
+                out[0] += ti.cast(0.5 * prm[1] * depth * depth, out.dtype)
     return ti.cast(out[0], ti.f64)
 
 
@@ -425,10 +431,15 @@ class SelfContact(Term):
         return self._scratch[key]
 
     def add_forces(self, x, v, t, f_out):
-        self_contact_forces(self.stage.candidates, self.stage.count, x, v, f_out)
+        broad = self.stage.broad
+        broad.moved(x)
+        self_contact_forces(broad.candidates, broad.count, broad.ref_gap, x, v, broad.far,
+                            f_out)
 
     def energy(self, x, t, out):
-        return _energy(self.stage.candidates, self.stage.count, x, out)
+        broad = self.stage.broad
+        broad.moved(x)
+        return _energy(broad.candidates, broad.count, broad.ref_gap, x, broad.far, out)
 
     def active(self, x):
         """{"point_triangle": n, "edge_edge": m}: contacts closer than the thickness at x."""
