@@ -36,7 +36,7 @@ from .. import runtime
 from ..runtime import serial, serial_count
 from .candidates import ContactList, gap
 from .hashgrid import PointGrid, blocks_for
-from .search import POINT_TRIANGLE, CandidateSearch
+from .search import EDGE_EDGE, POINT_TRIANGLE, CandidateSearch
 
 # particles per block of the displacement test's reduction
 DISPLACEMENT_BLOCK = 1024
@@ -191,9 +191,22 @@ class BroadPhase(CandidateSearch):
 
     @ti.func
     def _within(self, ids, kind):
-        """Whether the contact ids is within the reach at x_ref."""
-        _, g = gap(ids, kind, self.x_ref)
-        return g.norm() <= self.reach[None]
+        """Whether the contact ids is within the reach at x_ref. The edge grid reports
+        edges whose midpoints lie within the reach and half the longest edge of the
+        query's box, most of them farther than the reach: their boxes are compared first
+        (the point grid's test is already the point's box against the triangle's)."""
+        x = ti.static(self.x_ref)
+        reach = self.reach[None]
+        close = True
+        if kind == EDGE_EDGE:
+            a0, a1, b0, b1 = x[ids[0]], x[ids[1]], x[ids[2]], x[ids[3]]
+            close = (ti.min(a0, a1) <= ti.max(b0, b1) + reach).all() and \
+                (ti.min(b0, b1) <= ti.max(a0, a1) + reach).all()
+        within = False
+        if close:
+            _, g = gap(ids, kind, x)
+            within = g.norm() <= reach
+        return within
 
     def moved(self, x, y=None):
         """How far particles moved relative to each other (at most) since the build: from
