@@ -1,8 +1,9 @@
 """Batches of substeps (``tcloth/batch.py``): n steps in one kernel launch give the same
 numbers as n steps from Python, bit for bit (the same ``ti.func``s do the same arithmetic),
 for every explicit integrator, VBD and XPBD with every in-kernel term (the triangle
-membrane's: tests/test_membrane.py); a bad step inside a batch is named and the state
-before it kept, as between single steps."""
+membrane's: tests/test_membrane.py) and with self-collision (the batch stops where the
+contact stage needs Python); a bad step inside a batch is named and the state before it
+kept, as between single steps."""
 import numpy as np
 import pytest
 
@@ -51,6 +52,43 @@ def test_a_batch_equals_single_steps_bit_for_bit(f32, integrator):
     # the sphere's contact and the strain limit were at work
     assert single.energy()["contact"] > 0.0 and single.max_strain() < 0.03
     assert np.array_equal(batched.forces(), single.forces())
+
+
+def falling_pair(batch, integrator, dt):
+    """Two 10 x 10 cloths with self-collision falling at 6 m/s onto a box: at dt = 1e-3
+    the guard corrects pairs, searches steps' motions and the box cuts paths."""
+    scene = tcloth.Scene()
+    for centre in ((0.0, 0.3, 0.0), (0.02, 0.35, 0.01)):
+        scene.add_cloth(resolution=(10, 10), size=(0.5, 0.5), center=centre, plane="xz",
+                        mass=0.1, structural=(400.0, 0.05), shear=(80.0, 0.02),
+                        flexion=(10.0, 0.005), pinned=[])
+    scene.add_box((0.0, -0.05, 0.0), (0.2, 0.05, 0.2), thickness=0.005)
+    scene.set_self_collision(thickness=0.01)
+    sim = tcloth.Simulator(scene, integrator, dt=dt, batch=batch)
+    sim.set_state(velocities=np.tile([0.0, -6.0, 0.0], (scene.num_particles, 1)))
+    return sim
+
+
+@pytest.mark.parametrize("integrator", ["symplectic_euler", "verlet", "rk4"])
+def test_a_batch_with_self_collision_equals_single_steps_bit_for_bit(f32, integrator):
+    """With self-collision a batch stops at each step that needs the contact stage from
+    Python (a rebuild, a pair to correct, a path the box cut), which finishes that step:
+    the same numbers and the same counts as single steps."""
+    counts = ("guard_corrections", "rebuilds", "swept_searches", "collider_paths_cut",
+              "failsafe_steps")
+    single = falling_pair(False, integrator, 1e-3)
+    for _ in range(300):
+        single.step()
+    batched = falling_pair(True, integrator, 1e-3)
+    assert batched.fusion() is None
+    for n in (7, 93, 150, 50):
+        batched.step(n)
+    assert batched.num_steps == single.num_steps == 300
+    assert np.array_equal(batched.positions(), single.positions())
+    assert np.array_equal(batched.velocities(), single.velocities())
+    stats = single.contact_stats(), batched.contact_stats()
+    assert [stats[0][k] for k in counts] == [stats[1][k] for k in counts]
+    assert min(stats[0][k] for k in counts[:4]) > 0, stats[0]
 
 
 def test_xpbd_batches_where_it_projects_nothing(f32):
@@ -107,11 +145,15 @@ def test_vbd_batches_without_colliders_or_self_contact(f32):
     assert "colliders" in sim.fusion()
 
 
-def test_a_bad_step_inside_a_batch_is_named_and_the_state_before_it_kept(f64):
+@pytest.mark.parametrize("self_collision", [False, True])
+def test_a_bad_step_inside_a_batch_is_named_and_the_state_before_it_kept(f64,
+                                                                         self_collision):
     def exploding(batch):
         scene = tcloth.Scene()
         scene.add_cloth(resolution=(6, 6), structural=(1e4, 0.0), shear=(1e4, 0.0),
                         flexion=(1e4, 0.0))
+        if self_collision:
+            scene.set_self_collision(thickness=0.02)
         sim = tcloth.Simulator(scene, "forward_euler", dt=1e-3, velocity_bound=50.0,
                                batch=batch)
         rng = np.random.default_rng(1)
@@ -148,8 +190,15 @@ def test_fusion_names_what_keeps_a_scene_out_of_batches(f64):
     assert "callable" in sim.fusion()
     sim.step(2)                     # per substep, the gust evaluated in Python each time
     assert sim.num_steps == 2
-    scene.set_self_collision()
-    assert "SelfContact" in tcloth.Simulator(scene).fusion()
+    scene.set_self_collision()          # the explicit integrators batch between its stops
+    sim = tcloth.Simulator(scene)
+    assert sim.fusion() is None
+    sim.model.contact.record(True)          # a gradient's run: every step from Python
+    assert "gradient" in sim.fusion()
+    sim.model.contact.record(False)
+    assert sim.fusion() is None
+    assert "projects" in tcloth.Simulator(scene, "xpbd").fusion()
+    assert "every iteration" in tcloth.Simulator(scene, "vbd").fusion()
 
 
 def test_a_scene_whose_loops_run_on_several_threads_steps_from_python(f64):

@@ -48,14 +48,21 @@ GAP_ROUNDING = 1e-6
 @ti.kernel
 def _spread(broad: ti.template(), ref: ti.template(), x: ti.template(), y: ti.template(),
             both: ti.template()) -> ti.f64:
+    """``spread``."""
+    return spread(broad, ref, x, y, both)
+
+
+@ti.func
+def spread(broad, ref, x, y, both: ti.template()):
     """Twice the largest distance of a displacement (x - ref, and y - ref when
     ``both``) from the middle of all the displacements' bounding box: no two particles
     have moved relative to each other by more, from x_ref to x or y or anywhere on the
     straight path between them; each particle's own distance into ``broad.far`` (two
     particles moved by at most the sum of theirs). Blocks of DISPLACEMENT_BLOCK particles
-    reduce in parallel, then one thread over the blocks: Taichi keeps no thread-local copy of a vector reduced
-    with atomics, so one vector for every particle would have the threads take turns on
-    its compare-and-swaps."""
+    reduce in parallel, then one thread over the blocks: Taichi keeps no thread-local
+    copy of a vector reduced with atomics, so one vector for every particle would have
+    the threads take turns on its compare-and-swaps. In a batch of substeps (one
+    thread) every loop is serial."""
     P = ti.static(broad.table.point_count)
     B = ti.static(blocks_for(P, DISPLACEMENT_BLOCK))
     ti.loop_config(serialize=ti.static(serial_count(P)))
@@ -185,6 +192,10 @@ class BroadPhase(CandidateSearch):
         self.skin = None
         self.rebuilds = 0
         self.ref_gap = ti.field(real, shape=self.candidates.capacity)
+        # count and skin (-1: none) for kernels that run between builds (a batch's)
+        self.rows = ti.field(ti.i32, shape=())
+        self.skin_now = ti.field(ti.f64, shape=())
+        self.skin_now[None] = -1.0
 
     def _list(self, capacity):
         return ContactList(self.table, self.inv_mass, capacity)
@@ -239,8 +250,10 @@ class BroadPhase(CandidateSearch):
             self.ref_gap = ti.field(runtime.real(), shape=self.candidates.capacity)
         _ref_gaps(self.candidates, count, x, self.ref_gap)
         self.skin = float(skin)
+        self.rows[None], self.skin_now[None] = count, self.skin
         self.rebuilds += 1
 
     def invalidate(self):
         """The next ``covers`` is False (the state was set from outside)."""
         self.skin = None
+        self.skin_now[None] = -1.0

@@ -145,6 +145,12 @@ def near_planes(cl: ti.template(), pl: ti.template(), count: ti.i32, x0: ti.temp
     the list's bound keeps beyond the thickness all along (``broad.near``) is FAR_APART
     without its closest points, and without its normal, which the fail-safe's cuts need
     (``planes`` them again first)."""
+    near_plane_rows(cl, pl, count, x0, x1, thickness, ref_gap, far)
+
+
+@ti.func
+def near_plane_rows(cl, pl, count, x0, x1, thickness, ref_gap, far):
+    """``near_planes`` as a ``ti.func`` (a batch of substeps')."""
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
         if near(cl, ref_gap, far, c, thickness):
@@ -209,6 +215,12 @@ def violations(cl: ti.template(), pl: ti.template(), count: ti.i32,
                x1: ti.template()) -> ti.i32:
     """How many candidates have a vertex pair closer along their normal than delta
     (their ``planes``)."""
+    return violated_rows(cl, pl, count, x1)
+
+
+@ti.func
+def violated_rows(cl, pl, count, x1):
+    """``violations`` as a ``ti.func`` (a batch of substeps')."""
     bad = 0
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):

@@ -25,6 +25,10 @@ colliders, and updated only at named points, all called by the ``Simulator``:
     for them (the one rebuild inside a solve, and the stage's own).
   - ``record(on)``: a gradient's runs keep each step's projection corrections and the
     solver's end of the step (``tcloth/grad/frozen.py``).
+  - ``batch_begin`` / ``batch_end`` (``ti.func``s of a batch of substeps' kernel,
+    ``sim/batch.py``): ``end_step``'s colliders' sweep and, with self-collision, its check
+    of the pairs where it finds nothing to do; a step that needs more ends the batch,
+    and ``batch_finish`` does the rest of ``end_step`` for it from Python.
 So the proximity list covers the current state (a rebuild at most once a step, but for
 ``detect_bounds``), and the self-contact term (explicit forces, backward Euler's
 potential and Hessian, projective's projection) and the diagnostics read it; only the
@@ -40,7 +44,7 @@ import taichi as ti
 
 from .. import runtime
 from . import guard, projection
-from .broad import BroadPhase
+from .broad import BroadPhase, spread
 from .obstacle import ObstaclePairs
 from .swept import SweptSearch, search_step
 
@@ -117,7 +121,8 @@ class ContactStage:
         # x1 after the step's first collider sweep, where later sweeps start
         self.x_swept = ti.Vector.field(3, real, shape=n) \
             if self.colliders and self.table is not None else None
-        self.x_start = ti.Vector.field(3, real, shape=n) if self.colliders else None
+        self.x_start = (ti.Vector.field(3, real, shape=n)
+                        if self.colliders or self.table is not None else None)
         # the collider's outward normal where it stopped a particle's path this step, else 0
         self.held = ti.Vector.field(3, real, shape=n)
         # paths the collider sweep cut inside batches of substeps: in all, in the last step
@@ -188,6 +193,11 @@ class ContactStage:
         cl, count = self.solve_list
         return int(guard.truncate(cl, self.planes_of(cl), count, x0, x_pred, v,
                                   self.inv_mass, self.cut, self.solve_cuts))
+
+    @property
+    def proximity_planes(self):
+        """``planes_of`` the proximity list."""
+        return self.planes_of(self.broad.candidates)
 
     def planes_of(self, cl):
         """The guard's columns (``guard.Planes``) beside list cl, the proximity list or
@@ -288,21 +298,28 @@ class ContactStage:
         if self.broad is None:
             changed = self._sweep(x0, x1, v1, t0, dt, True)
         else:
-            cut = self._sweep(x0, x1, v1, t0, dt, True)
-            cl, count, covered = self._step_candidates(x0, x1, near=True)
-            if cut or guard.violations(cl, self.planes_of(cl), count, x1):
-                if covered:     # the rounds and the fail-safe take every row's plane
-                    guard.planes(cl, self.planes_of(cl), count, x0, x1, self.thickness, FAR)
-                if self.x_swept is not None:     # x1 as the first sweep left it
-                    self.x_swept.copy_from(x1)
-                changed = cut + self._resolve(cl, count, x0, x1, v1, t0, dt)
-            if changed or not covered:
-                self._cover(x1)
-            self.solve_list = None
+            changed = self._guard_pairs(x0, x1, v1, t0, dt, self._sweep(x0, x1, v1, t0, dt,
+                                                                        True))
         if self.obstacle is not None:
             changed += self._obstacle_failsafe(x0, x1, v1, t0, dt)
         self.stats["seconds"] += time.perf_counter() - start
         return changed > 0
+
+    def _guard_pairs(self, x0, x1, v1, t0, dt, cut):
+        """``end_step``'s guard of the cloth's own pairs after the colliders' first sweep,
+        which cut ``cut`` paths; returns how much it and they changed."""
+        changed = cut
+        cl, count, covered = self._step_candidates(x0, x1, near=True)
+        if cut or guard.violations(cl, self.planes_of(cl), count, x1):
+            if covered:     # the rounds and the fail-safe take every row's plane
+                guard.planes(cl, self.planes_of(cl), count, x0, x1, self.thickness, FAR)
+            if self.x_swept is not None:     # x1 as the first sweep left it
+                self.x_swept.copy_from(x1)
+            changed = cut + self._resolve(cl, count, x0, x1, v1, t0, dt)
+        if changed or not covered:
+            self._cover(x1)
+        self.solve_list = None
+        return changed
 
     def _obstacle_failsafe(self, x0, x1, v1, t0, dt):
         """Where a mesh collider's planes are still not met at x1, its fail-safe (cloth
@@ -428,7 +445,7 @@ class ContactStage:
         guard.planes(cl, self.planes_of(cl), count, x0, x1, self.thickness, reach)
         return cl, count, covered
 
-    # -- inside a batch of substeps (``sim/batch.py``; its scenes have no self-collision) -----
+    # -- inside a batch of substeps (``sim/batch.py``) -----------------------------------------
     @ti.func
     def batch_begin(self, x):
         """A step inside a batch starts at x: kept for ``batch_end``'s sweep."""
@@ -437,14 +454,62 @@ class ContactStage:
 
     @ti.func
     def batch_end(self, x, v, t, dt):
-        """The colliders' sweep (``guard.sweep_colliders``) of the step from
-        ``batch_begin``'s start to x, its cuts counted in ``batch_cuts`` (in all, in the
-        last step); returns how many paths it cut."""
-        cut = guard.sweep_colliders(self.colliders, self.inv_mass, self.x_start, x, v, t, dt,
-                                    self.held, self.sweep_log, False)
-        self.batch_cuts[0] += cut
-        self.batch_cuts[1] = cut
-        return cut
+        """The colliders' sweep (``guard.sweep_colliders``; with self-collision as
+        ``end_step``'s first) of the step from ``batch_begin``'s start to x, its cuts
+        counted in ``batch_cuts`` (in all, in the last step), then, with self-collision,
+        ``end_step``'s check of the pairs as it passes where nothing is to be done (the
+        proximity list covers the step and no pair is too close). Returns (how many paths
+        the sweep cut, whether the step needs the rest of ``end_step`` from Python:
+        ``batch_finish``)."""
+        cut = 0
+        if ti.static(bool(self.colliders)):
+            if ti.static(bool(self.broad)):
+                for p in range(self.held.shape[0]):
+                    self.held[p] = ti.Vector([0.0, 0.0, 0.0])
+            cut = guard.sweep_colliders(self.colliders, self.inv_mass, self.x_start, x, v,
+                                        t, dt, self.held, self.sweep_log, False)
+            self.batch_cuts[0] += cut
+            self.batch_cuts[1] = cut
+        unfinished = 0
+        if ti.static(bool(self.broad)):
+            unfinished = 1
+            if cut == 0:
+                if self._pairs_pass(x):
+                    unfinished = 0
+        return cut, unfinished
+
+    @ti.func
+    def _pairs_pass(self, x):
+        """Whether the proximity list covers the motion from ``batch_begin``'s start to x
+        and no pair of it is closer than its plane allows (``_step_candidates`` with
+        ``near``, then ``guard.violations``)."""
+        passes = False
+        if spread(self.broad, self.broad.x_ref, self.x_start, x, True) <= \
+                self.broad.skin_now[None]:
+            guard.near_plane_rows(self.broad.candidates, self.proximity_planes,
+                                  self.broad.rows[None], self.x_start, x, self.thickness,
+                                  self.broad.ref_gap, self.broad.far)
+            passes = guard.violated_rows(self.broad.candidates, self.proximity_planes,
+                                         self.broad.rows[None], x) == 0
+        return passes
+
+    def batch_finish(self, x1, v1, t0, dt):
+        """The rest of ``end_step`` (after the colliders' first sweep, done in the batch)
+        for a batch's step from ``batch_begin``'s start to x1 that ``batch_end`` found
+        unfinished; returns whether the step changed x1 and v1 (the sweep included)."""
+        start = time.perf_counter()
+        cut = int(self.batch_cuts[1])
+        changed = self._guard_pairs(self.x_start, x1, v1, t0, dt, cut)
+        self.stats["seconds"] += time.perf_counter() - start
+        return changed > 0
+
+    def batch_key(self):
+        """The fields a batch's kernel reads that the stage makes again (the proximity
+        list and its columns where the list grew): a batch compiled for another key is
+        compiled again."""
+        if self.broad is None:
+            return None
+        return self.broad.candidates, self.broad.ref_gap, self.proximity_planes
 
     def batch_obstacle(self):
         """Why a batch of substeps cannot run this stage's steps, or None."""

@@ -12,8 +12,11 @@ batch's start state to go back to if a step goes bad.
 
 A batch is used where every loop of a step would run on one thread anyway (on CPUs, below
 ``serial_below`` items: ``runtime.serial``) and no term needs Python between substeps
-(``Simulator.fusion`` says why not otherwise: an implicit integrator, self-collision, a
-Python-callable gust, a GPU, a large scene).
+(``Simulator.fusion`` says why not otherwise: an implicit integrator, a Python-callable
+gust, a GPU, a large scene). With self-collision the batch checks each step as the
+contact stage would, and stops at a step that needs the stage's Python (a rebuild of
+the proximity list, a pair to correct, a path a collider cut): the simulator finishes
+that step with ``ContactStage.batch_finish`` and starts the next batch after it.
 """
 import taichi as ti
 
@@ -24,18 +27,22 @@ from ..integrators.linalg import copy
 def _substep(integrator: ti.template(), limiter: ti.template(), contact: ti.template(),
              budget: ti.template(), a, b, t, dt, fresh, x_bound, v_bound):
     """One step of State a in place (b: scratch), with the contact stage's collider sweep
-    (``ContactStage.batch_begin`` / ``batch_end``; the batch's scenes have no
-    self-collision); returns (the budget's ``check`` of the result: -1, a bad particle,
-    or particles + the fastest one; the paths the sweep cut)."""
+    and its check of the cloth's own pairs (``ContactStage.batch_begin`` /
+    ``batch_end``); returns (the budget's ``check`` of the result: -1, a bad particle, or
+    particles + the fastest one; the paths the sweep cut; whether the step needs the
+    rest of the stage's guard from Python, and then no check)."""
     if ti.static(bool(contact)):
         contact.batch_begin(a.x)
     integrator.advance(a, b, t, dt, fresh)
     if ti.static(bool(limiter)):
         limiter.limit(a, ti.cast(1.0 / dt, float))
-    cut = 0
+    cut, unfinished = 0, 0
     if ti.static(bool(contact)):
-        cut = contact.batch_end(a.x, a.v, ti.cast(t, float), ti.cast(dt, float))
-    return budget.check(a.x, a.v, t + dt, x_bound, v_bound, 0.0), cut
+        cut, unfinished = contact.batch_end(a.x, a.v, ti.cast(t, float), ti.cast(dt, float))
+    bad = -1
+    if unfinished == 0:
+        bad = budget.check(a.x, a.v, t + dt, x_bound, v_bound, 0.0)
+    return bad, cut, unfinished
 
 
 def kernel(integrator, limiter, contact, budget, a, b, start, x_bound, v_bound):
@@ -52,7 +59,9 @@ def kernel(integrator, limiter, contact, budget, a, b, start, x_bound, v_bound):
     for the first step k whose result the energy budget's ``check`` finds bad (c: its
     code, below 2 particles): the batch stops there, a holds that bad state, and the
     caller goes back to ``start`` and runs the good steps again (the same numbers: the
-    steps are deterministic).
+    steps are deterministic). Or -2 - k where step k needs the rest of the contact
+    stage's guard (``ContactStage.batch_finish``): a holds that step's end as the batch
+    left it, unchecked, and the caller finishes it.
     """
     @ti.kernel
     def run(n: ti.i32, fresh: ti.i32, time_base: ti.f64, steps_before: ti.i32,
@@ -68,8 +77,11 @@ def kernel(integrator, limiter, contact, budget, a, b, start, x_bound, v_bound):
             evaluate = fresh if k == 0 else 0
             if ti.static(bool(limiter)) or cut > 0:     # a's forces are of another state
                 evaluate = 1
-            bad, cut = _substep(integrator, limiter, contact, budget, a, b, t, dt, evaluate,
-                                x_bound, v_bound)
+            bad, cut, unfinished = _substep(integrator, limiter, contact, budget, a, b, t,
+                                            dt, evaluate, x_bound, v_bound)
+            if unfinished:
+                result = -2 - ti.cast(k, ti.i64)
+                break
             if bad >= 0:
                 result = ti.cast(k, ti.i64) * (2 * a.x.shape[0]) + bad
                 break

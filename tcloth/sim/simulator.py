@@ -105,7 +105,8 @@ class Simulator(LiveParameters):
         self.num_steps = 0
         self._time_base, self._step_base = 0.0, 0      # the time at step _step_base
         self._batch_start = None                        # a batch's start state (batch.py)
-        self._batch_kernels = {}     # (integrator, limiter, State) -> its batch kernel
+        # (integrator, limiter, State) -> (the contact stage's batch_key, its batch kernel)
+        self._batch_kernels = {}
         self._fusion = None          # (fusion(),) once computed; reset by the live changes
         self._contact = self.model.contact
         if self._contact is not None:
@@ -137,7 +138,9 @@ class Simulator(LiveParameters):
             raise SceneError(f"n must be an integer >= 0 (got {n!r})")
         limiter = self._limiter if self.settings["strain_limiting"] else None
         if n and self.fusion() is None:
-            self._step_batch(int(n), limiter)
+            done = 0
+            while done < n:
+                done += self._step_batch(int(n) - done, limiter)
             return
         for _ in range(int(n)):
             s_in, s_out = self._states
@@ -164,6 +167,8 @@ class Simulator(LiveParameters):
         self._check()
         if self._fusion is None:
             self._fusion = (self._why_not_batched(),)
+        if self._fusion[0] is None and self._contact is not None and self._contact.recording:
+            return "a gradient's run keeps every step's contact guard from Python"
         return self._fusion[0]
 
     def _why_not_batched(self):
@@ -190,24 +195,31 @@ class Simulator(LiveParameters):
         are checked at the end, and where they fail the steps run again one at a time
         from the batch's start to find the first bad one. An integrator whose step costs
         many force passes (``Integrator.checked_steps``: VBD, XPBD) runs one step a launch,
-        each checked whole."""
+        each checked whole. A step that needs the contact stage's Python ends the batch
+        there (``_finish``). Returns the steps done."""
         a, b = self._states
         if self._batch_start is None:
             self._batch_start = self.model.state()
         key = (self.integrator, limiter, a)
-        if key not in self._batch_kernels:
-            self._batch_kernels[key] = batch.kernel(
+        fields = self._contact and self._contact.batch_key()
+        if key not in self._batch_kernels or self._batch_kernels[key][0] != fields:
+            self._batch_kernels[key] = fields, batch.kernel(
                 self.integrator, limiter, self._contact, self.budget, a, b,
                 self._batch_start, self.position_bound, self.velocity_bound)
-        run = self._batch_kernels[key]
+        run = self._batch_kernels[key][1]
         fresh = 0 if self.integrator.holds_forces(a) else 1
         args = (fresh, self._time_base, self.num_steps - self._step_base, self.dt)
-        done, error = n, None
+        done, error, changed = n, None, False
         if self.integrator.checked_steps:
             done, error = self._checked_steps(run, a, n, args)
             code = -1
         else:
             code = run(n, *args)
+        if code <= -2:      # step done needs the rest of the stage's guard
+            done = -2 - code
+            changed = self._finish(a, self.num_steps + done)
+            done += 1
+            code = -1
         if code >= 0:
             done, bad = divmod(code, 2 * self.model.particle_count)
             # a holds the bad state: checked whole, its stored energy in the message; the
@@ -217,18 +229,24 @@ class Simulator(LiveParameters):
             self._restore_batch_start(a)
             done, earlier = self._checked_steps(run, a, done, args)
             error = earlier or error
-        elif error is None and self._checker.verify(a, self.num_steps + n - 1) is not None:
+        elif error is None and self._checker.verify(a, self.num_steps + done - 1) is not None:
             self._restore_batch_start(a)
-            done, error = self._checked_steps(run, a, n, args)
+            done, error = self._checked_steps(run, a, done, args)
         self.num_steps += done
         self.state.t = self.time
         swept = self._contact is not None and self._contact.batch_cut_last()
-        if limiter is None and error is None and not swept:
+        if limiter is None and error is None and not swept and not changed:
             self.integrator.adopt_forces(self.state)
         else:
             self.integrator.invalidate()
         if error is not None:
             raise error
+        return done
+
+    def _finish(self, a, steps):
+        """The rest of the contact stage's guard (``ContactStage.batch_finish``) for step
+        steps + 1, whose end a holds as a batch left it; whether it changed a."""
+        return self._contact.batch_finish(a.x, a.v, self.time_at(steps), self.dt)
 
     def _restore_batch_start(self, a):
         for name in ("x", "v", "f"):
@@ -244,12 +262,15 @@ class Simulator(LiveParameters):
         bad one or None), State a at the last good state."""
         fresh, time_base, before, dt = args
         for k in range(n):
-            run(1, fresh, time_base, before + k, dt)       # keeps a's state as the start
+            changed = False                                 # run keeps a's state as the start
+            if run(1, fresh, time_base, before + k, dt) <= -2:
+                changed = self._finish(a, self.num_steps + k)
             error = self._checker.verify(a, self.num_steps + k)
             if error is not None:
                 self._restore_batch_start(a)
                 return k, error
-            fresh = 1 if self._contact is not None and self._contact.batch_cut_last() else 0
+            fresh = 1 if changed or (self._contact is not None
+                                     and self._contact.batch_cut_last()) else 0
         return n, None
 
     def _see_gust(self, t):

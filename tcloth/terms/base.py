@@ -11,7 +11,10 @@ keeps its own scratch. Every term gives:
     scene's terms in one kernel, and the simulator's batch of substeps calls them all in
     one launch (``batch.py``). A term whose force needs Python between its loops (a
     candidate list that grows) sets ``in_kernel = False`` and gives
-    ``add_forces(x, v, t, f_out)`` (kernel launches) instead;
+    ``add_forces(x, v, t, f_out)`` (kernel launches) instead; where it also gives an
+    ``accumulate`` for a batch of substeps (``in_batch = True``), that reads its fields as
+    they were when the batch compiled, and the batch is compiled again where they were
+    made again (self-contact: ``ContactStage.batch_key``);
   - ``prepare(t)``: Python work before a force evaluation at time t (an upload);
   - ``batch_obstacle()``: None when its force may run in a batch of substeps without
     Python between them, else the reason why not (one line, for ``Simulator.fusion``);
@@ -100,6 +103,7 @@ class Term:
     projective = "lagged"
     per_particle = False
     in_kernel = True
+    in_batch = False
     provides = frozenset()
     options = {}
     work = 1            # what a particle's evaluation costs, in simple items (runtime.serial)

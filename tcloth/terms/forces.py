@@ -9,8 +9,9 @@ The terms' ``accumulate`` functions run in one kernel launch (gravity and drag s
 the others add to it); a term that needs Python between its loops (``in_kernel = False``:
 self-contact's candidate list) is launched on its own between the kernels of the terms
 before and after it, so that the order of the sums is always ``TERMS`` order.
-``accumulate`` is that whole evaluation as a ``ti.func`` where every term is in-kernel: the
-simulator's batches of substeps call it (``batch.py``).
+``accumulate`` is that whole evaluation as a ``ti.func`` where every term is in-kernel or
+gives an ``accumulate`` for batches (``in_batch``): the simulator's batches of substeps
+call it (``batch.py``).
 """
 import taichi as ti
 
@@ -86,7 +87,7 @@ class Forces:
     def batch_obstacle(self):
         """None when ``accumulate`` may run in a batch of substeps, else why not."""
         for term in self.terms:
-            why = term.batch_obstacle() if term.in_kernel else \
+            why = term.batch_obstacle() if term.in_kernel or term.in_batch else \
                 f"{type(term).__name__} runs Python between its kernels"
             if why is not None:
                 return why
@@ -105,4 +106,5 @@ class Forces:
     @ti.func
     def accumulate(self, x, v, t, f_out):
         """``compute`` as a ``ti.func``, where ``batch_obstacle()`` is None."""
-        self.runs[0].accumulate(x, v, t, f_out)
+        for run in ti.static(self.runs):
+            run.accumulate(x, v, t, f_out)

@@ -47,7 +47,7 @@ Each correction can be kept (``ProjectionLog``) for the gradient (``grad/project
 import taichi as ti
 
 from .. import runtime
-from ..contact.broad import near
+from ..contact.broad import near, spread
 from ..contact.projection import LOG_CAPACITY
 from ..contact.search import POINT_TRIANGLE
 from ..features.self_collision import SELF_COLLISION
@@ -103,6 +103,12 @@ def self_contact_forces(
     """f_out += the self-contact forces of the first ``count`` candidates of the
     proximity list (its ``ref_gap``; ``far`` from its ``moved(x)``: the rows that the
     list's bound keeps beyond the thickness are skipped, ``broad.near``)."""
+    pair_forces(cl, count, ref_gap, x, v, far, f_out)
+
+
+@ti.func
+def pair_forces(cl, count, ref_gap, x, v, far, f_out):
+    """``self_contact_forces`` as a ``ti.func`` (a batch of substeps')."""
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
         if near(cl, ref_gap, far, c, cl.table.params[0]):
@@ -412,6 +418,7 @@ class SelfContact(Term):
     projective = "projection"
     provides = frozenset({"couplings", "projection"})
     in_kernel = False          # its list is the stage's, which Python grows and rebuilds
+    in_batch = True            # a batch stops where the stage needs Python (batch.py)
 
     @staticmethod
     def present(model):
@@ -435,6 +442,15 @@ class SelfContact(Term):
         broad.moved(x)
         self_contact_forces(broad.candidates, broad.count, broad.ref_gap, x, v, broad.far,
                             f_out)
+
+    @ti.func
+    def accumulate(self, x, v, t, f_out):
+        """``add_forces`` as a ``ti.func`` for a batch of substeps: the proximity list as
+        it was when the batch compiled (``ContactStage.batch_key``), its rows in use and
+        the particles' motion since its build read when it runs."""
+        spread(self.stage.broad, self.stage.broad.x_ref, x, x, False)
+        pair_forces(self.stage.broad.candidates, self.stage.broad.rows[None],
+                    self.stage.broad.ref_gap, x, v, self.stage.broad.far, f_out)
 
     def energy(self, x, t, out):
         broad = self.stage.broad
