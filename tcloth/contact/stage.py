@@ -44,7 +44,8 @@ import taichi as ti
 
 from .. import runtime
 from . import guard, projection
-from .broad import BroadPhase, spread
+from .batching import BatchSteps
+from .broad import BroadPhase
 from .obstacle import ObstaclePairs
 from .swept import SweptSearch, search_step
 
@@ -83,7 +84,7 @@ STATS = {
 
 
 @ti.data_oriented
-class ContactStage:
+class ContactStage(BatchSteps):
     """The contact set and the guard of one model (module docstring).
 
     Attributes:
@@ -444,82 +445,6 @@ class ContactStage:
             cl = self.swept.candidates        # after the search, which may grow the list
         guard.planes(cl, self.planes_of(cl), count, x0, x1, self.thickness, reach)
         return cl, count, covered
-
-    # -- inside a batch of substeps (``sim/batch.py``) -----------------------------------------
-    @ti.func
-    def batch_begin(self, x):
-        """A step inside a batch starts at x: kept for ``batch_end``'s sweep."""
-        for p in range(x.shape[0]):
-            self.x_start[p] = x[p]
-
-    @ti.func
-    def batch_end(self, x, v, t, dt):
-        """The colliders' sweep (``guard.sweep_colliders``; with self-collision as
-        ``end_step``'s first) of the step from ``batch_begin``'s start to x, its cuts
-        counted in ``batch_cuts`` (in all, in the last step), then, with self-collision,
-        ``end_step``'s check of the pairs as it passes where nothing is to be done (the
-        proximity list covers the step and no pair is too close). Returns (how many paths
-        the sweep cut, whether the step needs the rest of ``end_step`` from Python:
-        ``batch_finish``)."""
-        cut = 0
-        if ti.static(bool(self.colliders)):
-            if ti.static(bool(self.broad)):
-                for p in range(self.held.shape[0]):
-                    self.held[p] = ti.Vector([0.0, 0.0, 0.0])
-            cut = guard.sweep_colliders(self.colliders, self.inv_mass, self.x_start, x, v,
-                                        t, dt, self.held, self.sweep_log, False)
-            self.batch_cuts[0] += cut
-            self.batch_cuts[1] = cut
-        unfinished = 0
-        if ti.static(bool(self.broad)):
-            unfinished = 1
-            if cut == 0:
-                if self._pairs_pass(x):
-                    unfinished = 0
-        return cut, unfinished
-
-    @ti.func
-    def _pairs_pass(self, x):
-        """Whether the proximity list covers the motion from ``batch_begin``'s start to x
-        and no pair of it is closer than its plane allows (``_step_candidates`` with
-        ``near``, then ``guard.violations``)."""
-        passes = False
-        if spread(self.broad, self.broad.x_ref, self.x_start, x, True) <= \
-                self.broad.skin_now[None]:
-            guard.near_plane_rows(self.broad.candidates, self.proximity_planes,
-                                  self.broad.rows[None], self.x_start, x, self.thickness,
-                                  self.broad.ref_gap, self.broad.far)
-            passes = guard.violated_rows(self.broad.candidates, self.proximity_planes,
-                                         self.broad.rows[None], x) == 0
-        return passes
-
-    def batch_finish(self, x1, v1, t0, dt):
-        """The rest of ``end_step`` (after the colliders' first sweep, done in the batch)
-        for a batch's step from ``batch_begin``'s start to x1 that ``batch_end`` found
-        unfinished; returns whether the step changed x1 and v1 (the sweep included)."""
-        start = time.perf_counter()
-        cut = int(self.batch_cuts[1])
-        changed = self._guard_pairs(self.x_start, x1, v1, t0, dt, cut)
-        self.stats["seconds"] += time.perf_counter() - start
-        return changed > 0
-
-    def batch_key(self):
-        """The fields a batch's kernel reads that the stage makes again (the proximity
-        list and its columns where the list grew): a batch compiled for another key is
-        compiled again."""
-        if self.broad is None:
-            return None
-        return self.broad.candidates, self.broad.ref_gap, self.proximity_planes
-
-    def batch_obstacle(self):
-        """Why a batch of substeps cannot run this stage's steps, or None."""
-        return ("mesh colliders search their pairs between steps"
-                if self.obstacle is not None else None)
-
-    def batch_cut_last(self):
-        """Whether the collider sweep cut a path in a batch's last step (its velocities
-        then changed after the forces were evaluated)."""
-        return self.batch_cuts[1] > 0
 
     def contact_stats(self):
         """A copy of ``stats`` with the current candidate and rebuild counts."""

@@ -48,7 +48,7 @@ import taichi as ti
 
 from .. import runtime
 from ..contact.broad import near, spread
-from ..contact.projection import LOG_CAPACITY
+from ..contact.projection import LOG_CAPACITY, ProjectionLog
 from ..contact.search import POINT_TRIANGLE
 from ..features.self_collision import SELF_COLLISION
 from ..runtime import serial
@@ -337,41 +337,6 @@ def projection_impulse(prm, g, w, v_rel, velocity: ti.template()):
         else:
             impulse = (prm[0] - d) / w * n
     return fires, impulse
-
-
-@ti.data_oriented
-class ProjectionLog:
-    """The projection's corrections of one step in their order, kept where ``on`` is set (a
-    gradient's runs: ``tcloth/grad/projected.py`` differentiates each): the contact's
-    particles (``ids``) and ``kind``, whether it was a velocity pass (``velocity``), and
-    the four particles' positions and velocities before it (``x``, ``v``: (capacity, 4)).
-    ``count`` counts them all; past ``capacity`` they are not kept."""
-
-    def __init__(self, capacity):
-        real = runtime.real()
-        self.capacity = capacity
-        self.ids = ti.Vector.field(4, ti.i32, shape=capacity)
-        self.kind, self.velocity = (ti.field(ti.i32, shape=capacity) for _ in range(2))
-        self.x, self.v = (ti.Vector.field(3, real, shape=(capacity, 4)) for _ in range(2))
-        self.count, self.on = (ti.field(ti.i32, shape=()) for _ in range(2))
-
-    @ti.func
-    def keep(self, ids, kind, velocity, x, v):
-        if self.on[None]:
-            e = ti.atomic_add(self.count[None], 1)
-            if e < self.capacity:
-                self.ids[e], self.kind[e], self.velocity[e] = ids, kind, velocity
-                for j in ti.static(range(4)):
-                    self.x[e, j], self.v[e, j] = x[ids[j]], v[ids[j]]
-
-    def entries(self):
-        """The kept corrections as NumPy arrays (ids, kind, velocity, x, v), or None where
-        the step made more than the log keeps."""
-        if int(self.count[None]) > self.capacity:
-            return None
-        k = int(self.count[None])
-        return tuple(f.to_numpy()[:k] for f in (self.ids, self.kind, self.velocity, self.x,
-                                                 self.v))
 
 
 @ti.kernel
