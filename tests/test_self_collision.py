@@ -319,14 +319,44 @@ def test_kept_candidate_list_misses_no_contact(f64):
     assert stepping_rebuilds < 0.5 * 800, stepping_rebuilds
 
 
-def test_rows_skipped_as_far_are_beyond_the_thickness_all_along(f64):
-    """A consumer of the proximity list skips a row whose gap at the build less the
-    largest displacements of a particle of each side from the displacements' centre
-    (``broad.near``) is beyond the thickness. Against NumPy's distances: the gaps kept at
-    the build are the rows' gaps there, and after motions of up to twice the skin (some
-    particles still, some moving far) every skipped row is beyond the thickness at both
-    ends of the motion and halfway, while the bound skips a third of the rows at a tenth
-    of the skin."""
+def pairs_within(x, table, reach):
+    """Every point-triangle and edge-edge pair sharing no particle whose distance at x is
+    within ``reach``, by brute force (boxes first), as ``pair_key``s."""
+    points, triangles, edges = (getattr(table, k).to_numpy() for k in
+                                ("points", "triangles", "edges"))
+    found = set()
+    lo, hi = x[triangles].min(axis=1) - reach, x[triangles].max(axis=1) + reach
+    for p in points:
+        for t in np.flatnonzero(((lo <= x[p]) & (x[p] <= hi)).all(axis=1)):
+            if p not in triangles[t] and point_triangle(x[p], *x[triangles[t]]) <= reach:
+                found.add(pair_key([p, *triangles[t]], 0))
+    lo, hi = x[edges].min(axis=1), x[edges].max(axis=1)
+    for i, e in enumerate(edges):
+        near = ((lo[i] <= hi + reach) & (lo <= hi[i] + reach)).all(axis=1)
+        for j in np.flatnonzero(near[i + 1:]) + i + 1:
+            if not set(e) & set(edges[j]) and segment_segment(*x[e], *x[edges[j]]) <= reach:
+                found.add(pair_key([*e, *edges[j]], 1))
+    return found
+
+
+def pair_key(ids, kind):
+    """A contact's particles without their order within a side, nor the edges' order."""
+    ids = [int(i) for i in ids]
+    if kind == 0:
+        return 0, ids[0], tuple(sorted(ids[1:]))
+    return (1,) + tuple(sorted([tuple(sorted(ids[:2])), tuple(sorted(ids[2:]))]))
+
+
+def test_the_list_holds_each_pair_within_reach_once_and_skips_only_far_rows(f64):
+    """The proximity list holds each pair within thickness + skin once, as a NumPy brute
+    force finds them (the edge queries look for each pair from one side only:
+    ``PointGrid.for_each_partner``). A consumer of the list skips a row whose gap at the
+    build less the largest displacements of a particle of each side from the
+    displacements' centre (``broad.near``) is beyond the thickness. Against NumPy's
+    distances: the gaps kept at the build are the rows' gaps there, and after motions of
+    up to twice the skin (some particles still, some moving far) every skipped row is
+    beyond the thickness at both ends of the motion and halfway, while the bound skips a
+    third of the rows at a tenth of the skin."""
     import taichi as ti
     from tcloth.contact import broad as broad_phase
 
@@ -353,6 +383,10 @@ def test_rows_skipped_as_far_are_beyond_the_thickness_all_along(f64):
     broad = sim.model.contact.broad
     cl, count = broad.candidates, broad.count
     ids, kinds = cl.ids.to_numpy()[:count], cl.kind.to_numpy()[:count]
+    listed = [pair_key(i, k) for i, k in zip(ids, kinds)]
+    expected = pairs_within(x_ref, broad.table, thickness + skin)
+    assert len(set(listed)) == len(listed) and set(listed) == expected
+    assert sum(k for k, *_ in expected) > 100, "edge-edge pairs"
     np.testing.assert_allclose(broad.ref_gap.to_numpy()[:count], gaps(x_ref, ids, kinds),
                                rtol=1e-10)
     ends = [sim.model.state() for _ in range(2)]

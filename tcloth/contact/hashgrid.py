@@ -14,6 +14,10 @@ thread). Two grids bin on it:
     capacity). ``for_each`` visits the boxes that overlap a box, each once: in the first
     cell of the overlap of the two boxes' cell ranges.
 
+Both answer ``for_each_partner``: the items a query's own item pairs with, each pair of
+items once. ``PointGrid`` skips the cells before the item's own (each pair is then found
+from its earlier cell), ``BoxGrid`` the boxes of lower index.
+
 The cost of a build is O(entries + size); of a query, the cells the box covers times the
 entries per cell, which the caller bounds by choosing the cell size.
 """
@@ -146,14 +150,35 @@ class PointGrid(CellHash):
         for i in range(a[0], b[0] + 1):
             for j in range(a[1], b[1] + 1):
                 for k in range(a[2], b[2] + 1):
-                    bk = self.bucket(ti.Vector([i, j, k]))
-                    for s in range(self.start[bk], self.start[bk + 1]):
-                        item = self.order[s]
-                        if item > after:
-                            d, p = self.cell[item], self.pos[item]
-                            if d[0] == i and d[1] == j and d[2] == k and (lo <= p).all() \
-                                    and (p <= hi).all():
-                                body(item, ctx)
+                    self._visit(ti.Vector([i, j, k]), lo, hi, after, body, ctx)
+
+    @ti.func
+    def for_each_partner(self, lo, hi, own, body: ti.template(), ctx):
+        """body(item, ctx) for the points in the box [lo, hi] that pair with point
+        ``own`` (in the box) once: those in a cell after own's (cells ordered by their
+        indices, lexicographically) and those of higher index in its own cell. Where the
+        relation behind the boxes is symmetric (b is in a's box whenever a is in b's),
+        each pair is visited once, by the query of its first point in that order, and the
+        cells before own's are not scanned: half the cells of ``for_each(lo, hi, own)``."""
+        a, b, o = self.cell_of(lo), self.cell_of(hi), self.cell[own]
+        for i in range(ti.max(a[0], o[0]), b[0] + 1):
+            j0 = a[1] if i > o[0] else ti.max(a[1], o[1])
+            for j in range(j0, b[1] + 1):
+                k0 = a[2] if i > o[0] or j > o[1] else ti.max(a[2], o[2])
+                for k in range(k0, b[2] + 1):
+                    c = ti.Vector([i, j, k])
+                    self._visit(c, lo, hi, own if (c == o).all() else -1, body, ctx)
+
+    @ti.func
+    def _visit(self, c, lo, hi, after, body: ti.template(), ctx):
+        """body(item, ctx) for every point above ``after`` in cell c and the box."""
+        bk = self.bucket(c)
+        for s in range(self.start[bk], self.start[bk + 1]):
+            item = self.order[s]
+            if item > after:
+                p = self.pos[item]
+                if (self.cell[item] == c).all() and (lo <= p).all() and (p <= hi).all():
+                    body(item, ctx)
 
 
 @ti.data_oriented
@@ -218,3 +243,9 @@ class BoxGrid(CellHash):
                             first = ti.max(a, self.cell_of(self.lo[item]))
                             if (first == c).all():
                                 body(item, ctx)
+
+    @ti.func
+    def for_each_partner(self, lo, hi, own, body: ti.template(), ctx):
+        """body(item, ctx) once for every box of higher index than ``own`` that overlaps
+        [lo, hi] (``PointGrid.for_each_partner``'s contract)."""
+        self.for_each(lo, hi, own, body, ctx)

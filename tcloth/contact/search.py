@@ -3,7 +3,7 @@ grids report near each other, listed as a ``ContactList``'s rows in the order of
 search.
 
 A search has one query per triangle (the particles near it), then one per edge (the edges
-of higher index near it). Its owner bins the particles and the edges in two grids
+near it that pair with it, each pair once: the grid's ``for_each_partner``). Its owner bins the particles and the edges in two grids
 (``hashgrid.py``: points for the proximity list, ``broad.py``; swept boxes for a step's
 swept search, ``swept.py``) and gives each query its box (``Search.lo``, ``hi``);
 ``Search.run`` visits, for each query, the grid's items in its box, leaves out pairs that
@@ -75,7 +75,8 @@ class Search:
                 if q < T:
                     self.points.for_each(self.lo[q], self.hi[q], -1, self._point_triangle, q)
                 else:
-                    self.edges.for_each(self.lo[q], self.hi[q], q - T, self._edge_edge, q - T)
+                    self.edges.for_each_partner(self.lo[q], self.hi[q], q - T, self._edge_edge,
+                                                 q - T)
         exclusive_scan(self.found_count, self.found_start, self.scan_blocks, Q,
                        ti.static(serial_count(Q)), False)
         most = 0
