@@ -3,13 +3,14 @@ grids report near each other, listed as a ``ContactList``'s rows in the order of
 search.
 
 A search has one query per triangle (the particles near it), then one per edge (the edges
-near it that pair with it, each pair once: the grid's ``for_each_partner``). Its owner bins the particles and the edges in two grids
-(``hashgrid.py``: points for the proximity list, ``broad.py``; swept boxes for a step's
-swept search, ``swept.py``) and gives each query its box (``Search.lo``, ``hi``);
-``Search.run`` visits, for each query, the grid's items in its box, leaves out pairs that
-share a particle, pairs of pinned particles only and pairs the owner's ``keep`` turns
-down, and marks the pairs that touch by construction (``topology.py``) as ones that do
-not repel (``ContactList.repels``; they are still listed for the guard).
+near it that pair with it, each pair once: the grid's ``for_each_partner``). Its owner
+bins the particles and the edges in two grids (``hashgrid.py``: points for the proximity
+list, ``broad.py``; swept boxes for a step's swept search, ``swept.py``) and gives each
+query its box (``Search.lo``, ``hi``); ``Search.run`` visits, for each query, the grid's
+items in its box, leaves out pairs that share a particle, pairs of pinned particles only
+and pairs the owner's ``keep`` turns down, and marks the pairs that touch by
+construction (``topology.py``) as ones that do not repel (``ContactList.repels``; they
+are still listed for the guard).
 
 Blocks of QUERY_BLOCK consecutive queries run in parallel, each block on one thread
 appending what its queries find to its own ``block_slots`` slots; a prefix sum over the
