@@ -80,12 +80,21 @@ def test_a_batch_with_self_collision_equals_single_steps_bit_for_bit(f32, integr
     """With self-collision a batch stops at each step that needs the contact stage from
     Python (a rebuild, a pair to correct, a path the box cut), which finishes that step:
     the same numbers and the same counts as single steps (one simulator run twice, so
-    that the stage's kernels compile once)."""
+    that the stage's kernels compile once). A batch whose end then fails the stored
+    energy's check runs its steps again one at a time from its start: each counted once,
+    as single steps count them (with symplectic Euler, the check made to fail at the
+    first step whose pairs the guard corrected without a rebuild, in both runs)."""
     counts = ("guard_corrections", "rebuilds", "swept_searches", "collider_paths_cut",
               "failsafe_steps")
     sim = falling_pair(False, integrator, 1e-3)
+    before, corrected = sim.contact_stats(), []
     for _ in range(300):
         sim.step()
+        now = sim.contact_stats()
+        if now["guard_corrections"] > before["guard_corrections"] and \
+                now["rebuilds"] == before["rebuilds"]:
+            corrected.append(sim.num_steps - 1)
+        before = now
     single = sim.positions(), sim.velocities(), sim.contact_stats()
     start_falling(sim)
     sim.set_batching(True)
@@ -98,6 +107,24 @@ def test_a_batch_with_self_collision_equals_single_steps_bit_for_bit(f32, integr
     stats = single[2], sim.contact_stats()
     assert [stats[0][k] for k in counts] == [stats[1][k] for k in counts]
     assert min(stats[0][k] for k in counts[:4]) > 0, stats[0]
+
+    if integrator != "symplectic_euler":    # the replay is the simulator's: checked once
+        return
+    verify = sim._checker.verify
+    sim._checker.verify = lambda state, step: (
+        InstabilityError("made to fail", step) if step == corrected[0] else verify(state, step))
+    ends = []
+    for batching in (False, True):
+        start_falling(sim)
+        sim.set_batching(batching)
+        with pytest.raises(InstabilityError, match="made to fail"):
+            sim.step(300)
+        ends.append((sim.num_steps, sim.positions(), sim.contact_stats()))
+    assert ends[0][0] == ends[1][0] == corrected[0]
+    assert np.array_equal(ends[0][1], ends[1][1])
+    replayed = ("guard_corrections", "swept_searches", "collider_paths_cut", "failsafe_steps")
+    assert [ends[0][2][k] for k in replayed] == [ends[1][2][k] for k in replayed]
+    assert ends[1][2]["guard_corrections"] > 0
 
 
 def test_xpbd_batches_where_it_projects_nothing(f32):

@@ -71,6 +71,19 @@ class BatchSteps:
         self.stats["seconds"] += time.perf_counter() - start
         return changed > 0
 
+    def batch_counts(self):
+        """The counts of ``stats`` and of the batches' collider cuts as they stand at a
+        batch's start, for ``batch_replay``."""
+        return dict(self.stats), int(self.batch_cuts[0])
+
+    def batch_replay(self, counts):
+        """The counts back to a batch's start (``batch_counts``), whose steps run again
+        one at a time (after a bad step): each step is then counted once. The time spent
+        (``seconds``) and the list's builds, which were done, stay."""
+        stats, cuts = counts
+        self.stats = {**stats, "seconds": self.stats["seconds"]}
+        self.batch_cuts[0] = cuts
+
     def batch_key(self):
         """The fields a batch's kernel reads that the stage makes again (the proximity
         list and its columns where the list grew): a batch compiled for another key is

@@ -207,6 +207,7 @@ class Simulator(LiveParameters):
                 self.integrator, limiter, self._contact, self.budget, a, b,
                 self._batch_start, self.position_bound, self.velocity_bound)
         run = self._batch_kernels[key][1]
+        counts = self._contact and self._contact.batch_counts()
         fresh = 0 if self.integrator.holds_forces(a) else 1
         args = (fresh, self._time_base, self.num_steps - self._step_base, self.dt)
         done, error, changed = n, None, False
@@ -226,11 +227,11 @@ class Simulator(LiveParameters):
             # steps before it again, each checked whole (the kernel checked S only)
             error = (self._checker.verify(a, self.num_steps + done)
                      or self._checker.error(self.num_steps + done, bad))
-            self._restore_batch_start(a)
+            self._restore_batch_start(a, counts)
             done, earlier = self._checked_steps(run, a, done, args)
             error = earlier or error
         elif error is None and self._checker.verify(a, self.num_steps + done - 1) is not None:
-            self._restore_batch_start(a)
+            self._restore_batch_start(a, counts)
             done, error = self._checked_steps(run, a, done, args)
         self.num_steps += done
         self.state.t = self.time
@@ -248,9 +249,13 @@ class Simulator(LiveParameters):
         steps + 1, whose end a holds as a batch left it; whether it changed a."""
         return self._contact.batch_finish(a.x, a.v, self.time_at(steps), self.dt)
 
-    def _restore_batch_start(self, a):
+    def _restore_batch_start(self, a, counts=None):
+        """a and the contact stage's counts (``batch_counts``, where given) as the batch
+        started, for its steps to run again one at a time."""
         for name in ("x", "v", "f"):
             getattr(a, name).copy_from(getattr(self._batch_start, name))
+        if counts:
+            self._contact.batch_replay(counts)
 
     def time_at(self, steps):
         """The time after ``steps`` steps in all (at the current dt since its last change)."""
