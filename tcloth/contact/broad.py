@@ -10,8 +10,8 @@ the reach, each edge the edges whose midpoints lie in its box grown by the reach
 the longest edge, and a pair is kept where its gap at x_ref is within the reach. Two edges
 within the reach lie each in the other's grown box, so each pair is looked for once, by
 the edge whose midpoint's cell comes first (``PointGrid.for_each_partner``): the cells
-before its own are not scanned, which halves the edge queries' work (the larger part of a
-build).
+before its own, about half of each edge query's, are not scanned (the edge queries are
+the larger part of a build).
 
 The list covers a set of configurations when no two particles have moved, from x_ref to
 any of them, by more than the skin relative to each other: twice the largest distance of
