@@ -270,7 +270,7 @@ def test_displacement_bounds_keep_any_moves_inside_them_crossing_free(f64):
     x40, v40 = bsc.folded_state(module, os.path.join(HERE, "..", "tools", "data",
                                                      "fold_40x40.npz"))
     n = 24
-    scene = module.build(resolution=(n, n), thickness=0.006 * 40 / n)
+    scene = bsc.fold_scene(module, n)
     # the saved fold resampled (no step: the stage's list is built at set_state)
     sim = tcloth.Simulator(scene, "symplectic_euler", dt=1e-4)
     sim.set_state(positions=bsc.resample(x40, n), velocities=bsc.resample(v40, n))

@@ -69,6 +69,12 @@ def folded_state(module, path, base=40, seconds=0.9):
     return x, v
 
 
+def fold_scene(module, n):
+    """scenes/fold.py at n x n with the contact thickness scaled with the spacing (6 mm at
+    40 x 40, the module docstring)."""
+    return module.build(resolution=(n, n), thickness=0.006 * 40 / n)
+
+
 def resample(grid, n):
     """Bilinear resampling of a (m, m, 3) grid to (n, n, 3)."""
     m = grid.shape[0]
@@ -133,7 +139,7 @@ def one_second(module, x40, v40, n, integrator, dt, seconds, options):
     x, v = resample(x40, n), resample(v40, n)
     out = {}
     for mode in ("off", "on"):
-        scene = module.build(resolution=(n, n), thickness=0.006 * 40 / n)
+        scene = fold_scene(module, n)
         if mode == "off":
             scene.self_collision = None
         sim = tcloth.Simulator(scene, integrator, dt=dt, **options)
@@ -210,7 +216,7 @@ def main():
         dt = min(1.5e-4 * 40 / n, 0.5 * 2.0 * (0.2 / n ** 2) / DAMPING_SUM)
         result = {"size": n, "particles": n * n, "dt": dt}
         for mode in ("off", "on"):
-            scene = module.build(resolution=(n, n), thickness=0.006 * 40 / n)
+            scene = fold_scene(module, n)
             if mode == "off":
                 scene.self_collision = None
             elif args.skin is not None:

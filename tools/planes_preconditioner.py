@@ -26,7 +26,7 @@ import numpy as np
 import taichi as ti
 
 import tcloth
-from bench_self_collision import folded_state, resample
+from bench_self_collision import fold_scene, folded_state, resample
 from tcloth.app.script import load_script
 
 HERE = os.path.dirname(os.path.abspath(__file__))
@@ -80,7 +80,7 @@ def capture(n, at, dt):
     """Run the fold ``at`` steps, then solve each global solve of the next one again."""
     module = load_script(os.path.join(HERE, "..", "scenes", "fold.py"))[0]
     x40, v40 = folded_state(module, os.path.join(HERE, "data", "fold_40x40.npz"))
-    scene = module.build(resolution=(n, n), thickness=0.006 * 40 / n)
+    scene = fold_scene(module, n)
     sim = tcloth.Simulator(scene, "projective", dt=dt)
     sim.set_state(positions=resample(x40, n), velocities=resample(v40, n))
     sim.step(at)
