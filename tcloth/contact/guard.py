@@ -93,7 +93,7 @@ def spans(kind, a: ti.template(), b: ti.template()):
 
 
 @ti.func
-def _relative_path(ids, kind, x0, x1):
+def relative_path(ids, kind, x0, x1):
     """The longest relative displacement from x0 to x1 of a vertex pair across a
     candidate's sides: along straight paths its gap closes by at most that much."""
     most = 0.0
@@ -164,7 +164,7 @@ def _plane(cl, pl, c, x0, x1, thickness, reach):
     """``planes``' row c."""
     ids, kind = cl.ids[c], cl.kind[c]
     n, d0, delta = normal_margin(ids, kind, x0, thickness)
-    closing = _relative_path(ids, kind, x0, x1)
+    closing = relative_path(ids, kind, x0, x1)
     pl.n[c] = n
     pl.delta[c] = 0.0
     if d0 > LEAST_GAP:

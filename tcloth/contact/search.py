@@ -28,6 +28,12 @@ POINT_TRIANGLE, EDGE_EDGE = 0, 1
 # runtime.SERIAL_BELOW is set for, so its loop goes parallel from that many / this
 SEARCH_COST = 16
 QUERY_BLOCK = 64
+# a block's slots for what its queries find, at first, per query: a search that overflows
+# them is made again larger, and every kernel that reads it compiles again (seconds, in the
+# middle of a run: the 64 x 64 fold's proximity list needed 19 a query where the layers
+# overlap, its solve's swept search 43 before the swept list left out the pairs that
+# cannot meet)
+SLOTS_PER_QUERY = 32
 
 
 @ti.func
@@ -157,7 +163,7 @@ class CandidateSearch:
 
     def __init__(self, table, inv_mass, grids, keep=every_pair):
         self.table, self.inv_mass, self.grids, self.keep = table, inv_mass, grids, keep
-        self.search = self._search(4 * QUERY_BLOCK)
+        self.search = self._search(SLOTS_PER_QUERY * QUERY_BLOCK)
         self.candidates = self._list(8 * (table.point_count + table.edge_count))
         self.count = 0
 

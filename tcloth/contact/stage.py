@@ -52,7 +52,7 @@ from .swept import SweptSearch, search_step
 SWEEPS = 20          # sweeps of the pairs' projection a round (projection.project)
 ROUNDS = 4           # rounds of the projection and the colliders' sweep before the fail-safe
 MARGIN = 0.5         # the swept boxes' margin for the guard's moves, in thicknesses
-SOLVE_MARGIN = 2.0   # the swept boxes' margin for a solve's iterates, in thicknesses
+SOLVE_MARGIN = 1.0   # the swept boxes' margin for a solve's iterates, in thicknesses
 OBSTACLE_MARGIN = 0.25  # the obstacle pairs' boxes' margin, in thicknesses
 FAR = 1e30           # m: a reach that keeps every candidate of the proximity list
 STATS = {
