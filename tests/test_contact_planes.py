@@ -139,3 +139,54 @@ def test_a_gradient_of_projective_leaves_its_planes_out(f32):
     assert not Trajectory(scene, 2, 1.0 / 60.0, "projective").sim.integrator.has_planes
     with pytest.raises(tcloth.SceneError, match="planes=True"):
         Trajectory(scene, 2, 1.0 / 60.0, "projective", planes=True)
+
+
+def test_the_deflated_solve_matches_a_dense_solve_in_fewer_iterations(f64):
+    """The planes' second level (``integrators/deflation.py``) on the folded cloth at one
+    step per frame: its E equals U^T A U with A applied by the solver's own product to
+    each active pair's column u = (n on a, -n on b), and a global solve with it solves
+    A x = b (a random b; the residual by that product) as the V-cycle alone does, in
+    fewer CG iterations."""
+    import bench_self_collision as bsc
+    from tcloth.app.script import load_script
+    module = load_script(os.path.join(HERE, "..", "scenes", "fold.py"))[0]
+    x40, v40 = bsc.folded_state(module, os.path.join(HERE, "..", "tools", "data",
+                                                     "fold_40x40.npz"))
+    n = 16
+    sim = tcloth.Simulator(bsc.fold_scene(module, n), "projective", dt=1.0 / 60.0)
+    sim.set_state(positions=bsc.resample(x40, n), velocities=bsc.resample(v40, n))
+    sim.step(3)
+    integrator = sim.integrator
+    solver, deflation, rows = integrator.solver, integrator.deflation, integrator.planes.rows
+    k = deflation.count
+    assert k > 5, k
+    count = sim.model.particle_count
+    free = np.repeat(sim.model.inv_mass.to_numpy() > 0, 3)
+    v_in, out = field(np.zeros((count, 3))), field(np.zeros((count, 3)))
+
+    def apply(v):
+        v_in.from_numpy(v.reshape(count, 3))
+        solver.apply(v_in, out)
+        return out.to_numpy().ravel()
+    columns = np.zeros((k, count, 3))
+    for i, ((p, q), normal) in enumerate(zip(rows.pairs.to_numpy()[:k], rows.n.to_numpy()[:k])):
+        columns[i, p] += normal
+        columns[i, q] -= normal
+    u = columns.reshape(k, -1) * free
+    springs, gram, w = np.zeros((k, k)), np.zeros((k, k)), np.zeros(k)
+    deflation._blocks(rows, k, springs, gram, w)
+    expected = u @ np.stack([apply(column) * free for column in u]).T
+    np.testing.assert_allclose(springs + gram @ (w[:, None] * gram), expected, rtol=0,
+                               atol=1e-10 * np.abs(expected).max())
+    b = np.zeros(3 * count)
+    b[free] = np.random.default_rng(2).normal(size=free.sum())
+    solutions, iterations = [], []
+    for deflated in (k, 0):
+        deflation.count = deflated
+        solver.b.from_numpy(b.reshape(count, 3))
+        iterations.append(solver.solve(1e-10, 2000)[0])
+        solutions.append(solver.x.to_numpy().ravel())
+        assert np.linalg.norm((apply(solutions[-1]) - b)[free]) < 1e-9 * np.linalg.norm(b)
+    np.testing.assert_allclose(solutions[0], solutions[1], rtol=0,
+                               atol=1e-7 * np.abs(solutions[1]).max())
+    assert iterations[0] < 0.8 * iterations[1], (k, iterations)

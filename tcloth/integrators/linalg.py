@@ -98,7 +98,7 @@ def _apply(field: ti.template(), p, v):
 
 class ConjugateGradients:
     """The iteration loop of a conjugate-gradient solver whose kernels ``_start`` (set up
-    from x = 0, return r.r) and ``_iterate`` (one iteration, return r.r, or -1 when the
+    from x = 0, return r.r; ``_begin`` calls it, or another start) and ``_iterate`` (one iteration, return r.r, or -1 when the
     matrix is not positive definite along the search direction p, leaving x as it was)
     are given by a subclass, with fields ``x`` and ``p``, and ``precondition`` (x = the
     preconditioner applied to b)."""
@@ -112,7 +112,7 @@ class ConjugateGradients:
         Newton step on E, with b = -grad E, x is then still a descent direction (of any
         length: near-zero positive curvature before the negative one can make it huge;
         ``precondition`` gives a bounded one)."""
-        r0 = np.sqrt(self._start())
+        r0 = np.sqrt(self._begin())
         if r0 == 0.0:
             return 0, 0.0
         k, rel = 0, 1.0
@@ -125,6 +125,10 @@ class ConjugateGradients:
                 break
             rel = np.sqrt(rr) / r0
         return k, rel
+
+    def _begin(self):
+        """Set up the iterations (``_start``); returns b.b."""
+        return self._start()
 
 
 @ti.data_oriented

@@ -35,6 +35,7 @@ import numpy as np
 import taichi as ti
 
 from .. import runtime
+from ..runtime import serial
 from ..errors import SceneError
 from . import linalg
 from .galerkin import (COARSEST_NODES, PAD, coarse_size, coarse_stencil, dense_matrix, galerkin,
@@ -315,16 +316,59 @@ class MultigridPCG(linalg.PCG):
     def __init__(self, mg, n, diag, weights, adj_start, adj, inv_mass, couplings=()):
         super().__init__(n, diag, weights, adj_start, adj, diag, inv_mass, couplings)
         self.mg = mg
+        self.deflation = None
+        self.deflated = False
+
+    def deflate(self, deflation):
+        """A second level (``deflation.PlaneDeflation`` of this solver), before the first
+        solve: its pairs are deflated in every solve while its ``count`` is not 0."""
+        self.deflation, self.deflated = deflation, True
+
+    def _begin(self):
+        """From x = 0, or from x = Q b where deflating."""
+        if self.deflated and self.deflation.count:
+            bb = self._deflated_guess()
+            self._couple(self.x)
+            self._deflated_residual()
+            return bb
+        return self._start()
+
+    @ti.kernel
+    def _deflated_guess(self) -> ti.f64:
+        """x = Q b (``PlaneDeflation.guess``). Returns b.b over free particles."""
+        bb = ti.cast(0.0, ti.f64)
+        ti.loop_config(serialize=ti.static(serial(self.x)))
+        for p in range(self.x.shape[0]):
+            self.x[p] = ti.Vector.zero(float, 3)
+            if self.inv_mass[p] > 0.0:
+                bb += ti.cast(self.b[p].dot(self.b[p]), ti.f64)
+        self.deflation.guess()
+        return bb
+
+    @ti.kernel
+    def _deflated_residual(self):
+        """r = b - A x (the couplings' part of A x in ``extra``), z = p = P^-1 r,
+        scalars[0] = r.z."""
+        ti.loop_config(serialize=ti.static(serial(self.x)))
+        for p in range(self.x.shape[0]):
+            rp = ti.Vector.zero(float, 3)
+            if self.inv_mass[p] > 0.0:
+                rp = self.b[p] - self._product(self.x, p)
+            self.r[p] = rp
+        self.scalars[0] = self._precondition_r()
+        ti.loop_config(serialize=ti.static(serial(self.x)))
+        for p in range(self.x.shape[0]):
+            self.p[p] = self.z[p]
 
     @ti.func
     def _precondition_r(self):
-        """z = B r (a V-cycle), 0 on pinned particles; returns r.z."""
+        """z = B r (a V-cycle), 0 on pinned particles, then z += Q (r - A z) where
+        deflating (``PlaneDeflation.correct``); returns r.z."""
         ny, nx = ti.static(self.mg.shapes[0])
         ti.loop_config(serialize=ti.static(self.mg.serial))
         for j, i in ti.ndrange(ny, nx):
             self.mg.set_rhs(j, i, self.r[j * nx + i])
         self.mg.cycle()
-        rz = ti.cast(0.0, ti.f64)
         ti.loop_config(serialize=ti.static(self.mg.serial))
         for j, i in ti.ndrange(ny, nx):
             p = j * nx + i
@@ -332,5 +376,10 @@ class MultigridPCG(linalg.PCG):
             if self.inv_mass[p] > 0.0:
                 zp = self.mg.result(j, i)
             self.z[p] = zp
-            rz += ti.cast(self.r[p].dot(zp), ti.f64)
+        if ti.static(self.deflated):
+            self.deflation.correct()
+        rz = ti.cast(0.0, ti.f64)
+        ti.loop_config(serialize=ti.static(serial(self.x)))
+        for p in range(self.x.shape[0]):
+            rz += ti.cast(self.r[p].dot(self.z[p]), ti.f64)
         return rz

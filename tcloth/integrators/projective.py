@@ -64,6 +64,7 @@ from . import linalg
 from .anderson import Anderson, check_depth
 from .base import Integrator
 from .contact_planes import PlaneConstraints
+from .deflation import PlaneDeflation
 from .multigrid import GridMultigrid, MultigridPCG, single_grid
 
 
@@ -86,6 +87,9 @@ class Projective(Integrator):
         crossings; False leaves the contact work to the contact law's projection and to
         the guard after the step (which tore cloths thrown at each other at 10 m/s, a
         twisted cloth and the pile: ``docs/contact.md``).
+    deflation (True): with the planes on a cloth grid, the global solves' CG deflates the
+        active pairs' directions (``deflation.py``: a second level beside the V-cycle,
+        which does not see the planes' couplings); False for the V-cycle alone.
     After each step ``stats`` holds iterations, cg_iterations (total, 0 with multigrid),
     residual: |g| at the last iteration relative to |g| at the first (how far the
     iterations got), anderson_restarts (the acceleration's history dropped),
@@ -95,7 +99,7 @@ class Projective(Integrator):
     name = "projective"
     defaults = {"iterations": 10, "linear_solver": "auto", "cg_tol": 1e-3,
                 "cg_max_iterations": 200, "anderson": 0,
-                "planes": True}
+                "planes": True, "deflation": True}
     live_options = frozenset({"iterations", "cg_tol", "cg_max_iterations"})
 
     def __init__(self, model, **options):
@@ -118,6 +122,7 @@ class Projective(Integrator):
         self.stage = model.contact
         self.hold = self.stage.hold if self.stage is not None else None
         self.has_hold = self.hold is not None
+        self.deflation = None
         self.planes = (PlaneConstraints(n) if self.options["planes"]
                        and model.self_collision is not None else None)
         self.has_planes = self.planes is not None
@@ -154,6 +159,9 @@ class Projective(Integrator):
                 self.solver = MultigridPCG(self.mg, n, self.diag, self.weight,
                                            self.adj_start, self.adj, model.inv_mass,
                                            couplings)
+                if self.has_planes and not self.constant and self.options["deflation"]:
+                    self.deflation = PlaneDeflation(self.solver)
+                    self.solver.deflate(self.deflation)
             else:
                 self.solver = linalg.PCG(n, self.diag, self.weight, self.adj_start, self.adj,
                                          self.precond, model.inv_mass, couplings)
@@ -233,7 +241,7 @@ class Projective(Integrator):
         cloths thrown at each other at 10 m/s pass wholly through each other in it,
         every vertex pair of their candidates was active, and the first global solve,
         holding each at its plane, threw them 0.29 m apart."""
-        self.stage.begin_solve(x0, x)
+        self.stage.begin_solve(x0, x, near=True)
         self._plane_cuts = self.stage.truncate_solve(x0, x, v)
         if self._plane_cuts:
             self._velocities(x, v, h)
@@ -244,6 +252,8 @@ class Projective(Integrator):
         searched again where an iterate leaves them (``ContactStage.follow_solve``)."""
         contacts = self.stage.follow_solve(x0, x)
         found = self.planes.gather(contacts, x, self.inv_mass, self.bound)
+        if self.deflation is not None:
+            self.deflation.prepare(self.planes.rows)
         self._plane_pairs = max(self._plane_pairs, found)
         self.planes.add_forces(x, self.f)
 
