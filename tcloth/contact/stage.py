@@ -52,7 +52,12 @@ from .swept import SweptSearch, search_step
 SWEEPS = 20          # sweeps of the pairs' projection a round (projection.project)
 ROUNDS = 4           # rounds of the projection and the colliders' sweep before the fail-safe
 MARGIN = 0.5         # the swept boxes' margin for the guard's moves, in thicknesses
-SOLVE_MARGIN = 1.0   # the swept boxes' margin for a solve's iterates, in thicknesses
+SOLVE_MARGIN = 2.0   # the swept boxes' margin for a solve's iterates, in thicknesses
+# a near search's margin (``SweptSearch.holds``: each particle within it of its searched
+# start and end), in thicknesses. Projective on the 64 x 64 fold: a second in 16.0 s at 1
+# and 17.0 s at 1.5; on the twisted cloth the guard corrected 7,524 pairs at 1, 3,306 at
+# 1.5 and 3,190 at 2 (docs/contact.md)
+NEAR_SOLVE_MARGIN = 1.5
 OBSTACLE_MARGIN = 0.25  # the obstacle pairs' boxes' margin, in thicknesses
 FAR = 1e30           # m: a reach that keeps every candidate of the proximity list
 STATS = {
@@ -131,6 +136,7 @@ class ContactStage(BatchSteps):
         self.stats = {key: 0 for key in STATS}
         self.stats["seconds"] = 0.0
         self.solve_list = None      # the list a solve reads (``begin_solve``), or None
+        self.solve_near = False     # whether that list is a near search (``begin_solve``)
         self._planes = {}           # the guard's ``Planes`` beside each list, by its owner
         self.obstacle = None
         if self.colliders is not None and self.colliders.meshes is not None:
@@ -157,22 +163,25 @@ class ContactStage(BatchSteps):
             self.broad.build(x, self.skin)
 
     # -- contact inside a solve ---------------------------------------------------------------
-    def begin_solve(self, x0, x_pred):
+    def begin_solve(self, x0, x_pred, near=False):
         """The candidates a solver's iterations keep apart on a step from x0 whose
         iterates are predicted to end near x_pred: every pair that can come within the
         thickness on a motion from x0 whose ends lie within SOLVE_MARGIN thicknesses of
         the boxes of x0 and x_pred (the proximity list where it covers that, else a
-        swept search), with their separating planes at x0 (``guard.planes``: a pair
-        keeps n . (x_a - x_b) >= delta). Returns (list, its planes, rows) as
-        ``guard.keep_apart`` takes them; ``follow_solve`` keeps
-        them covering the iterates, and ``end_step`` checks the step with them where
-        they still hold it."""
-        margin = SOLVE_MARGIN * self.thickness
+        swept search), or with ``near`` (a solver whose iterates stay near x_pred) on a
+        motion whose particles start within NEAR_SOLVE_MARGIN thicknesses of x0 and end
+        within it of x_pred (``swept.py``), with their separating planes at x0
+        (``guard.planes``: a pair keeps n . (x_a - x_b) >= delta). Returns (list, its
+        planes, rows) as ``guard.keep_apart`` takes them; ``follow_solve`` keeps them
+        covering the iterates, and ``end_step`` checks the step with them where they
+        still hold it."""
+        self.solve_near = near
         if self.broad.covers(x0, x_pred):
             cl, count = self.broad.candidates, self.broad.count
         else:
             self.stats["solve_searches"] += 1
-            count = search_step(self.swept, x0, x_pred, self.thickness, margin)
+            margin = (NEAR_SOLVE_MARGIN if near else SOLVE_MARGIN) * self.thickness
+            count = search_step(self.swept, x0, x_pred, self.thickness, margin, near)
             cl = self.swept.candidates
         guard.planes(cl, self.planes_of(cl), count, x0, x_pred, self.thickness, FAR)
         self.solve_list = (cl, count)
@@ -184,7 +193,8 @@ class ContactStage(BatchSteps):
         cl, count = self.solve_list
         held = (self.broad.covers(x0, x) if cl is self.broad.candidates
                 else self.swept.holds(x0, x))
-        return (cl, self.planes_of(cl), count) if held else self.begin_solve(x0, x)
+        return ((cl, self.planes_of(cl), count) if held
+                else self.begin_solve(x0, x, self.solve_near))
 
     def truncate_solve(self, x0, x_pred, v):
         """The predicted motion of the last ``begin_solve``, from x0 to x_pred, cut short

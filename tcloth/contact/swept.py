@@ -18,23 +18,27 @@ cells is kept only in the first cell of their overlap, so each pair is listed on
 cell is the larger of the longest edge, T and a third of the longest path, so a box spans
 at most a few cells a side.
 
-Only the pairs that can come within T on a motion the search holds are kept
-(``SweptSearch._may_meet``): a pair's gap at the start closes by at most the longest
-relative displacement of a vertex pair across its sides (``guard.relative_path``), so a
-pair whose gap at the start less that stays above T plus twice the margin below is left
-out. Swept boxes alone kept about 30 times as many: at one step per frame the 64 x 64
-fold's boxes listed about 500,000 pairs, most of them neighbours within one layer whose
-boxes meet but which move together (``docs/contact.md``).
-
 The guard then moves end positions off their paths (its projection, the colliders'
-sweep), and a solver's iterates wander about the predicted end it was searched for. So a
-search serves every motion whose start lies within a margin of the searched start
-(``origin``) and whose end within the margin of the searched end (``anchor``), particle
-by particle (``SweptSearch.holds``): along the straight path between them each particle
-stays within the margin of its searched path, and a vertex pair's relative displacement
-from the searched start within the searched one's plus twice the margin. The boxes are
-grown by the margin besides, and a step searches again only where a particle left its
-margin.
+sweep), mostly back toward where they started, and a solver's iterates wander about the
+predicted end it was searched for. The boxes are grown by a margin besides, so one search
+serves every motion whose ends stay within the margin of the box of each particle's
+searched path (``SweptSearch.holds``), and a step searches again only where a particle
+left it.
+
+A search for a solver whose iterates stay near the predicted end (``near``: projective
+dynamics', whose last iterate ended within 1.9 mm of its first on the 64 x 64 fold, T
+being 3.75 mm) keeps only the pairs that can come within T on a motion it holds
+(``SweptSearch._may_meet``), and holds a motion only where each particle starts within
+the margin of its searched start (``origin``) and ends within it of its searched end
+(``anchor``). Along the straight path between them a vertex pair's relative displacement
+from the start stays within the searched one's plus twice the margin, and a pair's gap
+closes by at most its vertex pairs' longest relative displacement
+(``guard.relative_path``), so a pair whose gap at the start less the searched closing
+stays above T plus twice the margin is left out. Swept boxes alone listed about 500,000
+pairs on that fold, most of them neighbours in one layer that move together; the near
+search lists a tenth to a third of them (``docs/contact.md``). XPBD's and VBD's iterates
+move farther from the prediction: they keep the boxes (a near search with its stricter
+``holds`` searched again nearly every iteration).
 """
 import taichi as ti
 
@@ -55,26 +59,30 @@ def _box_grids(table, capacity):
 @ti.data_oriented
 class SweptSearch(CandidateSearch):
     """The swept-box candidates of one step (module docstring): ``candidates`` (a
-    ``ContactList``) and ``count``; ``origin`` and ``anchor`` the start and end positions
-    and ``margin`` the margin it was searched with, ``reach`` the thickness plus twice
-    the margin."""
+    ``ContactList``) and ``count``; ``origin`` and ``anchor`` the start and end positions,
+    ``margin`` the margin it was searched with and ``near`` whether it was a near search
+    (``reach``: the thickness plus twice the margin)."""
 
     def __init__(self, table, inv_mass):
         self.origin, self.anchor = (ti.Vector.field(3, inv_mass.dtype, shape=inv_mass.shape[0])
                                     for _ in range(2))
-        self.margin = 0.0
+        self.margin, self.near = 0.0, False
         self.reach = ti.field(runtime.real(), shape=())
+        self.filtered = ti.field(ti.i32, shape=())
         super().__init__(table, inv_mass,
                          _box_grids(table, 16 * (table.point_count + table.edge_count)),
                          self._may_meet)
 
     @ti.func
     def _may_meet(self, ids, kind):
-        """Whether contact ids can come within the thickness on a motion the search holds
-        (module docstring)."""
-        _, g = gap(ids, kind, self.origin)
-        closing = relative_path(ids, kind, self.origin, self.anchor)
-        return g.norm() - closing <= self.reach[None] + GAP_ROUNDING
+        """Whether contact ids can come within the thickness on a motion a near search
+        holds (module docstring); every pair for the others."""
+        keep = True
+        if self.filtered[None]:
+            _, g = gap(ids, kind, self.origin)
+            closing = relative_path(ids, kind, self.origin, self.anchor)
+            keep = g.norm() - closing <= self.reach[None] + GAP_ROUNDING
+        return keep
 
     def _list(self, capacity):
         return ContactList(self.table, self.inv_mass, capacity)
@@ -84,10 +92,15 @@ class SweptSearch(CandidateSearch):
 
     def holds(self, x0, x1):
         """Whether the candidates still hold every pair that can come within the thickness
-        on the motion x0 -> x1: each particle's start within the margin of ``origin`` and
-        its end within the margin of ``anchor`` (module docstring)."""
-        return float(departure(self.table.points, self.origin, self.anchor, x0,
-                               x1)) <= self.margin
+        on the motion x0 -> x1 (module docstring): both ends within the margin of the box
+        of each particle's searched path (``origin`` -> ``anchor``), or after a near
+        search each particle's start within the margin of ``origin`` and its end within
+        it of ``anchor``."""
+        if self.near:
+            return float(departure(self.table.points, self.origin, self.anchor, x0,
+                                   x1)) <= self.margin
+        return max(float(excess(self.table.points, self.origin, self.anchor, x))
+                   for x in (x0, x1)) <= self.margin
 
 @ti.func
 def _box(x0, x1, ids: ti.template(), grow):
@@ -183,15 +196,17 @@ def departure(points: ti.template(), origin: ti.template(), anchor: ti.template(
     return most
 
 
-def search_step(swept, x0, x1, thickness, margin):
+def search_step(swept, x0, x1, thickness, margin, near=False):
     """Fill ``swept.candidates`` (a ``SweptSearch``) with the step's swept-box candidates,
-    boxes grown by ``margin`` (m) besides; returns their number (also ``swept.count``)."""
+    boxes grown by ``margin`` (m) besides, less those that cannot meet where ``near``
+    (module docstring); returns their number (also ``swept.count``)."""
     table = swept.table
     path = float(longest_path(table.points, x0, x1))
     cell = max(float(longest_edge(table, x0)), thickness + 2.0 * margin, path / 3.0, 1e-9)
     swept.origin.copy_from(x0)
     swept.anchor.copy_from(x1)
-    swept.margin = margin
+    swept.margin, swept.near = margin, near
     swept.reach[None] = thickness + 2.0 * margin
+    swept.filtered[None] = int(near)
     return swept.fit(lambda: sweep_search(swept.search, swept.candidates, x0, x1, thickness,
                                           margin, cell))
