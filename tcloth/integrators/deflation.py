@@ -88,7 +88,8 @@ class PlaneDeflation:
             a_ij, g_ij = ti.cast(0.0, ti.f64), ti.cast(0.0, ti.f64)
             for a, b in ti.static([(0, 0), (0, 1), (1, 0), (1, 1)]):
                 p, q = self.pairs[i][a], self.pairs[j][b]
-                sign = ti.static((1 - 2 * a) * (1 - 2 * b)) * cosine * self._free(p) * self._free(q)
+                sign = (ti.static((1 - 2 * a) * (1 - 2 * b)) * cosine
+                        * self._free(p) * self._free(q))
                 coupling = ti.cast(0.0, ti.f64)
                 for e in range(self.solver.adj_start[p], self.solver.adj_start[p + 1]):
                     if p == q:
