@@ -31,8 +31,7 @@ QUERY_BLOCK = 64
 # a block's slots for what its queries find, at first, per query: a search that overflows
 # them is made again larger, and every kernel that reads it compiles again (seconds, in the
 # middle of a run: the 64 x 64 fold's proximity list needed 19 a query where the layers
-# overlap, its solve's swept search 43 before the swept list left out the pairs that
-# cannot meet)
+# overlap, projective's near search at a margin of one thickness 43)
 SLOTS_PER_QUERY = 32
 
 
