@@ -15,7 +15,9 @@ active at that iterate, each pair's direction u = (n on a, -n on b), U their col
 
 Prints ``preconditioner.<at>.<name>.iterations: k1,k2,...`` per solve (and ``.solver``,
 what the solver itself took, ``.pairs``, the active pairs) and their medians; the measured
-table is in docs/contact.md ("Which preconditioner, measured before building it").
+table is in docs/contact.md ("Which preconditioner, measured before building it"). The
+solver has since got the two-level preconditioner (``integrators/deflation.py``), so its
+``.solver`` iterations are now those of ``two_level`` (up to rounding and its start).
 
 Usage: python tools/planes_preconditioner.py [--n 64] [--at 8,30] [--dt 0.016667]
 """

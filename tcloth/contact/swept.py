@@ -60,13 +60,13 @@ def _box_grids(table, capacity):
 class SweptSearch(CandidateSearch):
     """The swept-box candidates of one step (module docstring): ``candidates`` (a
     ``ContactList``) and ``count``; ``origin`` and ``anchor`` the start and end positions,
-    ``margin`` the margin it was searched with and ``near`` whether it was a near search
-    (``reach``: the thickness plus twice the margin)."""
+    ``margin`` the margin it was searched with; ``filtered`` 1 after a near search and
+    ``reach`` the thickness plus twice the margin, for ``_may_meet``."""
 
     def __init__(self, table, inv_mass):
         self.origin, self.anchor = (ti.Vector.field(3, inv_mass.dtype, shape=inv_mass.shape[0])
                                     for _ in range(2))
-        self.margin, self.near = 0.0, False
+        self.margin = 0.0
         self.reach = ti.field(runtime.real(), shape=())
         self.filtered = ti.field(ti.i32, shape=())
         super().__init__(table, inv_mass,
@@ -96,7 +96,7 @@ class SweptSearch(CandidateSearch):
         of each particle's searched path (``origin`` -> ``anchor``), or after a near
         search each particle's start within the margin of ``origin`` and its end within
         it of ``anchor``."""
-        if self.near:
+        if self.filtered[None]:
             return float(departure(self.table.points, self.origin, self.anchor, x0,
                                    x1)) <= self.margin
         return max(float(excess(self.table.points, self.origin, self.anchor, x))
@@ -205,7 +205,7 @@ def search_step(swept, x0, x1, thickness, margin, near=False):
     cell = max(float(longest_edge(table, x0)), thickness + 2.0 * margin, path / 3.0, 1e-9)
     swept.origin.copy_from(x0)
     swept.anchor.copy_from(x1)
-    swept.margin, swept.near = margin, near
+    swept.margin = margin
     swept.reach[None] = thickness + 2.0 * margin
     swept.filtered[None] = int(near)
     return swept.fit(lambda: sweep_search(swept.search, swept.candidates, x0, x1, thickness,

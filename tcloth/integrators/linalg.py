@@ -98,10 +98,10 @@ def _apply(field: ti.template(), p, v):
 
 class ConjugateGradients:
     """The iteration loop of a conjugate-gradient solver whose kernels ``_start`` (set up
-    from x = 0, return r.r; ``_begin`` calls it, or another start) and ``_iterate`` (one iteration, return r.r, or -1 when the
-    matrix is not positive definite along the search direction p, leaving x as it was)
-    are given by a subclass, with fields ``x`` and ``p``, and ``precondition`` (x = the
-    preconditioner applied to b)."""
+    from x = 0, return r.r; ``_begin`` calls it, or another start) and ``_iterate`` (one
+    iteration, return r.r, or -1 when the matrix is not positive definite along the
+    search direction p, leaving x as it was) are given by a subclass, with fields ``x``
+    and ``p``, and ``precondition`` (x = the preconditioner applied to b)."""
 
     def solve(self, tol, max_iterations):
         """Iterate from x = 0 until the residual has dropped to tol times |b| or
