@@ -63,16 +63,6 @@ class ContactList:
         return gap(ids, kind, x)
 
     @ti.func
-    def counts(self, c, ids, kind, alpha, g, x):
-        """Whether row c repels and is, at positions x (its weights alpha and gap g), the
-        row through which its closest points are in contact (``SelfCollisionTable.counts``:
-        a contact over a shared edge or corner is counted once)."""
-        out = False
-        if self.repels[c]:
-            out = self.table.counts(ids, kind, alpha, g, x)
-        return out
-
-    @ti.func
     def inverse_mass(self, ids, alpha):
         """sum_k alpha_k^2 / m_k: the contact's inverse effective mass."""
         w = 0.0

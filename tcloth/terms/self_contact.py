@@ -19,19 +19,11 @@ each particle gets alpha_k f with
 v_rel = sum_k alpha_k v_k the relative velocity of the closest points (v_n its normal and
 v_t its tangential part), m = 1 / sum_k alpha_k^2 / m_k the contact's effective mass and
 zeta the damping ratio: the colliders' law between two moving surfaces. Since sum_k alpha_k
-= 0 the forces cancel: linear momentum is conserved. The force is minus the gradient of
-the energy (the closest points minimise d, so their own change does not enter). A contact
-with d = 0 exactly has no direction and exerts nothing.
-
-Each contact counts once (Offset Geometric Contact's rule, Chen et al. 2025;
-``SelfCollisionTable.counts``): a point is in contact with a triangle's face where it lies
-over the face, with an edge or a corner only where its direction from there lies in that
-feature's normal cone (not over a neighbouring face), and then through one of the
-triangles there; two edges only where their closest points lie inside both and the
-direction lies in both edges' cones (a point against an edge or a corner is a
-point-triangle row's). So a particle near a flat layer feels k (T - d) along the layer's
-normal wherever it is, where a sum over every row within T counted it twice over an edge
-and up to six times over a corner, and pushed it along the layer near them.
+= 0 the forces cancel: linear momentum is conserved. Each contact is a sum term, so a
+particle above a triangle's edge or vertex also feels the neighbouring triangles (a
+smooth, slightly stronger repulsion there); the force is minus the gradient of the energy
+(the closest points minimise d, so their own change does not enter). A contact with d = 0
+exactly has no direction and exerts nothing.
 
 Contact set. The term reads the candidates of the simulator's contact stage
 (``contact/stage.py``: one list per simulator, rebuilt only at the stage's update points),
@@ -76,17 +68,6 @@ def _normal(g, d):
 
 
 @ti.func
-def _counts(cl, c, ids, kind, alpha, g, x, depth):
-    """Whether row c of list cl is a contact of the law at x where its depth (the
-    thickness less its distance) is positive (``ContactList.counts``; only such rows read
-    the mesh around them)."""
-    out = False
-    if depth > 0.0:
-        out = cl.counts(c, ids, kind, alpha, g, x)
-    return out
-
-
-@ti.func
 def pair_force(cl, c, x, v):
     """(touches, ids, alpha, f) of candidate c of list cl at (x, v): particle k of the
     contact gets alpha_k f where it touches (a repelling pair closer than the thickness,
@@ -98,7 +79,7 @@ def pair_force(cl, c, x, v):
     thickness, k = prm[0], prm[1]
     touches = False
     f = ti.Vector.zero(float, 3)
-    if d > 0.0 and _counts(cl, c, ids, kind, alpha, g, x, thickness - d):
+    if cl.repels[c] and d > 0.0 and d < thickness:
         n = _normal(g, d)
         v_rel = ti.Vector.zero(float, 3)
         for j in ti.static(range(4)):
@@ -146,10 +127,9 @@ def _energy(cl: ti.template(), count: ti.i32, ref_gap: ti.template(), x: ti.temp
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
         if near(cl, ref_gap, far, c, prm[0]):
-            ids, kind = cl.ids[c], cl.kind[c]
-            alpha, g = cl.gap(ids, kind, x)
+            alpha, g = cl.gap(cl.ids[c], cl.kind[c], x)
             depth = prm[0] - g.norm()
-            if _counts(cl, c, ids, kind, alpha, g, x, depth):
+            if cl.repels[c] and depth > 0.0:
                 out[0] += ti.cast(0.5 * prm[1] * depth * depth, out.dtype)
     return ti.cast(out[0], ti.f64)
 
@@ -160,9 +140,9 @@ def _active(cl: ti.template(), count: ti.i32, x: ti.template()) -> ti.types.vect
     pt, ee = 0, 0
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
-        ids, kind = cl.ids[c], cl.kind[c]
-        alpha, g = cl.gap(ids, kind, x)
-        if _counts(cl, c, ids, kind, alpha, g, x, cl.table.params[0] - g.norm()):
+        kind = cl.kind[c]
+        alpha, g = cl.gap(cl.ids[c], kind, x)
+        if cl.repels[c] and g.norm() < cl.table.params[0]:
             if kind == POINT_TRIANGLE:
                 pt += 1
             else:
@@ -193,11 +173,10 @@ def lagged(cl, c, x0):
     """(fn, n, alpha) of candidate c at the step's start x0: its normal force k (T - d)
     (0 where it does not touch), normal and weights."""
     prm = ti.static(cl.table.params)
-    ids, kind = cl.ids[c], cl.kind[c]
-    alpha, g = cl.gap(ids, kind, x0)
+    alpha, g = cl.gap(cl.ids[c], cl.kind[c], x0)
     d = g.norm()
     fn = 0.0
-    if d > 0.0 and _counts(cl, c, ids, kind, alpha, g, x0, prm[0] - d):
+    if cl.repels[c] and d > 0.0 and d < prm[0]:
         fn = prm[1] * (prm[0] - d)
     return fn, _normal(g, d), alpha
 
@@ -244,13 +223,12 @@ def penalty_gradient(cl, c, x):
     """(ids, alpha, depth T - d, the penalty's gradient in the gap -k (T - d) n) of
     candidate c at x: the gradient zero where it does not touch."""
     prm = ti.static(cl.table.params)
-    ids, kind = cl.ids[c], cl.kind[c]
-    alpha, g = cl.gap(ids, kind, x)
+    ids = cl.ids[c]
+    alpha, g = cl.gap(ids, cl.kind[c], x)
     d = g.norm()
-    depth = 0.0
+    depth = prm[0] - d
     grad = ti.Vector.zero(float, 3)
-    if _counts(cl, c, ids, kind, alpha, g, x, prm[0] - d):
-        depth = prm[0] - d
+    if cl.repels[c] and depth > 0.0:
         grad = -prm[1] * depth * _normal(g, d)
     return ids, alpha, depth, grad
 
@@ -266,7 +244,7 @@ def _incremental(cl: ti.template(), lag: ti.template(), count: ti.i32, x: ti.tem
     for c in range(count):
         ids, alpha, depth, grad = penalty_gradient(cl, c, x)
         e = 0.0
-        if depth > 0.0:
+        if cl.repels[c] and depth > 0.0:
             e = 0.5 * prm[1] * depth * depth
             if ti.static(with_grad):
                 for j in ti.static(range(4)):
@@ -291,11 +269,11 @@ def _blocks(cl: ti.template(), lag: ti.template(), count: ti.i32, x: ti.template
         diag[p] = ti.Matrix.zero(float, 3, 3)
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
-        ids, kind = cl.ids[c], cl.kind[c]
-        alpha, g = cl.gap(ids, kind, x)
+        ids = cl.ids[c]
+        alpha, g = cl.gap(ids, cl.kind[c], x)
         d = g.norm()
         penalty = ti.Matrix.zero(float, 3, 3)
-        if _counts(cl, c, ids, kind, alpha, g, x, prm[0] - d):
+        if cl.repels[c] and d < prm[0]:
             n = _normal(g, d)
             penalty = prm[1] * n.outer_product(n)
         _, _, block = _dissipation(cl, lag, c, x, x0, h)
@@ -377,8 +355,7 @@ def _project_pass(cl: ti.template(), count: ti.i32, x: ti.template(), v: ti.temp
         if ti.static(velocity):
             for j in ti.static(range(4)):
                 v_rel += alpha[j] * v[ids[j]]
-        reach = cl.table.params[0] * (1.0 + VELOCITY_REACH)
-        if _counts(cl, c, ids, kind, alpha, g, x, reach - g.norm()):
+        if cl.repels[c]:
             fires, impulse = projection_impulse(ti.static(cl.table.params), g,
                                                 cl.inverse_mass(ids, alpha), v_rel, velocity)
             if fires:
