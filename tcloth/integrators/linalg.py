@@ -223,11 +223,16 @@ class PCG(ConjugateGradients):
             self.x[p] = ti.Vector.zero(float, 3)
             self.r[p] = rp
             rr += ti.cast(rp.dot(rp), ti.f64)
+        self._first_direction()
+        return rr
+
+    @ti.func
+    def _first_direction(self):
+        """z = p = P^-1 r; scalars[0] = r.z (the start's, after r is set)."""
         self.scalars[0] = self._precondition_r()
         ti.loop_config(serialize=ti.static(serial(self.x)))
         for p in range(self.x.shape[0]):
             self.p[p] = self.z[p]
-        return rr
 
     @ti.kernel
     def _iteration(self) -> ti.f64:

@@ -355,10 +355,7 @@ class MultigridPCG(linalg.PCG):
             if self.inv_mass[p] > 0.0:
                 rp = self.b[p] - self._product(self.x, p)
             self.r[p] = rp
-        self.scalars[0] = self._precondition_r()
-        ti.loop_config(serialize=ti.static(serial(self.x)))
-        for p in range(self.x.shape[0]):
-            self.p[p] = self.z[p]
+        self._first_direction()
 
     @ti.func
     def _precondition_r(self):
