@@ -24,13 +24,16 @@ p, -W between spring neighbours), the planes' part from their Hessian sum_k w_k 
 u_k^T = U W U^T, so U^T (U W U^T) U = G W G with G = U^T U. Two candidates can give one
 vertex pair the same normal, so E^+ is NumPy's pseudo-inverse. The solver's only
 couplings must be the planes (no constant matrix of a bending or membrane term:
-projective then solves without the second level), and its diagonal and weights scalars.
+projective then solves without the second level), its weights scalars and its diagonal
+symmetric 3 x 3 blocks (``linalg.symmetric6``: a collider's stiffness acts along its
+normal), so that a pair's diagonal part is n_k . D_p n_l.
 """
 import numpy as np
 import taichi as ti
 
 from .. import runtime
 from ..runtime import serial
+from .linalg import symmetric6_times
 
 # more active pairs than this: the solve runs without the second level (E's entries cost
 # k^2, its pseudo-inverse k^3; the 64 x 64 fold had 58 to 197)
@@ -88,18 +91,19 @@ class PlaneDeflation:
             a_ij, g_ij = ti.cast(0.0, ti.f64), ti.cast(0.0, ti.f64)
             for a, b in ti.static([(0, 0), (0, 1), (1, 0), (1, 1)]):
                 p, q = self.pairs[i][a], self.pairs[j][b]
-                sign = (ti.static((1 - 2 * a) * (1 - 2 * b)) * cosine
-                        * self._free(p) * self._free(q))
+                ends = ti.static((1 - 2 * a) * (1 - 2 * b)) * self._free(p) * self._free(q)
+                sign = ends * cosine
                 coupling = ti.cast(0.0, ti.f64)
                 for e in range(self.solver.adj_start[p], self.solver.adj_start[p + 1]):
                     if p == q:
                         coupling += self.solver.weights[e]
                     elif self.solver.adj[e][1] == q:
                         coupling -= self.solver.weights[e]
-                if p == q:
-                    coupling += self.solver.diag[p]
-                    g_ij += sign
                 a_ij += sign * coupling
+                if p == q:
+                    own = self.n[i].dot(symmetric6_times(self.solver.diag[p], self.n[j]))
+                    a_ij += ends * ti.cast(own, ti.f64)
+                    g_ij += sign
             springs[i, j], gram[i, j] = a_ij, g_ij
 
     @ti.kernel

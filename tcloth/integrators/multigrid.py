@@ -12,7 +12,9 @@ exactly with its dense inverse (Gauss-Jordan in a kernel).
 
 Two matrices, two cycles, one hierarchy (``GridLevels``):
   - ``GridMultigrid``: the projective solver's constant matrix, the same for x, y and z
-    (scalar weights), built once per scene in NumPy. One weighted Jacobi sweep before and
+    (scalar weights), built once per scene in NumPy; the fine level's diagonal may differ
+    between x, y and z at the iterate (``set_fine_diagonal``: the colliders' stiffness
+    along their normals, n n^T's diagonal). One weighted Jacobi sweep before and
     one after each coarse correction (weight 4/3 over the largest eigenvalue of D^-1 A),
     the first folded into the restriction.
   - ``BlockGridMultigrid``: backward Euler's Newton Hessian (symmetric 3 x 3 blocks),
@@ -28,8 +30,9 @@ update that decreases the energy a linear solve would minimise.
 Vectors are vec3 fields padded by two nodes of zeros on every side, so that stencils need
 no bounds tests. The scalar cycle's loops are ``ti.func`` bodies called from the projective
 solver's kernel, so that a whole iteration is one launch; the block cycle is small kernels
-(they compile faster than one large kernel): on one thread four for the fine level and two for the coarse
-ones, in parallel a few per level. ``vcycle`` runs one from NumPy for tests and tools.
+(they compile faster than one large kernel): on one thread four for the fine level and
+two for the coarse ones, in parallel a few per level. ``vcycle`` runs one from NumPy for
+tests and tools.
 """
 import numpy as np
 import taichi as ti
@@ -191,9 +194,12 @@ class GridMultigrid(GridLevels):
         real = runtime.real()
         self.w = [ti.Vector.field(len(s), real, shape=shape)
                   for s, shape in zip(self.stencils, self.shapes)]
-        self.inv_diag = [ti.field(real, shape=shape) for shape in self.shapes]
+        # per component: the fine level's diagonal differs between x, y and z where
+        # ``set_fine_diagonal`` adds a contact's stiffness along its normal
+        self.inv_diag = [ti.Vector.field(3, real, shape=shape) for shape in self.shapes]
         self.omega = ti.field(real, shape=len(self.shapes))
         self.fine_base = ti.field(real, shape=self.shapes[0])
+        self.fine_extra = ti.Vector.field(3, real, shape=self.shapes[0])
 
     def set_matrix(self, weights, omegas=None):
         """Fine stencil weights (ny, nx, len(stencil)); builds every level. ``omegas``: the
@@ -204,12 +210,13 @@ class GridMultigrid(GridLevels):
         for level, stencil in enumerate(self.stencils):
             diag = weights[..., stencil.index((0, 0))]
             self.w[level].from_numpy(weights.astype(npr))
-            self.inv_diag[level].from_numpy(
-                np.where(diag > 0, 1.0 / np.where(diag > 0, diag, 1.0), 0.0).astype(npr))
+            inverse = np.where(diag > 0, 1.0 / np.where(diag > 0, diag, 1.0), 0.0)
+            self.inv_diag[level].from_numpy(np.repeat(inverse[..., None], 3, -1).astype(npr))
             if omegas is None:
                 computed.append(smoothing_weight(weights, stencil))
             if level + 1 < self.levels:
                 weights = galerkin(weights, stencil)
+        self.fine_extra.fill(0)
         omegas = computed if omegas is None else omegas
         self.omega.from_numpy(np.array(omegas, dtype=npr))
         self._set_coarsest(np.kron(dense_matrix(weights, self.stencils[-1]), np.eye(3)))
@@ -221,21 +228,20 @@ class GridMultigrid(GridLevels):
 
     @ti.func
     def set_fine_diagonal(self, j, i, extra):
-        """The fine level's diagonal at node (j, i): its ``set_fine_base`` value plus extra
-        (an active node's only; before the node's ``set_rhs``). The coarse levels keep
-        what ``set_matrix`` gave them."""
+        """The fine level's diagonal at node (j, i): its ``set_fine_base`` value plus the
+        vector extra, per component (an active node's only; before the node's
+        ``set_rhs``). The coarse levels keep what ``set_matrix`` gave them."""
         d = self.fine_base[j, i]
         if d > 0.0:
-            d += extra
-            self.w[0][j, i][ti.static(self.stencil.index((0, 0)))] = d
-            self.inv_diag[0][j, i] = 1.0 / d
+            self.fine_extra[j, i] = extra
+            self.inv_diag[0][j, i] = 1.0 / (d + extra)
 
     def _solution(self, level):
         return self.t[level]
 
     @ti.func
     def _active(self, level: ti.template(), j, i):
-        return self.inv_diag[level][j, i] > 0.0
+        return self.inv_diag[level][j, i][0] > 0.0
 
     @ti.func
     def product_at(self, level: ti.template(), v: ti.template(), j, i):
@@ -245,6 +251,8 @@ class GridMultigrid(GridLevels):
         for k in ti.static(range(len(self.stencils[level]))):
             di, dj = ti.static(self.stencils[level][k])
             acc += w[k] * v[j + PAD + dj, i + PAD + di]
+        if ti.static(level == 0):
+            acc += self.fine_extra[j, i] * v[j + PAD, i + PAD]
         return acc
 
     @ti.func

@@ -34,15 +34,17 @@ The global solve, A is constant per scene and dt:
     cg_tol relative to |g|.
 Colliders act inside the iterations: their penalty and normal damping, against each
 particle's plane linearised at the step's start (``Colliders.begin_solve``), are in the
-force residual at every iterate, and their stiffness k + c_d / h is on A's diagonal for
-every particle the step can bring within a collider's thickness (its distance at the
-step's start less h |v0| + h^2 |g| and a thickness), so that the global solve carries a
-collider's push through the springs to the whole cloth in the step it lands (a
-projection after the iterations stopped only the particles that touched, and the rest
-of a falling cloth tore itself on them). A changes with that set of particles, and is
-rebuilt when it does. Friction follows the iterations: against each collider a particle
-touches, its approaching normal velocity is removed and its tangential velocity cut by
-mu times the normal velocity change the contact force gave it over the step (Coulomb).
+force residual at every iterate, and their stiffness (k + c_d / h) n n^T is in A's
+diagonal blocks for the particles within a collider's thickness at the iterate, so that
+the global solve carries a collider's push through the springs to the whole cloth in
+the step it lands (a projection after the iterations stopped only the particles that
+touched, and the rest of a falling cloth tore itself on them). Along the normal only: a
+frictionless collider takes no tangential momentum (with k + c_d / h in all three
+directions, a cloth pushed along a frictionless floor hardly moved within the
+iterations, and the step lost the momentum). Friction follows the iterations: against
+each collider a particle touches, its approaching normal velocity is removed and its
+tangential velocity cut by mu times the normal velocity change the contact force gave it
+over the step (Coulomb).
 A mesh collider's contact stage (``contact/obstacle.py``) keeps the step free of crossings
 with half-spaces set for the motion the solve made; more iterations then pull the
 particles below them onto them with a stiff penalty (``_hold``), so the springs take the
@@ -146,8 +148,9 @@ class Projective(Integrator):
             springs = self.residual_forces.springs or term_modules.Springs(model)
             self.adj_start, self.adj = springs.adjacency()
             self.weight = ti.field(real, shape=self.adj.shape[0])
-            self.diag, self.precond, self.base_diag, self.row_rest, self.bound = (
-                ti.field(real, shape=n) for _ in range(5))
+            # A's diagonal blocks (``linalg.symmetric6``) and block-Jacobi's inverses
+            self.diag, self.precond = ti.Vector.field(6, real, n), ti.Matrix.field(3, 3, real, n)
+            self.base_diag, self.row_rest, self.bound = (ti.field(real, n) for _ in range(3))
             # terms with a constant matrix (bending's Hessian, the membrane's bound)
             # enter A whole: their diagonal here, their couplings in CG's products
             self.constant = tuple(t.constant_matrix() for t in self.residual_forces.terms
@@ -360,14 +363,19 @@ class Projective(Integrator):
                 self.weight[k] = self.ks[s] + self.kd[s] / h
                 self.row_rest[p] += self.weight[k]
             self.bound[p] = self.base_diag[p] + self.row_rest[p]
-            self._set_diagonal(p, 0.0)
+            self._set_diagonal(p, ti.Matrix.zero(float, 3, 3))
 
     @ti.func
     def _set_diagonal(self, p, extra):
-        """A's diagonal at particle p with ``extra`` added (the colliders' weights of the
-        contacts active at the iterate), and its Jacobi preconditioner."""
-        self.diag[p] = self.base_diag[p] + extra
-        self.precond[p] = 1.0 / (self.diag[p] + self.row_rest[p])
+        """A's diagonal block at particle p with the 3 x 3 ``extra`` added (the stiffness
+        of the contacts active at the iterate), and its block-Jacobi preconditioner (where
+        no V-cycle preconditions)."""
+        block = self.base_diag[p] * ti.Matrix.identity(float, 3) + extra
+        self.diag[p] = linalg.symmetric6(block)
+        if ti.static(not self.gridded):
+            if self.inv_mass[p] > 0.0:
+                self.precond[p] = (block + self.row_rest[p]
+                                   * ti.Matrix.identity(float, 3)).inverse()
 
     # -- the iterations -------------------------------------------------------------------
     @ti.kernel
@@ -400,16 +408,16 @@ class Projective(Integrator):
 
     @ti.func
     def _contact_residual(self, x, v, p, h):
-        """(g_p with the mesh colliders' hold, the stiffness of p's active contacts and
-        hold on A's diagonal; 0 without colliders): the residual of the CG path."""
+        """(g_p with the mesh colliders' hold, the 3 x 3 stiffness of p's active contacts
+        and hold on A's diagonal; 0 without colliders): the residual of the CG path."""
         g = self._force_residual(x, v, p, self.f[p], h)
-        w = 0.0
+        w = ti.Matrix.zero(float, 3, 3)
         if ti.static(self.has_colliders):
-            w = self.colliders.plane_weight(p, x)
+            w = self.colliders.plane_stiffness(p, x)
             if ti.static(self.has_hold):
                 f_hold, w_hold = self.hold.pull(p, x)
                 g += f_hold
-                w += w_hold
+                w += w_hold * ti.Matrix.identity(float, 3)
         return g, w
 
     @ti.kernel
@@ -476,7 +484,8 @@ class Projective(Integrator):
             if ti.static(self.has_colliders):
                 self._set_diagonal(p, w)
                 if ti.static(self.gridded):
-                    self.mg.set_fine_diagonal(p // self.grid.nx, p % self.grid.nx, w)
+                    self.mg.set_fine_diagonal(p // self.grid.nx, p % self.grid.nx,
+                                              ti.Vector([w[0, 0], w[1, 1], w[2, 2]]))
             self.solver.b[p] = g
             total += ti.cast(g.dot(g), ti.f64)
         return total

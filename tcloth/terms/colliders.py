@@ -23,7 +23,7 @@ convex dissipation potential whose gradient is exactly the explicit law at the e
 velocity; VBD likewise. Projective dynamics has the penalty and normal damping in its
 residual, the approach speed the damping sees capped at depth / h so that the force is
 continuous where contact begins (``plane_contact_force``), and their stiffness in its
-matrix (``plane_force``, ``plane_weight``), XPBD
+matrix along the normals (``plane_force``, ``plane_stiffness``), XPBD
 pushes particles out (``push_out``), and both apply friction after the solve with the
 normal velocity change it gave (``plane_coulomb``).
 
@@ -374,17 +374,20 @@ class Colliders(Term):
                                     (v[p], self.mass[p]))
 
     @ti.func
-    def _weight_body(self, col, c, gap, n, m):
+    def _stiffness_body(self, col, c, gap, n, m):
         w = 0.0
         if gap < col.thickness:
             w = col.stiffness + 2.0 * col.damping * ti.sqrt(col.stiffness * m) / self._h[None]
-        return w
+        return w * n.outer_product(n)
 
     @ti.func
-    def plane_weight(self, p, x):
-        """k + c_d / h summed over particle p's planes it is within the thickness of at x:
-        the stiffness of its active contacts (projective's diagonal at an iterate)."""
-        return self._for_each_plane(p, x, self._weight_body, 0.0, self.mass[p])
+    def plane_stiffness(self, p, x):
+        """(k + c_d / h) n n^T summed over particle p's planes it is within the thickness
+        of at x: the stiffness of its active contacts, along their normals only (the
+        penalty and the normal damping act along n), for projective's matrix at an
+        iterate."""
+        return self._for_each_plane(p, x, self._stiffness_body, ti.Matrix.zero(float, 3, 3),
+                                    self.mass[p])
 
     @ti.func
     def _push_body(self, col, c, gap, n, x):
