@@ -2,6 +2,7 @@
 coarse operators, V-cycle convergence to the exact solution, pinned nodes."""
 import numpy as np
 import pytest
+import taichi as ti
 
 from tcloth.model.grid import stencil as grid_stencil
 from tcloth.integrators import block_multigrid, galerkin, multigrid
@@ -125,6 +126,40 @@ def test_two_level_cycle_is_smoothing_coarse_correction_smoothing(f64):
     assert np.isclose(np.sum(rhs * solver.vcycle(other.reshape(ny, nx, 3)).reshape(-1, 3)),
                       np.sum(other * solver.vcycle(rhs.reshape(ny, nx, 3)).reshape(-1, 3)),
                       rtol=1e-10)
+
+
+@ti.kernel
+def _add_fine_diagonal(mg: ti.template(), extra: ti.types.ndarray()):
+    for j, i in ti.ndrange(extra.shape[0], extra.shape[1]):
+        mg.set_fine_diagonal(j, i, ti.Vector([extra[j, i, 0], extra[j, i, 1], extra[j, i, 2]]))
+
+
+def test_a_fine_diagonal_per_component_is_in_the_smoother_and_the_product(f64):
+    """``set_fine_diagonal`` with a different addition for x, y and z (projective's
+    colliders: n n^T's diagonal): the two-level cycle of the test above, each component
+    on its own fine matrix A + diag(extra_c) (its smoother's diagonal too), the coarse
+    level built from A alone; pinned nodes keep 0."""
+    ny, nx = 13, 9
+    dense, weights, free = random_grid_matrix(ny, nx, pinned=[(0, 0), (12, 4)], seed=5)
+    solver = multigrid.GridMultigrid(nx, ny, PROVOT)
+    solver.set_matrix(weights)
+    solver.set_fine_base(weights[..., PROVOT.index((0, 0))])
+    rng = np.random.default_rng(6)
+    extra = rng.uniform(0.0, 5000.0, size=(ny * nx, 3)) * (rng.uniform(size=(ny * nx, 1)) < 0.4)
+    _add_fine_diagonal(solver, extra.reshape(ny, nx, 3))
+    p = np.kron(hat_prolongation(ny), hat_prolongation(nx)) * free[:, None]
+    coarse = p.T @ dense @ p
+    r = rng.normal(size=(ny * nx, 3)) * free[:, None]
+    expected = np.zeros_like(r)
+    for c in range(3):
+        a = dense + np.diag(extra[:, c] * free)
+        smoother = solver.omega[0] * np.where(free, 1.0 / np.where(free, np.diag(a), 1.0), 0.0)
+        e = smoother * r[:, c]
+        e = e + p @ np.linalg.solve(coarse, p.T @ (r[:, c] - a @ e))
+        expected[:, c] = e + smoother * (r[:, c] - a @ e)
+    got = solver.vcycle(r.reshape(ny, nx, 3)).reshape(-1, 3)
+    assert np.allclose(got, expected, rtol=1e-10, atol=1e-12 * np.abs(expected).max())
+    assert np.all(got[~free] == 0.0)
 
 
 def random_block_grid_matrix(ny, nx, pinned, seed=0):

@@ -133,8 +133,9 @@ def warp_hashgrid_ms(x, reach, repeats=5):
 def one_second(module, x40, v40, n, integrator, dt, seconds, options):
     """The n x n fold from the saved state, ``seconds`` of simulated time at one step of
     dt per frame with ``integrator``, self-collision on and off: wall time (after four steps
-    that compile, from the same start), the worst crossing count over every step (NumPy,
-    ``crossings.py``), the contact stage's statistics (the warm-up's included)."""
+    that compile, from the same start), CG iterations in all (where the solver counts
+    them), the worst crossing count over every step (NumPy, ``crossings.py``), the contact
+    stage's statistics (the warm-up's included)."""
     from crossings import count_crossings
     x, v = resample(x40, n), resample(v40, n)
     out = {}
@@ -151,6 +152,7 @@ def one_second(module, x40, v40, n, integrator, dt, seconds, options):
             out[f"{mode}_raised_at_step"] = sim.num_steps + 1
             continue
         sim.set_state(positions=x, velocities=v)
+        cg = 0
         for step in range(int(round(seconds / dt))):
             t = time.perf_counter()
             try:
@@ -160,6 +162,9 @@ def one_second(module, x40, v40, n, integrator, dt, seconds, options):
                 break
             sim.positions()
             wall += time.perf_counter() - t
+            cg += getattr(sim.integrator, "stats", {}).get("cg_iterations", 0)
+        if cg:                  # the implicit solvers' conjugate-gradient iterations
+            out[f"{mode}_cg_iterations"] = cg
             if mode == "on":
                 worst = max(worst, count_crossings(sim.positions(), scene.triangles))
         out[f"{mode}_wall_s"] = wall
