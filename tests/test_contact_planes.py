@@ -76,6 +76,64 @@ def energy(active, w, x):
                for (a, b, nk, d), wk in zip(active, w))
 
 
+def closest_direction(ids, kind, x):
+    """The unit direction between a candidate's closest points at x, in NumPy (brute
+    force over a fine sampling of the triangle or the two edges)."""
+    t = np.linspace(0.0, 1.0, 81)
+    if kind == POINT_TRIANGLE:
+        a, b, c = x[ids[1]], x[ids[2]], x[ids[3]]
+        u, v = np.meshgrid(t, t)
+        keep = u + v <= 1.0
+        points = a + u[keep, None] * (b - a) + v[keep, None] * (c - a)
+        d = x[ids[0]] - points
+    else:
+        p = x[ids[0]] + t[:, None] * (x[ids[1]] - x[ids[0]])
+        q = x[ids[2]] + t[:, None] * (x[ids[3]] - x[ids[2]])
+        d = (p[:, None, :] - q[None, :, :]).reshape(-1, 3)
+    best = d[np.argmin(np.linalg.norm(d, axis=1))]
+    return best / np.linalg.norm(best)
+
+
+def test_planes_between_two_layers_are_normal_to_them(f64):
+    """Two flat cloths 9 mm apart (thickness 6 mm), the upper one shifted by half a
+    spacing, moving along the layers: every candidate across them gets the layers'
+    normal (``guard.surface_normal``) where their closest points' direction tilts (it
+    stops one cloth's edges from passing over the other's); every plane with a margin
+    separates its candidate's vertex pairs by at least its delta at x0; candidates
+    within a layer keep their closest points' direction (in the layer)."""
+    scene = tcloth.Scene(gravity=(0.0, 0.0, 0.0))
+    spacing = 0.1 / 5
+    lower = scene.add_cloth(resolution=(6, 6), size=(0.1, 0.1), center=(0.0, 0.0, 0.0),
+                            mass=0.01, **CLOTH)
+    scene.add_cloth(resolution=(6, 6), size=(0.1, 0.1), mass=0.01, **CLOTH,
+                    center=(spacing / 2, 0.009, spacing / 2))
+    scene.set_self_collision(thickness=0.006)
+    sim = tcloth.Simulator(scene, "projective", dt=1.0 / 60.0)
+    x0 = scene.positions.astype(np.float64)
+    moved = x0.copy()
+    moved[36:, 0] += 1.0 / 60.0
+    cl, pl, rows = sim.model.contact.begin_solve(field(x0), field(moved))
+    ids, kind = cl.ids.to_numpy()[:rows], cl.kind.to_numpy()[:rows]
+    n, delta = pl.n.to_numpy()[:rows], pl.delta.to_numpy()[:rows]
+    low = set(lower.particles.ravel().tolist())
+    across, tilted = 0, 0
+    for c in range(rows):
+        if delta[c] == 0.0:
+            continue
+        pairs = PAIRS.get(kind[c], EDGE_PAIRS)
+        gaps = [n[c] @ (x0[ids[c, a]] - x0[ids[c, b]]) for a, b in pairs]
+        if delta[c] > 0.0:
+            assert min(gaps) >= delta[c] * (1 - 1e-9), (c, gaps, delta[c])
+        sides = {ids[c, k] in low for k in range(4)}
+        if len(sides) == 2:
+            across += 1
+            tilted += abs(closest_direction(ids[c], kind[c], x0)[1]) < 0.95
+            np.testing.assert_allclose(abs(n[c, 1]), 1.0, atol=1e-9)
+        else:
+            assert abs(n[c, 1]) < 1e-9
+    assert across > 20 and tilted > 10, (across, tilted)
+
+
 def test_the_planes_forces_and_matrix_match_numpy_and_finite_differences(f64):
     """The kernels' active pairs, forces f = -grad E with E = sum w/2 min(0, n.(x_a - x_b)
     - REACH delta)^2 (central differences of a NumPy E) and product H v (central
