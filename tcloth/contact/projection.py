@@ -16,8 +16,7 @@ import taichi as ti
 
 from .. import runtime
 from ..runtime import serial
-from .guard import SLACK
-from .normals import VERTEX_PAIRS, spans
+from .guard import SLACK, VERTEX_PAIRS, spans
 
 HELD_ALONG = 0.5         # a held vertex moves along a normal only if this much is left
 JACOBI = False           # the Jacobi passes on CPUs too (``project``)
