@@ -141,7 +141,7 @@ def test_a_fine_diagonal_per_component_is_in_the_smoother_and_the_product(f64):
     level built from A alone; pinned nodes keep 0."""
     ny, nx = 13, 9
     dense, weights, free = random_grid_matrix(ny, nx, pinned=[(0, 0), (12, 4)], seed=5)
-    solver = multigrid.GridMultigrid(nx, ny, PROVOT)
+    solver = multigrid.GridMultigrid(nx, ny, PROVOT, varied=True)
     solver.set_matrix(weights)
     solver.set_fine_base(weights[..., PROVOT.index((0, 0))])
     rng = np.random.default_rng(6)

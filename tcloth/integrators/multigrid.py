@@ -187,10 +187,12 @@ class GridLevels:
 class GridMultigrid(GridLevels):
     """V-cycles for A e = r with A the same scalar matrix for x, y and z, given by
     ``set_matrix`` as fine stencil weights (ny, nx, len(stencil)); weighted Jacobi
-    smoothing."""
+    smoothing. ``varied``: the fine diagonal may take additions per component at the
+    iterate (``set_fine_diagonal``); without, the fine product skips them."""
 
-    def __init__(self, nx, ny, stencil):
+    def __init__(self, nx, ny, stencil, varied=False):
         super().__init__(nx, ny, stencil)
+        self.varied = varied
         real = runtime.real()
         self.w = [ti.Vector.field(len(s), real, shape=shape)
                   for s, shape in zip(self.stencils, self.shapes)]
@@ -199,7 +201,7 @@ class GridMultigrid(GridLevels):
         self.inv_diag = [ti.Vector.field(3, real, shape=shape) for shape in self.shapes]
         self.omega = ti.field(real, shape=len(self.shapes))
         self.fine_base = ti.field(real, shape=self.shapes[0])
-        self.fine_extra = ti.Vector.field(3, real, shape=self.shapes[0])
+        self.fine_extra = ti.Vector.field(3, real, shape=self.shapes[0] if varied else (1, 1))
 
     def set_matrix(self, weights, omegas=None):
         """Fine stencil weights (ny, nx, len(stencil)); builds every level. ``omegas``: the
@@ -230,7 +232,8 @@ class GridMultigrid(GridLevels):
     def set_fine_diagonal(self, j, i, extra):
         """The fine level's diagonal at node (j, i): its ``set_fine_base`` value plus the
         vector extra, per component (an active node's only; before the node's
-        ``set_rhs``). The coarse levels keep what ``set_matrix`` gave them."""
+        ``set_rhs``; only where built ``varied``). The coarse levels keep what
+        ``set_matrix`` gave them."""
         d = self.fine_base[j, i]
         if d > 0.0:
             self.fine_extra[j, i] = extra
@@ -251,7 +254,7 @@ class GridMultigrid(GridLevels):
         for k in ti.static(range(len(self.stencils[level]))):
             di, dj = ti.static(self.stencils[level][k])
             acc += w[k] * v[j + PAD + dj, i + PAD + di]
-        if ti.static(level == 0):
+        if ti.static(level == 0 and self.varied):
             acc += self.fine_extra[j, i] * v[j + PAD, i + PAD]
         return acc
 

@@ -136,7 +136,7 @@ class Projective(Integrator):
         self.stepped = ()
         if self.grid is not None:
             self.mg = GridMultigrid(self.grid.nx, self.grid.ny,
-                                    grid_layout.stencil(self.grid.families))
+                                    grid_layout.stencil(self.grid.families), self.has_colliders)
         if self.vcycles:
             self.body = self.residual_forces.first
             self.grid_reals = model.grid_table.reals
