@@ -19,6 +19,7 @@ sys.path.insert(0, os.path.join(HERE, "..", "tools"))
 from bench_contact import (CLOTH, centre, falling, guard_step, order_kept, run_case,  # noqa: E402
                            side, signed_distances, thrown)
 from crossings import count_crossings, crossing_pairs, triangle_edges  # noqa: E402
+from bench_sliding import scene as sliding_scene  # noqa: E402
 
 
 # -- the independent counter -----------------------------------------------------------------
@@ -455,3 +456,21 @@ def test_the_swept_list_holds_every_pair_that_can_meet_on_a_motion_it_holds(f64)
     b = x1.copy()
     b[40] += 1.5 * margin
     assert not swept.holds(*motion(x0, b))
+
+
+@pytest.mark.parametrize("integrator,kept", [("xpbd", 0.99), ("projective", 0.9)])
+def test_a_cloth_slides_over_another_at_one_step_per_frame(f32, integrator, kept):
+    """A 6 x 6 cloth of 10 g thrown at 1 m/s across a 12 x 12 cloth lying on a
+    frictionless floor, 9 mm above it (self-collision of 6 mm, no friction), 10 steps at
+    1/60 (``tools/bench_sliding.py``'s case, smaller): nothing pushes along the layers, so the upper cloth should keep its speed and
+    both cloths their momentum. The separating planes take the layers' normal where the
+    motion does not cross it (``contact/normals.py``); with the closest points' direction
+    always, the two grids' parallel edges braked it to 0.33 (XPBD) and 0.18 m/s
+    (projective) (``docs/contact.md``, issue 46's part 6)."""
+    scene, _, upper, v = sliding_scene((12, 0.6, 0.15), (6, 0.2, 0.01))
+    sim = tcloth.Simulator(scene, integrator, dt=1.0 / 60.0)
+    sim.set_state(velocities=v)
+    sim.step(10)
+    assert sim.velocities()[upper.particles.ravel(), 0].mean() > kept
+    assert abs(sim.momentum()[0][0] - 0.01) < 1e-4
+    assert count_crossings(sim.positions(), scene.triangles) == 0

@@ -76,6 +76,83 @@ def energy(active, w, x):
                for (a, b, nk, d), wk in zip(active, w))
 
 
+def closest_gap(ids, kind, x):
+    """The vector between a candidate's closest points at x, first side less second, in
+    NumPy (brute force over a fine sampling of the triangle or the two edges)."""
+    t = np.linspace(0.0, 1.0, 81)
+    if kind == POINT_TRIANGLE:
+        a, b, c = x[ids[1]], x[ids[2]], x[ids[3]]
+        u, v = np.meshgrid(t, t)
+        keep = u + v <= 1.0
+        points = a + u[keep, None] * (b - a) + v[keep, None] * (c - a)
+        d = x[ids[0]] - points
+    else:
+        p = x[ids[0]] + t[:, None] * (x[ids[1]] - x[ids[0]])
+        q = x[ids[2]] + t[:, None] * (x[ids[3]] - x[ids[2]])
+        d = (p[:, None, :] - q[None, :, :]).reshape(-1, 3)
+    return d[np.argmin(np.linalg.norm(d, axis=1))]
+
+
+def least_separation(ids, kind, x, n):
+    """The least n . (x_a - x_b) over a candidate's vertex pairs across its sides."""
+    return min(n @ (x[ids[a]] - x[ids[b]]) for a, b in PAIRS.get(kind, EDGE_PAIRS))
+
+
+def test_planes_between_two_layers_let_one_slide_over_the_other(f64):
+    """Two flat cloths 9 mm apart (thickness 6 mm), the upper one shifted by half a
+    spacing and moving 16.7 mm along the layers. Each candidate across them takes the
+    layers' normal where the motion's end does not cross that plane, or crosses it less
+    than its closest points' plane (``normals.normal_margin``), checked against NumPy:
+    more than ten of them have closest points whose direction tilts by more than 18
+    degrees (the planes that braked a cloth sliding over another), yet take the
+    layers' normal. Every plane with a margin separates
+    its candidate's vertex pairs by at least its delta at x0; candidates within a layer
+    keep their closest points' direction (in the layer)."""
+    thickness = 0.006
+    scene = tcloth.Scene(gravity=(0.0, 0.0, 0.0))
+    spacing = 0.1 / 5
+    lower = scene.add_cloth(resolution=(6, 6), size=(0.1, 0.1), center=(0.0, 0.0, 0.0),
+                            mass=0.01, **CLOTH)
+    scene.add_cloth(resolution=(6, 6), size=(0.1, 0.1), mass=0.01, **CLOTH,
+                    center=(spacing / 2, 0.009, spacing / 2))
+    scene.set_self_collision(thickness=thickness)
+    sim = tcloth.Simulator(scene, "projective", dt=1.0 / 60.0)
+    x0 = scene.positions.astype(np.float64)
+    moved = x0.copy()
+    moved[36:, 0] += 1.0 / 60.0
+    cl, pl, rows = sim.model.contact.begin_solve(field(x0), field(moved))
+    ids, kind = cl.ids.to_numpy()[:rows], cl.kind.to_numpy()[:rows]
+    n, delta = pl.n.to_numpy()[:rows], pl.delta.to_numpy()[:rows]
+    low = set(lower.particles.ravel().tolist())
+    def margin(d):
+        return min(thickness, max(0.5 * d, 0.25 * thickness))
+    across, layered, tilted = 0, 0, 0
+    for c in range(rows):
+        if delta[c] == 0.0:
+            continue
+        if delta[c] > 0.0:
+            assert least_separation(ids[c], kind[c], x0, n[c]) >= delta[c] * (1 - 1e-9)
+        if len({ids[c, k] in low for k in range(4)}) == 1:
+            assert abs(n[c, 1]) < 1e-9
+            continue
+        across += 1
+        g = closest_gap(ids[c], kind[c], x0)
+        closest = g / np.linalg.norm(g)
+        up = np.array([0.0, np.sign(closest[1]), 0.0])
+        s = least_separation(ids[c], kind[c], x0, up)
+        closest_room = least_separation(ids[c], kind[c], moved, closest) - \
+            margin(np.linalg.norm(g))
+        up_room = least_separation(ids[c], kind[c], moved, up) - margin(s)
+        assert s >= min(0.5 * np.linalg.norm(g), 0.5 * thickness)
+        if up_room >= 1e-9 or up_room > closest_room + 1e-3 * thickness + 1e-9:
+            layered += 1
+            tilted += closest[1] ** 2 < 0.9
+            np.testing.assert_allclose(n[c], up, atol=1e-9)
+        elif up_room < -1e-9 and up_room < closest_room + 1e-3 * thickness - 1e-9:
+            np.testing.assert_allclose(n[c], closest, atol=2e-3)
+    assert across > 20 and layered > 10 and tilted > 10, (across, layered, tilted)
+
+
 def test_the_planes_forces_and_matrix_match_numpy_and_finite_differences(f64):
     """The kernels' active pairs, forces f = -grad E with E = sum w/2 min(0, n.(x_a - x_b)
     - REACH delta)^2 (central differences of a NumPy E) and product H v (central

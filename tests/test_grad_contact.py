@@ -3,15 +3,18 @@ frozen: tcloth/grad/frozen.py): a cloth lying on another against central differe
 the simulator's own trajectories, in float64, with symplectic and backward Euler; the
 adjoint's contact terms against the simulator's; the guard's projection against its log
 replayed in NumPy; projective dynamics' self-contact projection against central
-differences of its own kernel; the steps the gradient does not take reported."""
+differences of its own kernel; the steps the gradient does not take reported; the
+separating planes' normals and margins (either choice) against central differences."""
 import warnings
 
 import numpy as np
 import pytest
+import taichi as ti
 
 import tcloth
 from tcloth import grad
 from tcloth.contact import projection, stage
+from tcloth.contact.normals import SURFACE, chosen_margin, vertex_normals
 from tcloth.grad import frozen, projected
 from tcloth.terms.self_contact import ProjectionLog
 
@@ -209,16 +212,18 @@ def test_the_fail_safe_is_differentiated_as_its_cuts(f64, monkeypatch):
     cloth thrown at 6 m/s (12 mm a step of 2 ms, past its 9.8 mm gap): the step's
     truncation cuts vertices short of their dividing planes, the gradient takes it
     (``projected_steps``) through each vertex's plane, and positions, velocities and
-    masses match central differences within 1e-5 (measured 2.5e-6, 1.6e-6, 2.6e-8). The
-    lower cloth's heights carry 0.5 mm of noise: on a flat layer a vertex's planes tie,
-    the minimum has a kink, and central differences average its two sides."""
+    masses match central differences within 1e-5. Most cuts are by planes along the
+    layers' normal (``normals.SURFACE``), differentiated through the vertex normals. Both
+    cloths' heights carry 0.5 mm of noise: on a flat layer a vertex's planes tie, and an
+    edge's two ends lie level along the layer's normal, so the dividing plane's extents
+    tie; the minimum has a kink there, and central differences average its two sides."""
     use_runtime("f64", __name__)
     monkeypatch.setattr(stage, "ROUNDS", 0)
     scene = _stack()
     trajectory = grad.Trajectory(scene, steps=1, dt=2e-3, integrator="backward_euler",
                                  checkpoint_every=1, **OPTIONS["backward_euler"])
     x = trajectory.value("positions")
-    x[:36, 1] += 5e-4 * np.random.default_rng(7).standard_normal(36)
+    x[:, 1] += 5e-4 * np.random.default_rng(7).standard_normal(len(x))
     trajectory.set("positions", x)
     trajectory.set("velocities", _thrown(trajectory, 6.0))
     rng = np.random.default_rng(3)
@@ -228,6 +233,8 @@ def test_the_fail_safe_is_differentiated_as_its_cuts(f64, monkeypatch):
         result = trajectory.gradient(loss)
     assert result.projected_steps == [0] and not result.guarded_steps
     assert trajectory.sim.contact_stats()["failsafe_vertices"] > 0
+    kinds = trajectory.sim.model.contact.truncation_log.entries()[2]
+    assert (kinds >= SURFACE).sum() > 10 and (kinds < SURFACE).sum() > 5
     check_gradients(trajectory, loss, result, ("positions", "velocities", "masses"), rng,
                     1e-8)
 
@@ -285,3 +292,58 @@ def test_projectives_self_contact_projection_has_its_gradient(f64, prepared):
     finally:
         term.record(True)                   # its full size again
     assert 0 in guarded
+
+
+@ti.kernel
+def _plane_sum(table: ti.template(), ids: ti.template(), kind: ti.template(),
+               choice: ti.i32, x: ti.template(), normals: ti.template(),
+               wn: ti.template(), wd: ti.template(), out: ti.template()):
+    vertex_normals(table, x, normals)
+    for c in range(ids.shape[0]):
+        n, d0, delta = chosen_margin(ids[c], kind[c], choice, x, table.params[0], normals)
+        if d0 > 0.0:
+            out[None] += wn[c].dot(n) + wd[c] * delta
+
+
+@pytest.mark.parametrize("choice", [0, SURFACE])
+def test_a_planes_normal_and_margin_have_their_gradient(f64, choice):
+    """The separating planes of the stack's candidates (heights with 0.2 mm of noise), as
+    the adjoints rebuild them at the step's start (``normals.chosen_margin``): along the
+    closest points' direction, and along the surfaces' normal (the triangle's, or an edge
+    pair's summed vertex normals, which depend on the vertices' neighbours). Taichi's
+    reverse mode of sum_c wn_c . n_c + wd_c delta_c matches central differences within
+    1e-6 relative (measured 4e-10 for the surfaces' at a step of 1e-8)."""
+    scene = _stack()
+    sim = tcloth.Simulator(scene, "backward_euler", dt=2e-3)
+    broad = sim.model.contact.broad
+    rows = broad.count
+    ids = ti.Vector.field(4, ti.i32, shape=rows)
+    kind = ti.field(ti.i32, shape=rows)
+    ids.from_numpy(broad.candidates.ids.to_numpy()[:rows])
+    kind.from_numpy(broad.candidates.kind.to_numpy()[:rows])
+    n = scene.num_particles
+    x, normals = (ti.Vector.field(3, ti.f64, shape=n, needs_grad=True) for _ in range(2))
+    wn = ti.Vector.field(3, ti.f64, shape=rows)
+    wd = ti.field(ti.f64, shape=rows)
+    out = ti.field(ti.f64, shape=(), needs_grad=True)
+    rng = np.random.default_rng(0)
+    wn.from_numpy(rng.standard_normal((rows, 3)))
+    wd.from_numpy(rng.standard_normal(rows))
+    x0 = scene.positions.astype(np.float64) + 2e-4 * rng.standard_normal((n, 3))
+    table = sim.model.contact.table
+
+    def value(positions):
+        x.from_numpy(positions)
+        out[None] = 0.0
+        _plane_sum(table, ids, kind, choice, x, normals, wn, wd, out)
+        return out[None]
+    value(x0)
+    x.grad.fill(0)
+    normals.grad.fill(0)
+    out.grad[None] = 1.0
+    _plane_sum.grad(table, ids, kind, choice, x, normals, wn, wd, out)
+    d = rng.standard_normal((n, 3))
+    adjoint = float((x.grad.to_numpy() * d).sum())
+    fd = (value(x0 + 1e-8 * d) - value(x0 - 1e-8 * d)) / 2e-8
+    assert rows > 100
+    assert abs(adjoint - fd) <= 1e-6 * abs(fd), (adjoint, fd)

@@ -25,13 +25,16 @@ from bench_contact import CLOTH
 RUNS = "symplectic_euler:1e-4,projective:1/60,xpbd:1/60,vbd:1/60"
 
 
-def scene():
-    """(scene, lower cloth, upper cloth, velocities at the start)."""
+def scene(lower=(24, 1.2, 0.3), upper=(8, 0.3, 0.02)):
+    """(scene, lower cloth, upper cloth, velocities at the start): the lower cloth
+    (resolution, size in m, mass in kg) lying on a frictionless floor, the upper one 9 mm
+    above it, a size of its own from the lower one's middle, moving at 1 m/s."""
     s = tcloth.Scene(gravity=(0.0, -9.81, 0.0))
-    low = s.add_cloth(resolution=(24, 24), size=(1.2, 1.2), center=(0.0, 0.006, 0.0),
-                      mass=0.3, **CLOTH)
-    up = s.add_cloth(resolution=(8, 8), size=(0.3, 0.3), center=(-0.3, 0.015, 0.0),
-                     mass=0.02, **CLOTH)
+    (n, size, mass), (m, upper_size, upper_mass) = lower, upper
+    low = s.add_cloth(resolution=(n, n), size=(size, size), center=(0.0, 0.006, 0.0),
+                      mass=mass, **CLOTH)
+    up = s.add_cloth(resolution=(m, m), size=(upper_size, upper_size),
+                     center=(-upper_size, 0.015, 0.0), mass=upper_mass, **CLOTH)
     s.add_plane((0.0, 0.0, 0.0), (0.0, 1.0, 0.0), friction=0.0)
     s.set_self_collision(thickness=0.006)
     v = np.zeros((s.num_particles, 3))

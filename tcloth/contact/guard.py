@@ -5,7 +5,9 @@ The motion of a step is the straight path of every particle from its start x0 to
 x1. Kernels here change x1 (and v1 by the same change over dt) until that motion is safe:
 
   - ``projection.project``: each candidate pair (a point and a triangle, or two edges) was
-    separated at x0 by its gap D0 > 0 along the unit normal n of its closest points. The
+    separated at x0 by D0 > 0 along a unit normal n (``normals.py``: the surfaces'
+    normal where it separates the pair by enough, else its closest points' direction,
+    D0 the least separation along it). The
     pair stays separated by the plane normal to n along the whole motion if, at x1, every
     vertex a of its first side and b of its second keep n . (x_a - x_b) >= delta: the
     function min_a n . x_a - max_b n . x_b is concave, so on the path it stays above its
@@ -50,15 +52,11 @@ from .. import runtime
 from ..runtime import jacobi_apply, jacobi_zero, serial
 from ..geometry.shapes import SHAPES
 from .broad import near
-from .candidates import gap
+from .normals import LEAST_GAP, VERTEX_PAIRS, normal_margin, spans, vertex_normals
 from .search import POINT_TRIANGLE
 
-# the (first side, second side) vertex pairs of either kind of contact: a point-triangle
-# contact's (0, 1), (0, 2), (0, 3); an edge-edge contact's (0, 2), (0, 3), (1, 2), (1, 3)
-VERTEX_PAIRS = ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3))
 SLACK = 1e-3             # a violation below this fraction of delta is no violation
 KEEP = 0.9               # the fail-safe stops a vertex at this fraction of its way to a plane
-FLOOR = 0.25             # pairs end a step at least this fraction of the thickness apart
 BACK_OFF = 1e-6          # m: a path a collider stops ends this far before the surface
 # halvings of the stop's search along a path: to float64's last bit, so the stop is the
 # root to rounding, on its outer side (a smooth function of the path, whose derivative
@@ -66,30 +64,11 @@ BACK_OFF = 1e-6          # m: a path a collider stops ends this far before the s
 STOP_BISECTIONS = 53
 FAR_APART = -1.0         # the delta of a candidate that cannot come within reach
 PATH, START = 1, 2       # the kinds of a collider sweep's cut (``SweepLog``)
-LEAST_GAP = 1e-6         # m: a pair closer than this at x0 has no normal (float32 rounds
-                         # coordinates near 1 m to 6e-8 m)
-
-
-@ti.func
-def normal_margin(ids, kind, x0, thickness):
-    """(unit normal, D0, delta) of a candidate at x0; D0 <= LEAST_GAP: no normal."""
-    alpha, g = gap(ids, kind, x0)
-    d0 = g.norm()
-    n = g / ti.max(d0, LEAST_GAP)
-    return n, d0, ti.min(thickness, ti.max(0.5 * d0, FLOOR * thickness))
 
 
 @ti.func
 def _worst(ids, a: ti.template(), b: ti.template(), n, delta, x1):
     return delta - n.dot(x1[ids[a]] - x1[ids[b]])
-
-
-@ti.func
-def spans(kind, a: ti.template(), b: ti.template()):
-    """Whether vertices a and b (a pair of VERTEX_PAIRS) lie on the two sides of a contact
-    of ``kind``: the point and a triangle's vertex, or a vertex of each edge."""
-    return ti.select(kind == POINT_TRIANGLE, ti.static(int(a == 0)),
-                     ti.static(int(b >= 2))) == 1
 
 
 @ti.func
@@ -116,6 +95,8 @@ class Planes:
         self.capacity = capacity
         self.n = ti.Vector.field(3, real, shape=capacity)
         self.delta = ti.field(real, shape=capacity)
+        # SURFACE where the plane took the surfaces' normal, else 0 (``normals.py``)
+        self.surface = ti.field(ti.i32, shape=capacity)
         self.touched = ti.field(ti.i32, shape=capacity)
 
 
@@ -131,6 +112,7 @@ def planes(cl: ti.template(), pl: ti.template(), count: ti.i32, x0: ti.template(
     cannot close by more on the motion, and such a pair stays farther apart than
     ``reach`` all along (the projection skips it; the fail-safe, whose cuts change the
     motion, does not)."""
+    vertex_normals(cl.table, x0, cl.table.normals)
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
         _plane(cl, pl, c, x0, x1, thickness, reach)
@@ -151,6 +133,7 @@ def near_planes(cl: ti.template(), pl: ti.template(), count: ti.i32, x0: ti.temp
 @ti.func
 def near_plane_rows(cl, pl, count, x0, x1, thickness, ref_gap, far):
     """``near_planes`` as a ``ti.func`` (a batch of substeps')."""
+    vertex_normals(cl.table, x0, cl.table.normals)
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
         if near(cl, ref_gap, far, c, thickness):
@@ -163,9 +146,10 @@ def near_plane_rows(cl, pl, count, x0, x1, thickness, ref_gap, far):
 def _plane(cl, pl, c, x0, x1, thickness, reach):
     """``planes``' row c."""
     ids, kind = cl.ids[c], cl.kind[c]
-    n, d0, delta = normal_margin(ids, kind, x0, thickness)
+    n, d0, delta, choice = normal_margin(ids, kind, x0, x1, thickness, cl.table.normals)
     closing = relative_path(ids, kind, x0, x1)
     pl.n[c] = n
+    pl.surface[c] = choice
     pl.delta[c] = 0.0
     if d0 > LEAST_GAP:
         pl.delta[c] = delta if d0 - closing <= reach else FAR_APART
@@ -312,7 +296,7 @@ def truncate(cl: ti.template(), pl: ti.template(), count: ti.i32, x0: ti.templat
                         # one plane a vertex (where planes tie, as a flat layer's do
                         # for a vertex above it, whichever comes first)
                         if ti.atomic_add(log.claimed[ids[k]], 1) == 0:
-                            log.keep(ids[k], ids, kind, k)
+                            log.keep(ids[k], ids, kind + pl.surface[c], k)
     cut = 0
     ti.loop_config(serialize=ti.static(serial(x1)))
     for p in range(x1.shape[0]):
@@ -344,7 +328,8 @@ class _CutLog:
 class TruncationLog(_CutLog):
     """The fail-safe's cuts of one step, kept where ``on`` is set (a gradient's runs:
     ``tcloth/grad/frozen.py``): each cut vertex (``particle``), the candidate whose
-    dividing plane stopped it (``ids``, ``kind``) and its slot in it (``slot``), one a
+    dividing plane stopped it (``ids``, ``kind`` plus ``normals.SURFACE`` where its
+    plane took the surfaces' normal) and its slot in it (``slot``), one a
     vertex (``claimed``, n particles). ``count`` counts them all; past ``capacity``
     they are not kept."""
 

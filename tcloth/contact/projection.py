@@ -16,7 +16,8 @@ import taichi as ti
 
 from .. import runtime
 from ..runtime import serial
-from .guard import SLACK, VERTEX_PAIRS, spans
+from .guard import SLACK
+from .normals import VERTEX_PAIRS, spans
 
 HELD_ALONG = 0.5         # a held vertex moves along a normal only if this much is left
 JACOBI = False           # the Jacobi passes on CPUs too (``project``)
@@ -30,9 +31,10 @@ class Log:
     each one's vertices (``pair``), plane (``n``, ``delta``), directions ``da`` and ``db``,
     ``w`` and whether it removed approaching velocity (``stopped``): x_a += m_a^-1 lam da,
     x_b += m_b^-1 lam db with lam = (delta - n . (x_a - x_b)) / w, and where ``stopped`` v
-    the same with lam = -n . (v_a - v_b) / w; the candidate's ``ids`` and ``kind`` (its
-    plane's), and x_a - x_b and v_a - v_b before it (``gap_x``, ``gap_v``). ``count``
-    counts them all; past ``capacity`` they are not kept."""
+    the same with lam = -n . (v_a - v_b) / w; the candidate's ``ids`` and ``kind`` (plus
+    ``normals.SURFACE`` where its plane took the surfaces' normal), and x_a - x_b and
+    v_a - v_b before it (``gap_x``, ``gap_v``). ``count`` counts them all; past
+    ``capacity`` they are not kept."""
 
     def __init__(self, capacity=LOG_CAPACITY):
         real = runtime.real()
@@ -191,8 +193,8 @@ def _gauss_seidel(cl: ti.template(), pl: ti.template(), count: ti.i32, x1: ti.te
             if delta > 0.0:
                 for a, b in ti.static(VERTEX_PAIRS):
                     if spans(kind, a, b):
-                        corrected += _correct_now(ids, kind, a, b, n, delta, x1, v1,
-                                                  inv_mass, held, log)
+                        corrected += _correct_now(ids, kind + pl.surface[c], a, b, n,
+                                                  delta, x1, v1, inv_mass, held, log)
         if ran == 0:
             found = corrected
         ran += 1

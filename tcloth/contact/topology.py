@@ -68,7 +68,9 @@ class SelfCollisionTable:
         points: (P,) particle ids; triangles: (T,) of 3 x i32; edges: (E,) of 2 x i32;
         start, neighbours: the mesh neighbour lists (CSR, i32);
         params: (6,) reals in ``PARAMS`` order; settings: the same as a dict;
-        point_count, triangle_count, edge_count: sizes.
+        point_count, triangle_count, edge_count: sizes;
+        normals: a vec3 per particle, the guard's vertex normals at a step's start
+        (``normals.vertex_normals``).
     """
 
     def __init__(self, scene):
@@ -86,6 +88,7 @@ class SelfCollisionTable:
         self.start = _upload(ti.i32, topo["start"], ())
         self.neighbours = _upload(ti.i32, topo["neighbours"], ())
         self.params = _upload(runtime.real(), np.array([self.settings[k] for k in PARAMS]), ())
+        self.normals = ti.Vector.field(3, runtime.real(), shape=max(scene.num_particles, 1))
 
     @ti.func
     def adjacent(self, i, j):

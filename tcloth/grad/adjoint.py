@@ -29,7 +29,7 @@ part of the incremental potential's gradient, over the rows of ``set_contacts`` 
 list the forward step read, ``frozen.py``) with the term's own functions
 (``self_contact.pair_force``; ``lagged``, ``penalty_gradient`` and ``dissipation``, the
 lagged values computed from x in the kernel). ``plane_vjp`` differentiates the guard's
-planes (``guard.normal_margin``) at the step's start.
+planes (``normals.chosen_margin``) at the step's start.
 
 ``vjp(seed)`` runs the kernel's reverse mode with ``seed`` as the output's adjoint: the
 inputs' gradients (x.grad, v.grad, x1.grad) are set and the parameters' accumulate (a
@@ -44,7 +44,7 @@ import taichi as ti
 
 from .. import runtime
 from ..contact.candidates import ContactList
-from ..contact.guard import normal_margin
+from ..contact.normals import SURFACE, chosen_margin, vertex_normals
 from ..contact.projection import LOG_CAPACITY
 from ..model.collider_table import ColliderTable
 from ..features import FEATURES
@@ -127,6 +127,7 @@ class StepAdjoint:
             self.n_bar = ti.Vector.field(3, real, shape=LOG_CAPACITY)
             self.delta_bar = ti.field(real, shape=LOG_CAPACITY)
             self.plane_sum = ti.field(real, shape=(), needs_grad=True)
+            self.normals = ti.Vector.field(3, real, shape=n, needs_grad=True)
         self.parameter_fields = [self.params, self.drag, self.mass, self.inv_mass, self.ks,
                                  self.kd]
         # hinge bending: the term on weights that carry gradients
@@ -171,8 +172,9 @@ class StepAdjoint:
     def plane_vjp(self, x0, planes):
         """The adjoint of the step's start x0 ((n, 3) NumPy) from those of the guard's
         planes there: planes = (ids (k, 4), kinds (k,), n_bar (k, 3), delta_bar (k,)) of
-        ``frozen.pull_back``, each a candidate's plane as ``guard.normal_margin`` makes it
-        (its normal and delta from its closest points at x0)."""
+        ``frozen.pull_back``, each a candidate's plane as ``normals.chosen_margin`` makes it
+        at x0 (along the normal the forward step chose: a kind carries
+        ``normals.SURFACE`` where that was the surfaces')."""
         ids, kinds, n_bar, delta_bar = planes
         k, npr = len(kinds), runtime.numpy_real()
         self.planes.upload(ids, kinds)
@@ -180,6 +182,7 @@ class StepAdjoint:
         self.delta_bar.from_numpy(np.pad(delta_bar, (0, LOG_CAPACITY - k)).astype(npr))
         self.x.from_numpy(x0.astype(npr))
         self.x.grad.fill(0)
+        self.normals.grad.fill(0)
         self.plane_sum[None] = 0.0
         self.plane_sum.grad[None] = 1.0
         self._planes()
@@ -188,11 +191,15 @@ class StepAdjoint:
 
     @ti.kernel
     def _planes(self):
-        """sum over the planes of n_bar . n + delta_bar delta at x."""
+        """sum over the planes of n_bar . n + delta_bar delta at x (and the vertex
+        normals there)."""
+        vertex_normals(self.planes.table, self.x, self.normals)
         for c in range(LOG_CAPACITY):
             if self.planes.repels[c]:
-                n, _, delta = normal_margin(self.planes.ids[c], self.planes.kind[c], self.x,
-                                            self.planes.table.params[0])
+                kind = self.planes.kind[c] % SURFACE
+                n, _, delta = chosen_margin(self.planes.ids[c], kind,
+                                            self.planes.kind[c] - kind, self.x,
+                                            self.planes.table.params[0], self.normals)
                 self.plane_sum[None] += self.n_bar[c].dot(n) + self.delta_bar[c] * delta
 
     def load(self, colliders_off=()):

@@ -20,7 +20,8 @@ import numpy as np
 import taichi as ti
 
 from .. import runtime
-from ..contact.guard import BACK_OFF, PATH, dividing_plane, normal_margin, stop_fraction
+from ..contact.guard import BACK_OFF, PATH, dividing_plane, stop_fraction
+from ..contact.normals import SURFACE, chosen_margin, vertex_normals
 from ..geometry.shapes import SHAPES
 
 
@@ -114,15 +115,16 @@ class TruncationAdjoint:
     """The vector-Jacobian product of one step's fail-safe (``vjp``) for n particles of
     a self-collision ``table``: a vertex p stopped by candidate (ids, kind) ends at x0 +
     t (x1 - x0) with velocity t v1, t = KEEP (its distance to the dividing plane at x0) /
-    (its approach to it), the plane normal to the candidate's n (its closest points at
-    x0, ``guard.normal_margin``) between the sides' extents, placed by their speeds
-    (``guard.dividing_plane``), all differentiated by Taichi's reverse mode."""
+    (its approach to it), the plane normal to the candidate's n (from x0 and the vertex
+    normals there, ``normals.chosen_margin``) between the sides' extents, placed by
+    their speeds (``guard.dividing_plane``), all differentiated by Taichi's reverse
+    mode."""
 
     def __init__(self, table, n):
         real = runtime.real()
-        self.thickness = table.params
-        self.x0, self.x1, self.v1, self.x_out, self.v_out = (
-            ti.Vector.field(3, real, shape=n, needs_grad=True) for _ in range(5))
+        self.table, self.thickness = table, table.params
+        self.x0, self.x1, self.v1, self.x_out, self.v_out, self.normals = (
+            ti.Vector.field(3, real, shape=n, needs_grad=True) for _ in range(6))
         self.particle, self.kind, self.slot = (ti.field(ti.i32, shape=n) for _ in range(3))
         self.ids = ti.Vector.field(4, ti.i32, shape=n)
         self.capacity = n
@@ -133,6 +135,7 @@ class TruncationAdjoint:
         its cuts: ``frozen.StepRecord``) from those of its output, and the step start's
         share. Returns (x1_bar, v1_bar, x0_bar)."""
         (particle, ids, kind, slot), x1, v1 = truncation
+        self.normals.grad.fill(0)
         run_cuts(self, ((self.particle, particle), (self.ids, ids), (self.kind, kind),
                         (self.slot, slot)), x0, x1, v1, x_bar[particle], v_bar[particle])
         x1_bar, v1_bar = x_bar.copy(), v_bar.copy()
@@ -145,10 +148,13 @@ class TruncationAdjoint:
     @ti.kernel
     def _cut(self):
         """Each kept cut c: the vertex's end x_out[c] and velocity v_out[c] (class)."""
+        vertex_normals(self.table, self.x0, self.normals)
         for c in range(self.capacity):
             if c < self.count[None]:
-                p, ids, kind, slot = self.particle[c], self.ids[c], self.kind[c], self.slot[c]
-                n, _, _ = normal_margin(ids, kind, self.x0, self.thickness[0])
+                p, ids, slot = self.particle[c], self.ids[c], self.slot[c]
+                kind = self.kind[c] % SURFACE
+                n, _, _ = chosen_margin(ids, kind, self.kind[c] - kind, self.x0,
+                                        self.thickness[0], self.normals)
                 _, plane, first = dividing_plane(ids, kind, n, self.x0, self.x1)
                 side = 1.0 if slot < first else -1.0
                 t = stop_fraction(self.x0, self.x1, n, plane, side, p)

@@ -34,7 +34,7 @@ import taichi as ti
 
 from .. import runtime
 from ..runtime import serial
-from ..contact.guard import VERTEX_PAIRS, spans
+from ..contact.normals import VERTEX_PAIRS, spans
 
 PLANE_STIFFNESS = 10.0   # the most a vertex's constraints weigh together, over its A_pp
 # active vertex pairs a particle held at first (more grows the list: the kernels that
