@@ -52,7 +52,8 @@ from .. import runtime
 from ..runtime import jacobi_apply, jacobi_zero, serial
 from ..geometry.shapes import SHAPES
 from .broad import near
-from .normals import LEAST_GAP, VERTEX_PAIRS, normal_margin, spans, vertex_normals
+from .normals import (LEAST_GAP, VERTEX_PAIRS, closest_margin, normal_margin, spans,
+                      vertex_normals)
 from .search import POINT_TRIANGLE
 
 SLACK = 1e-3             # a violation below this fraction of delta is no violation
@@ -111,11 +112,12 @@ def planes(cl: ti.template(), pl: ti.template(), count: ti.i32, x0: ti.template(
     two edges) is the length of a convex combination of those pairs' differences, so it
     cannot close by more on the motion, and such a pair stays farther apart than
     ``reach`` all along (the projection skips it; the fail-safe, whose cuts change the
-    motion, does not)."""
+    motion, does not). The normal is the one the motion x1 needs
+    (``normals.normal_margin``)."""
     vertex_normals(cl.table, x0, cl.table.normals)
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
-        _plane(cl, pl, c, x0, x1, thickness, reach)
+        _plane(cl, pl, c, x0, x1, thickness, reach, True)
 
 
 @ti.kernel
@@ -126,27 +128,33 @@ def near_planes(cl: ti.template(), pl: ti.template(), count: ti.i32, x0: ti.temp
     it covers (``far`` from its ``moved(x0, x1)``), with reach = thickness; a row that
     the list's bound keeps beyond the thickness all along (``broad.near``) is FAR_APART
     without its closest points, and without its normal, which the fail-safe's cuts need
-    (``planes`` them again first)."""
+    (``planes`` them again first). These planes only find the steps with something to
+    correct: each takes the closest points' direction (no vertex normals, which would
+    cost a pass over the triangles at every explicit substep). A motion that keeps clear
+    of them is safe, as of any separating planes; where one is crossed, the guard makes
+    the planes again (``planes``) before it corrects."""
     near_plane_rows(cl, pl, count, x0, x1, thickness, ref_gap, far)
 
 
 @ti.func
 def near_plane_rows(cl, pl, count, x0, x1, thickness, ref_gap, far):
     """``near_planes`` as a ``ti.func`` (a batch of substeps')."""
-    vertex_normals(cl.table, x0, cl.table.normals)
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
         if near(cl, ref_gap, far, c, thickness):
-            _plane(cl, pl, c, x0, x1, thickness, thickness)
+            _plane(cl, pl, c, x0, x1, thickness, thickness, False)
         else:
             pl.delta[c] = FAR_APART
 
 
 @ti.func
-def _plane(cl, pl, c, x0, x1, thickness, reach):
-    """``planes``' row c."""
+def _plane(cl, pl, c, x0, x1, thickness, reach, choose: ti.template()):
+    """``planes``' row c; the closest points' direction unless ``choose``."""
     ids, kind = cl.ids[c], cl.kind[c]
-    n, d0, delta, choice = normal_margin(ids, kind, x0, x1, thickness, cl.table.normals)
+    n, d0, delta = closest_margin(ids, kind, x0, thickness)
+    choice = 0
+    if ti.static(choose):
+        n, d0, delta, choice = normal_margin(ids, kind, x0, x1, thickness, cl.table.normals)
     closing = relative_path(ids, kind, x0, x1)
     pl.n[c] = n
     pl.surface[c] = choice
