@@ -6,8 +6,8 @@ x1. Kernels here change x1 (and v1 by the same change over dt) until that motion
 
   - ``projection.project``: each candidate pair (a point and a triangle, or two edges) was
     separated at x0 by D0 > 0 along a unit normal n (``normals.py``: the surfaces'
-    normal where it separates the pair by enough, else its closest points' direction,
-    D0 the least separation along it). The
+    normal where it separates the pair by enough and the motion keeps clear of its
+    plane, else its closest points' direction; D0 the least separation along it). The
     pair stays separated by the plane normal to n along the whole motion if, at x1, every
     vertex a of its first side and b of its second keep n . (x_a - x_b) >= delta: the
     function min_a n . x_a - max_b n . x_b is concave, so on the path it stays above its

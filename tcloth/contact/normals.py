@@ -16,10 +16,9 @@ sweeps, which the closest points' plane does not. Which of the two a pair's moti
 is told by the motion, not by x0: ``normal_margin`` takes the surfaces' normal (where it
 separates the pair by enough at x0) unless the motion's end x1 (a solver's prediction,
 or its result for the guard) crosses its plane and keeps more room from the closest
-points' plane. The choice
-is a branch, kept with the plane (``Planes.surface``) and with each correction or cut a
-gradient reads (``SURFACE`` added to the kind), so the adjoints differentiate the plane
-the forward step used (``chosen_margin``).
+points' plane. The choice is a branch, kept with the plane (``Planes.surface``) and with
+each correction or cut a gradient reads (``SURFACE`` added to the kind), so the adjoints
+differentiate the plane the forward step used (``chosen_margin``).
 """
 import taichi as ti
 
@@ -110,10 +109,7 @@ def surface_normal(ids, kind, x0, normals, n):
     """The unit normal of the surfaces between a candidate's sides, on n's side (0 where
     it has none): a point-triangle contact's triangle's; an edge-edge contact's, the
     sum of its four vertices' normals (``vertex_normals``; each edge's sum turned to
-    agree with the other's). Two cloths' grid edges lie parallel in pairs, offset
-    across the layers, and their closest points' direction tilts toward the offset: a
-    plane normal to it stops one edge from passing over the other, which a cloth
-    sliding over another does at every step (``docs/contact.md``)."""
+    agree with the other's)."""
     m = (x0[ids[2]] - x0[ids[1]]).cross(x0[ids[3]] - x0[ids[1]])
     if kind != POINT_TRIANGLE:
         a = normals[ids[0]] + normals[ids[1]]
