@@ -150,6 +150,10 @@ EXTENDED = {
     # the quick set on 2026-11-29, which then took 8:00)
     "test_contact_planes::test_the_deflated_solve_solves_the_same_system_in_fewer_iterations",
     "test_implicit::test_anderson_acceleration_reaches_the_same_step_in_fewer_iterations",
+    # a cloth sliding over another at one step per frame (41 and 30 s in the quick set on
+    # 2026-11-29, the two longest, when it took 8:08; the planes' rule stays there)
+    "test_contact::test_a_cloth_slides_over_another_at_one_step_per_frame[xpbd-0.99]",
+    "test_contact::test_a_cloth_slides_over_another_at_one_step_per_frame[projective-0.9]",
     "test_grad::test_checkpoints_change_the_memory_not_the_gradient",
     "test_grad::test_projective_steps_left_unconverged_are_named_and_warned_of",
     "test_grad::test_the_fabric_fit_recovers_a_known_fabric",
