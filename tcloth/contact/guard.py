@@ -52,8 +52,7 @@ from .. import runtime
 from ..runtime import jacobi_apply, jacobi_zero, serial
 from ..geometry.shapes import SHAPES
 from .broad import near
-from .normals import (LEAST_GAP, VERTEX_PAIRS, closest_margin, normal_margin, spans,
-                      vertex_normals)
+from .normals import LEAST_GAP, VERTEX_PAIRS, normal_margin, spans, vertex_normals
 from .search import POINT_TRIANGLE
 
 SLACK = 1e-3             # a violation below this fraction of delta is no violation
@@ -151,10 +150,8 @@ def near_plane_rows(cl, pl, count, x0, x1, thickness, ref_gap, far):
 def _plane(cl, pl, c, x0, x1, thickness, reach, choose: ti.template()):
     """``planes``' row c; the closest points' direction unless ``choose``."""
     ids, kind = cl.ids[c], cl.kind[c]
-    n, d0, delta = closest_margin(ids, kind, x0, thickness)
-    choice = 0
-    if ti.static(choose):
-        n, d0, delta, choice = normal_margin(ids, kind, x0, x1, thickness, cl.table.normals)
+    n, d0, delta, choice = normal_margin(ids, kind, x0, x1, thickness, cl.table.normals,
+                                         choose)
     closing = relative_path(ids, kind, x0, x1)
     pl.n[c] = n
     pl.surface[c] = choice

@@ -42,20 +42,30 @@ PREFER = 1e-3
 
 
 @ti.func
-def normal_margin(ids, kind, x0, x1, thickness, normals):
+def normal_margin(ids, kind, x0, x1, thickness, normals, choose: ti.template()):
     """(unit normal, D0, delta, SURFACE or 0) of a candidate at x0; D0 <= LEAST_GAP: no
-    normal. The surfaces' normal (where it separates the pair by enough, ``surface_margin``)
-    where the motion x0 -> x1 does not cross its plane (``room`` >= 0) or crosses it less
-    than the closest points' by PREFER thickness, else the closest points' direction."""
+    normal. The closest points' direction unless ``choose``; with it, the surfaces' normal
+    (where it separates the pair by enough, ``surface_margin``) where the motion x0 -> x1
+    does not cross its plane (``room`` >= 0) or crosses it less than the closest points'
+    by PREFER thickness."""
     n, d0, delta = closest_margin(ids, kind, x0, thickness)
     choice = 0
-    if d0 > LEAST_GAP:
-        m, s, margin = surface_margin(ids, kind, x0, thickness, normals, n, d0)
-        surface_room = room(ids, kind, x1, m, margin)
-        if s > LEAST_GAP and (surface_room >= 0.0 or
-                              surface_room > room(ids, kind, x1, n, delta) + PREFER * thickness):
-            n, d0, delta, choice = m, s, margin, SURFACE
+    if ti.static(choose):
+        if d0 > LEAST_GAP:
+            m, s, margin = surface_margin(ids, kind, x0, thickness, normals, n, d0)
+            surface_room = room(ids, kind, x1, m, margin)
+            if s > LEAST_GAP and (surface_room >= 0.0 or surface_room >
+                                  room(ids, kind, x1, n, delta) + PREFER * thickness):
+                n, d0, delta, choice = m, s, margin, SURFACE
     return n, d0, delta, choice
+
+
+@ti.func
+def logged_kind(logged):
+    """(kind, choice) of a kind as the logs keep it: plus SURFACE where the plane took the
+    surfaces' normal (``chosen_margin``'s choice)."""
+    kind = logged % SURFACE
+    return kind, logged - kind
 
 
 @ti.func

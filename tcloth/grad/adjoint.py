@@ -44,7 +44,7 @@ import taichi as ti
 
 from .. import runtime
 from ..contact.candidates import ContactList
-from ..contact.normals import SURFACE, chosen_margin, vertex_normals
+from ..contact.normals import chosen_margin, logged_kind, vertex_normals
 from ..contact.projection import LOG_CAPACITY
 from ..model.collider_table import ColliderTable
 from ..features import FEATURES
@@ -196,9 +196,8 @@ class StepAdjoint:
         vertex_normals(self.planes.table, self.x, self.normals)
         for c in range(LOG_CAPACITY):
             if self.planes.repels[c]:
-                kind = self.planes.kind[c] % SURFACE
-                n, _, delta = chosen_margin(self.planes.ids[c], kind,
-                                            self.planes.kind[c] - kind, self.x,
+                kind, choice = logged_kind(self.planes.kind[c])
+                n, _, delta = chosen_margin(self.planes.ids[c], kind, choice, self.x,
                                             self.planes.table.params[0], self.normals)
                 self.plane_sum[None] += self.n_bar[c].dot(n) + self.delta_bar[c] * delta
 

@@ -21,7 +21,7 @@ import taichi as ti
 
 from .. import runtime
 from ..contact.guard import BACK_OFF, PATH, dividing_plane, stop_fraction
-from ..contact.normals import SURFACE, chosen_margin, vertex_normals
+from ..contact.normals import chosen_margin, logged_kind, vertex_normals
 from ..geometry.shapes import SHAPES
 
 
@@ -152,9 +152,9 @@ class TruncationAdjoint:
         for c in range(self.capacity):
             if c < self.count[None]:
                 p, ids, slot = self.particle[c], self.ids[c], self.slot[c]
-                kind = self.kind[c] % SURFACE
-                n, _, _ = chosen_margin(ids, kind, self.kind[c] - kind, self.x0,
-                                        self.thickness[0], self.normals)
+                kind, choice = logged_kind(self.kind[c])
+                n, _, _ = chosen_margin(ids, kind, choice, self.x0, self.thickness[0],
+                                        self.normals)
                 _, plane, first = dividing_plane(ids, kind, n, self.x0, self.x1)
                 side = 1.0 if slot < first else -1.0
                 t = stop_fraction(self.x0, self.x1, n, plane, side, p)
