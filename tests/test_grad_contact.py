@@ -15,6 +15,7 @@ import tcloth
 from tcloth import grad
 from tcloth.contact import projection, stage
 from tcloth.contact.normals import SURFACE, chosen_margin, vertex_normals
+from tcloth.contact.search import EDGE_EDGE
 from tcloth.grad import frozen, projected
 from tcloth.terms.self_contact import ProjectionLog
 
@@ -272,6 +273,9 @@ def test_projectives_self_contact_projection_has_its_gradient(f64, prepared):
     x2, v2 = project(x1, v1)
     entries = term.log.entries()
     assert set(entries[2]) == {0, 1}        # position and velocity corrections
+    # velocity corrections along an edge pair's vertex normals (``contact_normal``): the
+    # pull-back goes through the normals at x1 (``projected.vertex_normals_vjp``)
+    assert ((entries[2] == 1) & (entries[1] == EDGE_EDGE + SURFACE)).any()
     np.testing.assert_array_equal(projected.before(entries, x2), x1)
     np.testing.assert_array_equal(projected.before(entries, v2, velocities=True), v1)
     rng = np.random.default_rng(4)
@@ -280,7 +284,7 @@ def test_projectives_self_contact_projection_has_its_gradient(f64, prepared):
     (xa, va), (xb, vb) = project(x1 + eps * p, v1 + eps * q), project(x1 - eps * p, v1 - eps * q)
     fd = ((wx * (xa - xb)).sum() + (wv * (va - vb)).sum()) / (2 * eps)
     inv_mass = sim.model.inv_mass.to_numpy()
-    x_bar, v_bar, _ = trajectory._projection.pull_back(entries, inv_mass, wx, wv)
+    x_bar, v_bar, _ = trajectory._projection.pull_back(entries, inv_mass, x1, wx, wv)
     assert abs((x_bar * p).sum() + (v_bar * q).sum() - fd) <= 1e-6 * abs(fd)
     check_gradients(trajectory, loss, result, ("positions", "velocities", "masses"),
                     np.random.default_rng(2), 1e-7)

@@ -18,7 +18,9 @@ separates the pair by enough at x0) unless the motion's end x1 (a solver's predi
 or its result for the guard) crosses its plane and keeps more room from the closest
 points' plane. The choice is a branch, kept with the plane (``Planes.surface``) and with
 each correction or cut a gradient reads (``SURFACE`` added to the kind), so the adjoints
-differentiate the plane the forward step used (``chosen_margin``).
+differentiate the plane the forward step used (``chosen_margin``). The self-contact
+projection's velocity pass (``terms/self_contact.py``) takes the surfaces' normal by the
+same test of separation, without a motion (``contact_normal``).
 """
 import taichi as ti
 
@@ -93,11 +95,48 @@ def surface_margin(ids, kind, x0, thickness, normals, n, d0):
     side of the closest points' direction n, their distance d0): D0 the least separation
     of the vertex pairs along it, or 0 where that is below min(d0 / 2, 2 FLOOR
     thickness)."""
-    m = surface_normal(ids, kind, x0, normals, n)
-    s = separation(ids, kind, x0, m)
+    p = corners(ids, x0)
+    a, b = sides(ids, normals)
+    m = surface_normal(kind, p, a, b, n)
+    s = separation(kind, p, m)
     if s < ti.min(0.5 * d0, 2.0 * FLOOR * thickness):
         s = 0.0
     return m, s, margin(s, thickness)
+
+
+@ti.func
+def contact_normal(ids, kind, x, normals, g, thickness):
+    """(unit normal, SURFACE or 0) of a contact law's correction at x with gap g: the
+    surfaces' normal where it separates the contact by enough (``surface_margin``),
+    else the closest points' direction. Between two layers the closest points'
+    direction of offset features tilts along the layers, and a correction along it
+    takes the sliding layer's speed."""
+    d = g.norm()
+    n = g / ti.max(d, LEAST_GAP)
+    choice = 0
+    if d > LEAST_GAP:
+        m, s, _ = surface_margin(ids, kind, x, thickness, normals, n, d)
+        if s > LEAST_GAP:
+            n, choice = m, SURFACE
+    return n, choice
+
+
+@ti.func
+def corners(ids, x):
+    """A candidate's four positions at x as the rows of a 4 x 3 matrix."""
+    return ti.Matrix.rows([x[ids[0]], x[ids[1]], x[ids[2]], x[ids[3]]])
+
+
+@ti.func
+def sides(ids, normals):
+    """(a, b): the vertex normals (``vertex_normals``) of a candidate's first two and
+    last two particles, summed: an edge-edge contact's two edges'."""
+    return normals[ids[0]] + normals[ids[1]], normals[ids[2]] + normals[ids[3]]
+
+
+@ti.func
+def _row(p, k: ti.template()):
+    return ti.Vector([p[k, 0], p[k, 1], p[k, 2]])
 
 
 @ti.func
@@ -111,19 +150,17 @@ def margin(d0, thickness):
 def room(ids, kind, x1, n, delta):
     """The least n . (x1_a - x1_b) - delta over a candidate's vertex pairs across its
     sides: how far the motion's end keeps clear of the plane (negative: it crosses)."""
-    return separation(ids, kind, x1, n) - delta
+    return separation(kind, corners(ids, x1), n) - delta
 
 
 @ti.func
-def surface_normal(ids, kind, x0, normals, n):
-    """The unit normal of the surfaces between a candidate's sides, on n's side (0 where
-    it has none): a point-triangle contact's triangle's; an edge-edge contact's, the
-    sum of its four vertices' normals (``vertex_normals``; each edge's sum turned to
-    agree with the other's)."""
-    m = (x0[ids[2]] - x0[ids[1]]).cross(x0[ids[3]] - x0[ids[1]])
+def surface_normal(kind, p, a, b, n):
+    """The unit normal of the surfaces between a candidate's sides at its corners p
+    (``corners``), on n's side (0 where it has none): a point-triangle contact's
+    triangle's; an edge-edge contact's, a + b, its two edges' vertex normals
+    (``sides``; b turned to agree with a)."""
+    m = (_row(p, 2) - _row(p, 1)).cross(_row(p, 3) - _row(p, 1))
     if kind != POINT_TRIANGLE:
-        a = normals[ids[0]] + normals[ids[1]]
-        b = normals[ids[2]] + normals[ids[3]]
         turn = 1.0
         if a.dot(b) < 0.0:
             turn = -1.0
@@ -138,12 +175,13 @@ def surface_normal(ids, kind, x0, normals, n):
 
 
 @ti.func
-def separation(ids, kind, x0, m):
-    """The least m . (x_a - x_b) over a candidate's vertex pairs across its sides."""
+def separation(kind, p, m):
+    """The least m . (p_a - p_b) over a candidate's vertex pairs across its sides, p its
+    corners (``corners``)."""
     least = 1e30
     for a, b in ti.static(VERTEX_PAIRS):
         if spans(kind, a, b):
-            least = ti.min(least, m.dot(x0[ids[a]] - x0[ids[b]]))
+            least = ti.min(least, m.dot(_row(p, a) - _row(p, b)))
     return least
 
 

@@ -285,9 +285,10 @@ class ProjectionLog:
     dynamics', after its iterations: ``terms/self_contact.py``) in their order, kept
     where ``on`` is set (a gradient's runs: ``tcloth/grad/projected.py`` differentiates
     each): the contact's particles (``ids``) and ``kind``, whether it was a velocity
-    pass (``velocity``), and the four particles' positions and velocities before it
-    (``x``, ``v``: (capacity, 4)). ``count`` counts them all; past ``capacity`` they are
-    not kept."""
+    pass (``velocity``), the four particles' positions and velocities before it
+    (``x``, ``v``: (capacity, 4)) and the two sides' vertex normals the velocity pass's
+    normal read (``sides``: (capacity, 2); ``kind`` plus ``normals.SURFACE`` where it
+    took them). ``count`` counts them all; past ``capacity`` they are not kept."""
 
     def __init__(self, capacity):
         real = runtime.real()
@@ -295,22 +296,24 @@ class ProjectionLog:
         self.ids = ti.Vector.field(4, ti.i32, shape=capacity)
         self.kind, self.velocity = (ti.field(ti.i32, shape=capacity) for _ in range(2))
         self.x, self.v = (ti.Vector.field(3, real, shape=(capacity, 4)) for _ in range(2))
+        self.sides = ti.Vector.field(3, real, shape=(capacity, 2))
         self.count, self.on = (ti.field(ti.i32, shape=()) for _ in range(2))
 
     @ti.func
-    def keep(self, ids, kind, velocity, x, v):
+    def keep(self, ids, kind, velocity, x, v, a, b):
         if self.on[None]:
             e = ti.atomic_add(self.count[None], 1)
             if e < self.capacity:
                 self.ids[e], self.kind[e], self.velocity[e] = ids, kind, velocity
+                self.sides[e, 0], self.sides[e, 1] = a, b
                 for j in ti.static(range(4)):
                     self.x[e, j], self.v[e, j] = x[ids[j]], v[ids[j]]
 
     def entries(self):
-        """The kept corrections as NumPy arrays (ids, kind, velocity, x, v), or None where
-        the step made more than the log keeps."""
+        """The kept corrections as NumPy arrays (ids, kind, velocity, x, v, sides), or
+        None where the step made more than the log keeps."""
         if int(self.count[None]) > self.capacity:
             return None
         k = int(self.count[None])
         return tuple(f.to_numpy()[:k] for f in (self.ids, self.kind, self.velocity, self.x,
-                                                 self.v))
+                                                 self.v, self.sides))

@@ -456,14 +456,14 @@ class Trajectory(StepAdjoints):
         return x1, x_bar, v_bar, planes, start_bar
 
     def _projection_back(self, entries, x1, x_bar, v_bar):
-        """The solver's x1 before projective dynamics' self-contact projection, and the
-        adjoints of its end before it from those after (``projected.py``); the masses'
-        share added to ``_mass_bar``."""
-        x_bar, v_bar, inv_bar = self._projection.pull_back(entries, self._inv_mass, x_bar,
+        """The solver's x1 before projective's self-contact projection, and the adjoints of
+        its end before it from those after (``projected.py``); the masses' to _mass_bar."""
+        start = before(entries, x1)
+        x_bar, v_bar, inv_bar = self._projection.pull_back(entries, self._inv_mass, start, x_bar,
                                                            v_bar)
         if self._mass_bar is not None:
             self._mass_bar -= self._inv_mass ** 2 * inv_bar
-        return before(entries, x1), x_bar, v_bar
+        return start, x_bar, v_bar
 
     def _reduce(self, wrt, x_bar, v_bar, controls_bar):
         adj, grads = self.adjoint, {}

@@ -41,13 +41,17 @@ them applied matrix-free in CG's products (``add_product``). Projective dynamics
 iterations: Gauss-Seidel passes over the penetrating contacts moving the particles apart to
 distance T (an impulse along the contact's weights, inverse-mass weighted: momentum is
 kept), then one over the contacts within T (those left at T included) removing
-approaching normal velocity and cutting tangential velocity by mu times that (Coulomb).
-Each correction can be kept (``ProjectionLog``) for the gradient (``grad/projected.py``).
+approaching normal velocity and cutting tangential velocity by mu times that (Coulomb),
+along the surfaces' normal where it separates the contact (``normals.contact_normal``:
+between two layers the closest points' direction of offset edges tilts along them, and
+removing approach along it took a sliding cloth's speed). Each correction can be kept
+(``ProjectionLog``) for the gradient (``grad/projected.py``).
 """
 import taichi as ti
 
 from .. import runtime
 from ..contact.broad import near, spread
+from ..contact.normals import contact_normal, sides, vertex_normals
 from ..contact.projection import LOG_CAPACITY, ProjectionLog
 from ..contact.search import POINT_TRIANGLE
 from ..features.self_collision import SELF_COLLISION
@@ -312,19 +316,18 @@ def _couplings(cl: ti.template(), lag: ti.template(), count: ti.i32, v: ti.templ
 
 # -- projective dynamics ---------------------------------------------------------------------
 @ti.func
-def projection_impulse(prm, g, w, v_rel, velocity: ti.template()):
+def projection_impulse(prm, g, n, w, v_rel, velocity: ti.template()):
     """(fires, impulse) of one projection correction of a contact with gap g, inverse
     effective mass w and relative velocity v_rel: where it is closer than the thickness
     (the velocity pass: within VELOCITY_REACH beyond it), the impulse that moves it apart
-    to the thickness or (``velocity``) removes its approaching normal velocity and cuts
-    the tangential by Coulomb; particle k of the contact then moves by alpha_k / m_k
-    times it."""
+    along g to the thickness or (``velocity``) removes its approaching velocity along
+    the unit normal n and cuts the tangential by Coulomb; particle k of the contact then
+    moves by alpha_k / m_k times it."""
     d = g.norm()
     reach = prm[0] * (1.0 + VELOCITY_REACH) if ti.static(velocity) else prm[0]
     fires = d > 0.0 and d < reach and w > 0.0
     impulse = ti.Vector.zero(float, 3)
     if fires:
-        n = _normal(g, d)
         if ti.static(velocity):
             vn = v_rel.dot(n)
             fires = vn < 0.0
@@ -335,31 +338,42 @@ def projection_impulse(prm, g, w, v_rel, velocity: ti.template()):
                 jt = ti.min(prm[2] * jn, speed / w)
                 impulse = jn * n - jt * vt / ti.max(speed, 1e-30)
         else:
-            impulse = (prm[0] - d) / w * n
+            impulse = (prm[0] - d) / w * _normal(g, d)
     return fires, impulse
+
+
+@ti.kernel
+def _vertex_normals(table: ti.template(), x: ti.template()):
+    vertex_normals(table, x, table.normals)
 
 
 @ti.kernel
 def _project_pass(cl: ti.template(), count: ti.i32, x: ti.template(), v: ti.template(),
                   velocity: ti.template(), log: ti.template()):
     """One Gauss-Seidel pass over the contacts (on one thread, in list order): positions
-    apart to the thickness, or (``velocity``) approaching normal velocity removed and
-    tangential velocity cut by Coulomb (``projection_impulse``). Each correction is an
-    impulse along the contact's weights, alpha_k / m_k on particle k: equal and
-    opposite, so momentum is kept. ``log`` keeps each correction (where on)."""
+    apart to the thickness, or (``velocity``) approaching velocity removed and
+    tangential velocity cut by Coulomb along the contact's normal (``projection_impulse``;
+    the normal ``normals.contact_normal`` chooses, from the vertex normals in
+    ``cl.table.normals``). Each correction is an impulse along the contact's weights,
+    alpha_k / m_k on particle k: equal and opposite, so momentum is kept. ``log`` keeps
+    each correction (where on), its kind plus the normal's choice."""
+    prm = ti.static(cl.table.params)
     ti.loop_config(serialize=True)
     for c in range(count):
         ids, kind = cl.ids[c], cl.kind[c]
         alpha, g = cl.gap(ids, kind, x)
+        a, b = sides(ids, cl.table.normals)
+        n, choice = _normal(g, g.norm()), 0
         v_rel = ti.Vector.zero(float, 3)
         if ti.static(velocity):
+            n, choice = contact_normal(ids, kind, x, cl.table.normals, g, prm[0])
             for j in ti.static(range(4)):
                 v_rel += alpha[j] * v[ids[j]]
         if cl.repels[c]:
-            fires, impulse = projection_impulse(ti.static(cl.table.params), g,
-                                                cl.inverse_mass(ids, alpha), v_rel, velocity)
+            fires, impulse = projection_impulse(prm, g, n, cl.inverse_mass(ids, alpha),
+                                                v_rel, velocity)
             if fires:
-                log.keep(ids, kind, int(velocity), x, v)
+                log.keep(ids, kind + choice, int(velocity), x, v, a, b)
                 for j in ti.static(range(4)):
                     q = ids[j]
                     if ti.static(velocity):
@@ -459,9 +473,11 @@ class SelfContact(Term):
     # -- projective dynamics -----------------------------------------------------------------
     def project(self, x, v, t):
         """Gauss-Seidel passes moving penetrating contacts apart to the thickness, then one
-        removing their approaching normal velocity with Coulomb friction (momentum kept)."""
+        removing their approaching normal velocity with Coulomb friction (momentum kept),
+        along the normals ``contact_normal`` chooses with the vertex normals at x."""
         cl, count = self.stage.candidates, self.stage.count
         self.log.count[None] = 0
+        _vertex_normals(self.table, x)
         for _ in range(PROJECTION_PASSES):
             _project_pass(cl, count, x, v, False, self.log)
         _project_pass(cl, count, x, v, True, self.log)
