@@ -112,7 +112,7 @@ def contact_normal(ids, kind, x, normals, g, thickness):
     direction of offset features tilts along the layers, and a correction along it
     takes the sliding layer's speed."""
     d = g.norm()
-    n = g / ti.max(d, LEAST_GAP)
+    n = g / ti.max(d, 1e-30)
     choice = 0
     if d > LEAST_GAP:
         m, s, _ = surface_margin(ids, kind, x, thickness, normals, n, d)
