@@ -318,11 +318,11 @@ def _couplings(cl: ti.template(), lag: ti.template(), count: ti.i32, v: ti.templ
 @ti.func
 def projection_impulse(prm, g, n, w, v_rel, velocity: ti.template()):
     """(fires, impulse) of one projection correction of a contact with gap g, inverse
-    effective mass w and relative velocity v_rel: where it is closer than the thickness
-    (the velocity pass: within VELOCITY_REACH beyond it), the impulse that moves it apart
-    along g to the thickness or (``velocity``) removes its approaching velocity along
-    the unit normal n and cuts the tangential by Coulomb; particle k of the contact then
-    moves by alpha_k / m_k times it."""
+    effective mass w, relative velocity v_rel and unit normal n (g's direction in the
+    position passes): where it is closer than the thickness (the velocity pass: within
+    VELOCITY_REACH beyond it), the impulse along n that moves it apart to the thickness
+    or (``velocity``) removes its approaching velocity along n and cuts the tangential
+    by Coulomb; particle k of the contact then moves by alpha_k / m_k times it."""
     d = g.norm()
     reach = prm[0] * (1.0 + VELOCITY_REACH) if ti.static(velocity) else prm[0]
     fires = d > 0.0 and d < reach and w > 0.0
@@ -338,7 +338,7 @@ def projection_impulse(prm, g, n, w, v_rel, velocity: ti.template()):
                 jt = ti.min(prm[2] * jn, speed / w)
                 impulse = jn * n - jt * vt / ti.max(speed, 1e-30)
         else:
-            impulse = (prm[0] - d) / w * _normal(g, d)
+            impulse = (prm[0] - d) / w * n
     return fires, impulse
 
 
