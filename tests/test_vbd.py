@@ -180,6 +180,30 @@ def test_vbd_keeps_the_momentum_of_a_free_cloth_as_it_converges(f64):
     assert drift[2] < 1e-12
 
 
+def test_a_cloth_on_a_frictionless_floor_keeps_its_momentum(f32):
+    """Nothing pushes along a frictionless floor, so a cloth lying on it at rest stays at
+    rest and one sliding over it keeps its speed, with VBD's defaults (Chebyshev's mix
+    on) at one step per frame. The mix used to extrapolate the particles the floor's
+    penalty holds, and the resting cloth crept 6 cm/s sideways within 0.5 s (0.018 kg
+    m/s, particles at up to 0.38 m/s); the sliding one raised InstabilityError at its
+    second step."""
+    for n, size, mass, speed in ((24, 1.2, 0.3, 0.0), (8, 0.3, 0.02, 1.0)):
+        scene = tcloth.Scene(gravity=(0.0, -9.81, 0.0))
+        scene.add_cloth(resolution=(n, n), size=(size, size), center=(0.0, 0.006, 0.0),
+                        mass=mass, structural=(400.0, 0.05), shear=(80.0, 0.02),
+                        flexion=(10.0, 0.005), pinned=[])
+        scene.add_plane((0.0, 0.0, 0.0), (0.0, 1.0, 0.0), friction=0.0)
+        sim = tcloth.Simulator(scene, "vbd", dt=1.0 / 60.0)
+        v = np.zeros((scene.num_particles, 3))
+        v[:, 0] = speed
+        sim.set_state(velocities=v)
+        sim.step(30)
+        p = sim.momentum()[0]
+        assert abs(p[0] - mass * speed) < 1e-4 and abs(p[2]) < 2e-4, (n, p)
+        drift = sim.velocities()[:, [0, 2]] - [speed, 0.0]
+        assert np.abs(drift).max() < 0.01, (n, np.abs(drift).max())
+
+
 def test_vbd_reaches_the_hanging_chain_closed_form(f64):
     """A chain of masses hanging from a pinned end (conftest.hanging_chain): each spring
     stretched by the weight below it over k."""

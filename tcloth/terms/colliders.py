@@ -38,6 +38,8 @@ from ..geometry.meshstore import QUERY_WORK
 from ..runtime import serial
 from .base import Term, norm_above, particle_energy
 
+NO_PLANE = -1e30     # a contact plane's offset where a particle has none (``plane_offset``)
+
 
 @ti.func
 def contact_force(depth, v_rel, n, k, cd, mu, eps):
@@ -87,7 +89,7 @@ def plane_offset(col, x0p, phi, n, v0p, h, fall, free):
     the offset b of the tangent plane n . x = b at its closest point, moved with the
     collider over the step, where the particle can reach the collider within the step
     (fall: h^2 |g|), else -1e30 (no plane)."""
-    b = -1e30
+    b = NO_PLANE
     reach = h * (v0p.norm() + col.velocity.norm()) + fall + col.thickness
     if col.stiffness > 0.0 and free and phi < col.thickness + reach:
         b = n.dot(x0p - phi * n + h * col.velocity)
@@ -347,6 +349,16 @@ class Colliders(Term):
                                              self.inv_mass[p] > 0.0)
         self._planes[2][p, c] = col.velocity
         return 0
+
+    @ti.func
+    def reaches(self, p):
+        """Whether particle p has a contact plane this step (``begin_solve``): a collider
+        it can reach within the step."""
+        near = False
+        for c in range(self.table.count):
+            if self._planes[1][p, c] > 0.5 * NO_PLANE:
+                near = True
+        return near
 
     @ti.func
     def _for_each_plane(self, p, x, body: ti.template(), zero, ctx):
