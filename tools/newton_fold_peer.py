@@ -82,6 +82,7 @@ import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
+from newton_peer import grid_colouring  # noqa: E402
 # tcloth's default strain_bound: (length - rest) / rest beyond it is a torn cloth
 STRAIN_BOUND = 1.0
 UNMAPPED = ("bending", "membrane", "strain_limit", "pressure", "wind", "attraction")
@@ -129,12 +130,12 @@ def export(path, n, state):
 
 def grid_colours(n, pairs):
     """SolverVBD's colour groups for an n x n grid whose particle (i, j) is j n + i:
-    (i mod 3, j mod 3); raises if a spring joins two particles of one colour."""
-    ii, jj = np.meshgrid(np.arange(n), np.arange(n))
-    colours = ((ii % 3) + 3 * (jj % 3)).ravel()
+    (i mod 3, j mod 3) (``newton_peer.grid_colouring``); raises if a spring joins two
+    particles of one colour."""
+    groups, colours = grid_colouring(n)
     if np.any(colours[pairs[:, 0]] == colours[pairs[:, 1]]):
         raise SystemExit("a spring joins two particles of one colour: not a grid cloth?")
-    return [np.nonzero(colours == c)[0].astype(int) for c in range(9)]
+    return groups
 
 
 def contact_materials(meta, particle_mass):

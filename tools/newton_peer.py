@@ -56,9 +56,15 @@ def add_grid_springs(builder, n, families):
                     if 0 <= i + di < n and 0 <= j + dj < n:
                         builder.add_spring(int(idx[j, i]), int(idx[j + dj, i + di]), ke, kd,
                                            control=0.0)
+    builder.set_coloring(grid_colouring(n)[0])
+
+
+def grid_colouring(n):
+    """(SolverVBD's nine colour groups, each particle's colour) of an n x n grid whose
+    particle (i, j) is j n + i: (i mod 3, j mod 3)."""
     ii, jj = np.meshgrid(np.arange(n), np.arange(n))
     colours = ((ii % 3) + 3 * (jj % 3)).ravel()
-    builder.set_coloring([np.nonzero(colours == c)[0].astype(int) for c in range(9)])
+    return [np.nonzero(colours == c)[0].astype(int) for c in range(9)], colours
 
 
 def timed_steps(model, solver, steps, dt, record=None):

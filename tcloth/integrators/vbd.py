@@ -252,7 +252,7 @@ class VBD(ForceCache, Integrator):
         if self.pair_terms:
             return ("vbd gathers its Jacobi terms (self-contact, pressure) from Python "
                     "every iteration")
-        if any(t.has("contact_planes") for t in self.potential.terms):
+        if self.has_colliders:
             return "vbd stores the colliders' contacts at each step's start with a launch"
         for term in self.potential.terms:
             if term.batch_obstacle() is not None:
