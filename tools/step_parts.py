@@ -7,16 +7,19 @@ n x n, self-collision on) runs ``--steps`` steps at one step per frame with each
 ``--integrators``, after four steps that compile kernels (from the same start). Python
 timers wrap the contact stage's update points and the solvers' parts named in ``PARTS``:
 kernels on CPUs return when they are done, so a call's wall time is its work (on a GPU
-the tool synchronises around each). A part's time includes the parts it calls (the
-nesting is in the labels), so the rows do not sum; ``step`` is the whole step.
+the tool synchronises around each). A part's time includes the parts it calls
+(``<part>_ms``); its own time (``<part>_own_ms``) does not, and the own times with
+``other_own_ms`` (the step's time in no part) sum to ``step_ms``, the whole step.
+``--plot FILE`` draws the own times as one bar per integrator.
 
 Each integrator's lines: ``parts.<n>x<n>.<integrator>.<part>_ms`` (mean per step),
-``.step_ms``, ``.us_per_vertex_step`` and ``.ogc_ratio``: that cost over Offset
-Geometric Contact's published CPU figure, 0.21 s a step for 246K vertices (Chen et al.
-2025), 0.85 us a vertex-step.
+``.step_ms``, ``.raised_at_step`` (where the solver raised ``InstabilityError``: the
+means are then over the steps before), ``.us_per_vertex_step`` and ``.ogc_ratio``:
+that cost over Offset Geometric Contact's published CPU figure, 0.21 s a step for 246K
+vertices (Chen et al. 2025), 0.85 us a vertex-step.
 
 Usage: python tools/step_parts.py [--size 64] [--integrators projective,xpbd,vbd]
-                                  [--steps 30] [--arch cpu|cuda]
+                                  [--steps 30] [--arch cpu|cuda] [--plot FILE.png]
 """
 import argparse
 import collections
@@ -59,21 +62,41 @@ PARTS = (
 )
 
 
-def wrap(owner, name, label, totals, sync):
-    """owner.name timed into totals[label]; returns an undo, or None where owner has no
-    such attribute or it cannot be wrapped (a Taichi kernel of a data-oriented class)."""
+class Timers:
+    """Each part's time with the parts it calls (``total``) and without them (``own``:
+    the own times of every call partition the time spent in the parts)."""
+
+    def __init__(self, sync):
+        self.sync = sync
+        self.total = collections.defaultdict(float)
+        self.own = collections.defaultdict(float)
+        self.stack = []         # per open call: the time its timed callees took
+
+    def call(self, label, function, args, kwargs):
+        self.sync()
+        start = time.perf_counter()
+        self.stack.append(0.0)
+        try:
+            return function(*args, **kwargs)
+        finally:
+            self.sync()
+            spent = time.perf_counter() - start
+            callees = self.stack.pop()
+            self.total[label] += spent
+            self.own[label] += spent - callees
+            if self.stack:
+                self.stack[-1] += spent
+
+
+def wrap(owner, name, label, timers):
+    """owner.name timed by ``timers`` as ``label``; returns an undo, or None where owner
+    has no such attribute or it cannot be wrapped."""
     original = getattr(owner, name, None)
     if original is None:
         return None
 
     def timed(*args, **kwargs):
-        sync()
-        start = time.perf_counter()
-        try:
-            return original(*args, **kwargs)
-        finally:
-            sync()
-            totals[label] += time.perf_counter() - start
+        return timers.call(label, original, args, kwargs)
     try:
         setattr(owner, name, timed)
     except (AttributeError, TypeError):
@@ -101,27 +124,35 @@ def parts_of(module, x40, v40, n, integrator, options, steps, sync):
     sim.set_state(positions=x, velocities=v)
     sim.step(4)
     sim.set_state(positions=x, velocities=v)
-    totals = collections.defaultdict(float)
+    timers = Timers(sync)
     undo = []
     for label, where, attr in PARTS:
         owner = resolve(sim, where)
         if owner is not None:
-            undo.append(wrap(owner, attr, label, totals, sync))
-    ran, start = 0, time.perf_counter()
+            undo.append(wrap(owner, attr, label, timers))
+    ran, raised, start = 0, None, time.perf_counter()
     try:
         for _ in range(steps):
             sim.step()
             ran += 1
     except tcloth.InstabilityError as error:
         print(f"# {integrator} raised at step {ran + 1}: {str(error).splitlines()[0]}")
+        raised = ran + 1
     finally:
         sync()
         wall = time.perf_counter() - start
         for restore in reversed([u for u in undo if u is not None]):
             restore()
-    out = {f"{label}_ms": 1e3 * seconds / max(ran, 1) for label, seconds in totals.items()}
-    out["step_ms"] = 1e3 * wall / max(ran, 1)
+    per_step = 1e3 / max(ran, 1)
+    out = {}
+    for label, seconds in timers.total.items():
+        out[f"{label}_ms"] = seconds * per_step
+        out[f"{label}_own_ms"] = timers.own[label] * per_step
+    out["other_own_ms"] = (wall - sum(timers.own.values())) * per_step
+    out["step_ms"] = wall * per_step
     out["steps"] = ran
+    if raised is not None:
+        out["raised_at_step"] = raised
     out["us_per_vertex_step"] = 1e6 * wall / max(ran, 1) / sim.model.particle_count
     out["ogc_ratio"] = out["us_per_vertex_step"] / OGC_US_PER_VERTEX_STEP
     return out
@@ -134,6 +165,7 @@ def main():
     ap.add_argument("--steps", type=int, default=30)
     ap.add_argument("--arch", default="cpu")
     ap.add_argument("--state", default=os.path.join(HERE, "data", "fold_40x40.npz"))
+    ap.add_argument("--plot", default=None, help="a PNG of the parts' own times")
     args = ap.parse_args()
     if args.size < 2 or args.steps < 1:
         ap.error(f"--size must be at least 2 and --steps at least 1 (got {args.size}, "
@@ -143,12 +175,59 @@ def main():
     module = load_script(os.path.join(HERE, "..", "scenes", "fold.py"))[0]
     x40, v40 = folded_state(module, args.state)
     n = args.size
+    results = {}
     for spec in args.integrators.split(","):
         integrator, options, label = integrator_spec(spec)
         print(f"# {label}: {args.steps} steps of the {n} x {n} fold at 1/60", flush=True)
-        for key, value in parts_of(module, x40, v40, n, integrator, options, args.steps,
-                                   sync).items():
+        results[label] = parts_of(module, x40, v40, n, integrator, options, args.steps, sync)
+        for key, value in results[label].items():
             print(f"parts.{n}x{n}.{label}.{key}: {value:.4g}", flush=True)
+    if args.plot:
+        plot(results, n, args.plot)
+        print(f"# wrote {args.plot}")
+
+
+def plot(results, n, path):
+    """One horizontal bar per integrator: its step's own times by part, the parts below
+    2 % of every step in "other"."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    own = {label: {key[:-len("_own_ms")]: value for key, value in r.items()
+                   if key.endswith("_own_ms")} for label, r in results.items()}
+    shown = sorted({part for label, parts in own.items() for part, ms in parts.items()
+                    if part != "other" and ms >= 0.02 * results[label]["step_ms"]})
+    fig, ax = plt.subplots(figsize=(11, 1.4 + 0.8 * len(results)))
+    # tab20 without its greys, which "other" has
+    colours = [c for c in plt.get_cmap("tab20").colors if max(c) - min(c) > 0.05]
+    order = list(dict.fromkeys(label for label, _, _ in PARTS))    # a part's colour
+    labels, labelled = list(results), set()
+    for row, label in enumerate(labels):
+        left = 0.0
+        parts = own[label]
+        rest = sum(ms for part, ms in parts.items() if part not in shown)
+        for part in shown + ["other"]:
+            ms = rest if part == "other" else parts.get(part, 0.0)
+            if ms <= 0.0:
+                continue
+            ax.barh(row, ms, left=left, color="0.8" if part == "other" else
+                    colours[order.index(part) % len(colours)],
+                    label=None if part in labelled else part)
+            labelled.add(part)
+            left += ms
+        r = results[label]
+        raised = "" if "raised_at_step" not in r else \
+            f", raised at step {r['raised_at_step']:.0f}"
+        ax.text(left, row, f"  {r['step_ms']:.0f} ms, {r['us_per_vertex_step']:.1f} us a "
+                f"vertex-step ({r['ogc_ratio']:.0f}x OGC){raised}", va="center", fontsize=8)
+    ax.set_yticks(range(len(labels)), labels)
+    ax.invert_yaxis()
+    ax.set_xlabel("ms a step (each part's own time)")
+    ax.set_title(f"{n} x {n} fold, one step per frame: where a step's time goes")
+    ax.set_xlim(0, 1.6 * max(r["step_ms"] for r in results.values()))
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
 
 
 if __name__ == "__main__":
