@@ -122,7 +122,12 @@ def parts_of(module, x40, v40, n, integrator, options, steps, sync):
     sim = tcloth.Simulator(scene, integrator, dt=1.0 / 60.0, **options)
     x, v = resample(x40, n), resample(v40, n)
     sim.set_state(positions=x, velocities=v)
-    sim.step(4)
+    try:
+        sim.step(4)
+    except tcloth.InstabilityError as error:     # torn in the warm-up: nothing to time
+        print(f"# {integrator} raised at warm-up step {sim.num_steps + 1}: "
+              f"{str(error).splitlines()[0]}")
+        return {"raised_at_step": sim.num_steps + 1, "steps": 0}
     sim.set_state(positions=x, velocities=v)
     timers = Timers(sync)
     undo = []
@@ -184,12 +189,15 @@ def main():
             print(f"parts.{n}x{n}.{label}.{key}: {value:.4g}", flush=True)
     if args.plot:
         plot(results, n, args.plot)
-        print(f"# wrote {args.plot}")
 
 
 def plot(results, n, path):
-    """One horizontal bar per integrator: its step's own times by part, the parts below
-    2 % of every step in "other"."""
+    """One horizontal bar per integrator that stepped: its step's own times by part, the
+    parts below 2 % of every step in "other"."""
+    results = {label: r for label, r in results.items() if r["steps"]}
+    if not results:
+        print("# nothing stepped: no plot")
+        return
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -228,6 +236,7 @@ def plot(results, n, path):
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     fig.tight_layout()
     fig.savefig(path, dpi=120)
+    print(f"# wrote {path}")
 
 
 if __name__ == "__main__":
