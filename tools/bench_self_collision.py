@@ -130,6 +130,20 @@ def warp_hashgrid_ms(x, reach, repeats=5):
     return float(np.median(times[1:]))
 
 
+def warm_up(sim, x, v):
+    """Four steps of ``sim`` from positions x and velocities v, which compile the kernels
+    of both states' alternation, then the state set back to (x, v). Returns the
+    InstabilityError where the cloth tore in them (at step ``sim.num_steps + 1``), else
+    None."""
+    try:
+        sim.set_state(positions=x, velocities=v)
+        sim.step(4)
+    except tcloth.InstabilityError as error:
+        return error
+    sim.set_state(positions=x, velocities=v)
+    return None
+
+
 def one_second(module, x40, v40, n, integrator, dt, seconds, options):
     """The n x n fold from the saved state, ``seconds`` of simulated time at one step of
     dt per frame with ``integrator``, self-collision on and off: wall time (after four steps
@@ -145,13 +159,9 @@ def one_second(module, x40, v40, n, integrator, dt, seconds, options):
             scene.self_collision = None
         sim = tcloth.Simulator(scene, integrator, dt=dt, **options)
         wall, worst = 0.0, 0
-        try:
-            sim.set_state(positions=x, velocities=v)
-            sim.step(4)                 # compiles the kernels of both states' alternation
-        except tcloth.InstabilityError:          # the cloth tore: say where, time nothing
+        if warm_up(sim, x, v) is not None:      # the cloth tore: say where, time nothing
             out[f"{mode}_raised_at_step"] = sim.num_steps + 1
             continue
-        sim.set_state(positions=x, velocities=v)
         cg = 0
         for step in range(int(round(seconds / dt))):
             t = time.perf_counter()
@@ -160,11 +170,11 @@ def one_second(module, x40, v40, n, integrator, dt, seconds, options):
             except tcloth.InstabilityError:      # the cloth tore: say where, time no more
                 out[f"{mode}_raised_at_step"] = step + 1
                 break
-            sim.positions()
+            x1 = sim.positions()
             wall += time.perf_counter() - t
             cg += getattr(sim.integrator, "stats", {}).get("cg_iterations", 0)
             if mode == "on":        # every step's, untimed
-                worst = max(worst, count_crossings(sim.positions(), scene.triangles))
+                worst = max(worst, count_crossings(x1, scene.triangles))
         if cg:                  # the implicit solvers' conjugate-gradient iterations
             out[f"{mode}_cg_iterations"] = cg
         out[f"{mode}_wall_s"] = wall

@@ -29,7 +29,7 @@ import time
 import taichi as ti
 
 import tcloth
-from bench_self_collision import HERE, fold_scene, folded_state, resample
+from bench_self_collision import HERE, fold_scene, folded_state, resample, warm_up
 from benchcsv import integrator_spec
 from tcloth.app.script import load_script
 from tcloth.contact import broad, guard, stage
@@ -121,20 +121,18 @@ def parts_of(module, x40, v40, n, integrator, options, steps, sync):
     scene = fold_scene(module, n)
     sim = tcloth.Simulator(scene, integrator, dt=1.0 / 60.0, **options)
     x, v = resample(x40, n), resample(v40, n)
-    sim.set_state(positions=x, velocities=v)
-    try:
-        sim.step(4)
-    except tcloth.InstabilityError as error:     # torn in the warm-up: nothing to time
+    error = warm_up(sim, x, v)
+    if error is not None:                       # torn in the warm-up: nothing to time
         print(f"# {integrator} raised at warm-up step {sim.num_steps + 1}: "
               f"{str(error).splitlines()[0]}")
         return {"raised_at_step": sim.num_steps + 1, "steps": 0}
-    sim.set_state(positions=x, velocities=v)
     timers = Timers(sync)
     undo = []
     for label, where, attr in PARTS:
         owner = resolve(sim, where)
-        if owner is not None:
-            undo.append(wrap(owner, attr, label, timers))
+        restore = None if owner is None else wrap(owner, attr, label, timers)
+        if restore is not None:
+            undo.append(restore)
     ran, raised, start = 0, None, time.perf_counter()
     try:
         for _ in range(steps):
@@ -146,7 +144,7 @@ def parts_of(module, x40, v40, n, integrator, options, steps, sync):
     finally:
         sync()
         wall = time.perf_counter() - start
-        for restore in reversed([u for u in undo if u is not None]):
+        for restore in reversed(undo):
             restore()
     per_step = 1e3 / max(ran, 1)
     out = {}
