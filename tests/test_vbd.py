@@ -5,6 +5,7 @@ free cloth's momentum and pinned particles in place, and reaches a hanging chain
 closed-form equilibrium."""
 import numpy as np
 import pytest
+import taichi as ti
 
 import tcloth
 from conftest import hanging_chain
@@ -109,6 +110,87 @@ def test_each_vertex_gradient_and_block_match_finite_differences(f64, friction):
                 n = (xt[p] - (0.5, 0.3, 0.25)) / np.linalg.norm(xt[p] - (0.5, 0.3, 0.25))
                 error = n @ error @ n
             assert np.abs(error).max() < 1e-5 * np.abs(fd_h).max(), (p, block, fd_h)
+
+
+def layers():
+    """A 6 x 6 cloth with a 4 x 4 one 4 mm above it, inside the 6 mm self-contact."""
+    scene = tcloth.Scene(gravity=(0.0, -9.81, 0.0))
+    for y, n in ((0.0, 6), (0.004, 4)):
+        scene.add_cloth(resolution=(n, n), size=(0.3, 0.3), center=(0.01 * n, y, 0.0),
+                        mass=0.02, structural=(400.0, 0.05), shear=(80.0, 0.02),
+                        flexion=(10.0, 0.005))
+    scene.set_self_collision(thickness=0.006)
+    return scene
+
+
+def test_each_vertex_self_contact_is_evaluated_afresh_and_matches_finite_differences(f64):
+    """Self-contact in VBD's sweeps (``SelfContact.vertex_system``): each particle's
+    rows of the contact list are indexed once a step (every row at each of its four
+    particles, once), and a particle's gradient, its rows evaluated at the current
+    positions, matches central differences of the contact's part of the incremental
+    potential (the penalty, and the normal damping lagged at the step's start) for every
+    particle in a row, on two layers pressed into each other."""
+    scene = layers()
+    sim = tcloth.Simulator(scene, "vbd", dt=1 / 60)
+    vbd, h = sim.integrator, 1 / 60
+    rng = np.random.default_rng(3)
+    x0 = scene.positions + 5e-4 * rng.normal(size=scene.positions.shape)
+    sim.set_state(positions=x0, velocities=rng.normal(scale=0.05, size=x0.shape))
+    x, start_x = sim.state.x, vbd.potential.x0
+    vbd.potential.begin(sim.state.x, sim.state.v, h, 0.0, vbd.prev)
+    term = vbd.vertex_terms[0]
+    cl, rows = sim.model.contact.candidates, sim.model.contact.count
+    ids = cl.ids.to_numpy()[:rows]
+    start, entries = term.rows.start.to_numpy(), term.rows.entries.to_numpy()
+    for p in range(len(x0)):
+        listed = sorted(map(tuple, entries[start[p]:start[p + 1]]))
+        assert listed == sorted(zip(*np.nonzero(ids == p))), p
+    acc, grad = ti.field(ti.f64, shape=2), ti.Vector.field(3, ti.f64, shape=len(x0))
+
+    @ti.kernel
+    def gradient(p: ti.i32) -> ti.types.vector(3, ti.f64):
+        return term.vertex_system(p, x, start_x, h)[0]
+
+    def energy(y):
+        x.from_numpy(y)
+        acc.fill(0.0)
+        term.add_incremental(x, start_x, h, False, acc, grad)
+        return acc[0]
+    xt = x0 + h * sim.velocities() + 5e-4 * rng.normal(size=x0.shape)
+    eps, touching = 1e-7, 0
+    for p in np.unique(ids):
+        x.from_numpy(xt)
+        g = np.array(gradient(p))
+        fd = np.zeros(3)
+        for c in range(3):
+            up, down = xt.copy(), xt.copy()
+            up[p, c] += eps
+            down[p, c] -= eps
+            fd[c] = (energy(up) - energy(down)) / (2 * eps)
+        assert np.abs(g - fd).max() < 1e-6 * (np.abs(fd).max() + 1e-3), (p, g, fd)
+        touching += np.abs(fd).max() > 1e-2
+    assert touching >= 10
+
+
+def test_vbd_reads_the_contact_list_the_stage_made_again_larger(f64):
+    """The stage replaces its candidate list with a larger one where a search outgrew
+    it; VBD's sweeps, compiled for the first list, compile again for the new one (the
+    term's ``layout``) and step exactly as a simulator that never had the smaller list."""
+    grown, fresh = (tcloth.Simulator(layers(), "vbd", dt=1 / 60) for _ in range(2))
+    grown.step(1)
+    broad = grown.model.contact.broad
+    term = grown.integrator.vertex_terms[0]
+    before = term.layout()
+    broad.candidates = broad._list(2 * broad.candidates.capacity)
+    x, v = grown.positions(), grown.velocities()
+    grown.set_state(positions=x, velocities=v)
+    fresh.set_state(positions=x, velocities=v)
+    grown.step(2)
+    fresh.step(2)
+    assert term.layout() > before
+    assert grown.model.contact.candidates is broad.candidates
+    assert np.array_equal(grown.positions(), fresh.positions())
+    assert np.abs(grown.positions() - x).max() > 1e-3
 
 
 def projection(scene, x, p):

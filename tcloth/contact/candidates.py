@@ -8,7 +8,7 @@ from crossing). Two searches fill such lists, and only the contact stage
 candidates (``swept.py``). Its consumers keep their columns per row themselves: the
 guard's separating planes and the projection's marks (``guard.Planes``, which the stage
 keeps beside each list), the contact law's lagged values for backward Euler
-(``terms/self_contact.Lagged``).
+(``terms/contact_lag.Lagged``).
 
 A contact joins four particles x_k with weights alpha_k so that the gap between the two
 closest points is g = sum_k alpha_k x_k (``geometry/proximity.py``): point-triangle (a
@@ -36,7 +36,7 @@ class ContactList:
     """Candidate contacts (ids (4,), kind and whether they repel, per row) of capacity
     ``capacity``. Consumers keep their own columns per row: the guard's planes
     (``guard.Planes``, beside each of the stage's lists) and the contact law's lagged
-    values (``terms.self_contact.Lagged``)."""
+    values (``terms.contact_lag.Lagged``)."""
 
     def __init__(self, table, inv_mass, capacity):
         self.table, self.inv_mass = table, inv_mass

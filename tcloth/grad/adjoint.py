@@ -51,7 +51,8 @@ from ..features import FEATURES
 from ..terms import Bending, Colliders, GravityDrag, Membrane, Wind
 from ..terms.colliders import (coulomb_change, lagged_normal_force, plane_contact_force,
                                plane_offset, step_contact)
-from ..terms.self_contact import dissipation, lagged, pair_force, penalty_gradient
+from ..terms.contact_lag import dissipation, lagged, penalty_gradient
+from ..terms.self_contact import pair_force
 from ..terms.springs import direction, incremental, spring_force
 
 

@@ -20,8 +20,12 @@ Hinge bending (``terms/bending.py``) and the triangle membrane (``terms/membrane
 are Gauss-Seidel like the springs: a vertex's gradient and block are summed over its
 hinges and triangles at the current positions, and vertices sharing a hinge or a
 triangle get different colours. Self-contact couples vertices through
-the contact list, which changes every step: its gradient and diagonal blocks are evaluated
-once per iteration, before the colour passes, and held through them (a Jacobi update);
+the contact list, which changes every step: each vertex's rows are evaluated afresh in its
+update too (``SelfContact.vertex_system``, from a per-vertex index made at the step's
+start, as Newton's VBD does), but they are not in the colouring, so two vertices of one
+colour may share a row. Held through an iteration's colours instead (a Jacobi update,
+until stop 76), its exact blocks moved both sides of a contact at once and overshot
+(``docs/contact.md``);
 each iteration ends keeping the contact stage's pairs on their sides of their separating
 planes (``ContactStage.begin_solve`` at the step's start with the initial guess as the
 predicted motion, searched again where an iterate leaves it; ``guard.keep_apart``), and
@@ -125,13 +129,18 @@ class VBD(ForceCache, Integrator):
             self.pairs, self.rest = self.springs.pairs, self.springs.rest
             self.ks, self.kd = self.springs.ks, self.springs.kd
         # pair terms with a per-vertex system (bending, membrane) are Gauss-Seidel like
-        # the springs; the others (self-contact, pressure) Jacobi, held through an
-        # iteration, with diagonal blocks that bound their couplings (the term option
-        # ``jacobi``, given to those that declare it)
+        # the springs; pressure is Jacobi, held through an iteration, with diagonal blocks
+        # that bound its couplings (the term option ``jacobi``, given to those that
+        # declare it)
         self.local_terms = tuple(t for t in self.potential.pair_terms
                                  if t.has("local_system"))
+        # self-contact: each particle's rows evaluated afresh in its update (Gauss-Seidel,
+        # as Newton's VBD does; its couplings change every step, so they are not in the
+        # colouring)
+        self.vertex_terms = tuple(t for t in self.potential.pair_terms
+                                  if t.has("vertex_system"))
         self.pair_terms = tuple(t for t in self.potential.pair_terms
-                                if t not in self.local_terms)
+                                if t not in self.local_terms + self.vertex_terms)
         self.mass, self.params = model.mass, model.params
         self.order, self.colour_start = self._colouring(n)
         self.colours = len(self.colour_start) - 1
@@ -226,7 +235,7 @@ class VBD(ForceCache, Integrator):
                 pushed = keep_apart(*planes, x, self.potential.inv_mass, self.dx, self.hits) > 0
             if self.bounds is not None and self.bounds.any_clamped() and it < opt["iterations"]:
                 if model.contact.detect_bounds(self.bounds, x):
-                    for term in self.pair_terms:        # the list's rows changed
+                    for term in self.pair_terms + self.vertex_terms:  # the rows changed
                         term.begin_step(state_in.x, state_in.t)
         if self.hold_stage is not None and self.hold_stage.begin_hold(state_in.x, x,
                                                                      state_in.t, h):
@@ -249,9 +258,9 @@ class VBD(ForceCache, Integrator):
         at the step's start are stored by a launch)."""
         if self.options["substeps"] != 1:
             return "vbd runs its substeps from Python"
-        if self.pair_terms:
-            return ("vbd gathers its Jacobi terms (self-contact, pressure) from Python "
-                    "every iteration")
+        if self.pair_terms or self.vertex_terms:
+            return ("vbd gathers its Jacobi terms (pressure) and self-contact's rows from "
+                    "Python every iteration or step")
         if self.has_colliders:
             return "vbd stores the colliders' contacts at each step's start with a launch"
         for term in self.potential.terms:
@@ -343,6 +352,10 @@ class VBD(ForceCache, Integrator):
             g_t, block_t = term.local_system(p, x, self.potential.x0, h)
             g += g_t
             block += block_t
+        for term in ti.static(self.vertex_terms):
+            g_t, block_t = term.vertex_system(p, x, self.potential.x0, h)
+            g += g_t
+            block += block_t
         if ti.static(self.has_springs):
             d0 = ti.static(self.springs.d0)
             for a in range(self.adj_start[p], self.adj_start[p + 1]):
@@ -356,8 +369,15 @@ class VBD(ForceCache, Integrator):
                 block += projected
         return g, block
 
+    def _sweep(self, x, h, t):
+        self._sweep_kernel(x, h, t, self._layout())
+
+    def _layout(self):
+        """The vertex terms' ``layout``s: a sweep compiles again where one changed."""
+        return tuple(term.layout() for term in self.vertex_terms)
+
     @ti.kernel
-    def _sweep(self, x: ti.template(), h: float, t: float):
+    def _sweep_kernel(self, x: ti.template(), h: float, t: float, layout: ti.template()):
         self.sweep(x, h, t)
 
     @ti.func
@@ -404,13 +424,13 @@ class VBD(ForceCache, Integrator):
         """(g_i, H_i) of vertex p at positions x (a field) within the step begun last, as
         NumPy; for tests."""
         self._contacts(x, h)
-        out = self._local_kernel(x, h, t, p)
+        out = self._local_kernel(x, h, t, p, self._layout())
         out = np.asarray(out)
         return out[0], out[1:]
 
     @ti.kernel
-    def _local_kernel(self, x: ti.template(), h: float, t: float,
-                      p: ti.i32) -> ti.types.matrix(4, 3, ti.f64):
+    def _local_kernel(self, x: ti.template(), h: float, t: float, p: ti.i32,
+                      layout: ti.template()) -> ti.types.matrix(4, 3, ti.f64):
         g, block = self._local(p, x, h, t)
         out = ti.Matrix.zero(ti.f64, 4, 3)
         for j in ti.static(range(3)):

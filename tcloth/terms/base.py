@@ -80,6 +80,11 @@ CAPABILITIES = {
     # VBD's Gauss-Seidel sweeps: particle p's gradient and Hessian block at x (ti.func
     # ``local_system(p, x, x0, h)``); a coupled term without it is taken Jacobi-style
     "local_system": ("local_system",),
+    # VBD's sweeps, for a coupling that changes every step (self-contact): particle p's
+    # gradient and Hessian block at x from its rows evaluated afresh (ti.func
+    # ``vertex_system(p, x, x0, h)``), the couplings left out of the colouring; and
+    # ``layout()``, an int that changes where the fields it reads were made again
+    "vertex_system": ("vertex_system", "layout"),
     # projective dynamics' matrix: ``constant_matrix()``, a ``ConstantMatrix``
     "constant_matrix": ("constant_matrix",),
     # XPBD's compliant constraints (built with the option ``constraints=True`` where the

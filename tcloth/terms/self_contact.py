@@ -37,10 +37,12 @@ dissipation potentials with the start of the step's normal force, normal and wei
 Newton matrix gets each contact's Gauss-Newton Hessian (the penalty's k n n^T without
 the curvature term, which is negative, and the dissipation's blocks) spread over its four
 particles: the diagonal blocks in the block-Jacobi preconditioner, the couplings between
-them applied matrix-free in CG's products (``add_product``). Projective dynamics projects after its
-iterations: Gauss-Seidel passes over the penetrating contacts moving the particles apart to
-distance T (an impulse along the contact's weights, inverse-mass weighted: momentum is
-kept), then one over the contacts within T (those left at T included) removing
+them applied matrix-free in CG's products (``add_product``). VBD takes the same gradient
+and exact blocks particle by particle inside its sweeps (``vertex_system``: each particle's
+rows, indexed at the step's start, evaluated at the current positions). Projective
+dynamics projects after its iterations: Gauss-Seidel passes over the penetrating
+contacts moving the particles apart to distance T (an impulse along the contact's
+weights, inverse-mass weighted: momentum is kept), then one over the contacts within T (those left at T included) removing
 approaching normal velocity and cutting tangential velocity by mu times that (Coulomb),
 along the surfaces' normal where it separates the contact (``normals.contact_normal``:
 between two layers the closest points' direction of offset edges tilts along them, and
@@ -57,18 +59,15 @@ from ..contact.search import POINT_TRIANGLE
 from ..features.self_collision import SELF_COLLISION
 from ..runtime import serial
 from .base import Term
-from .colliders import add_dissipation, contact_force
+from .colliders import contact_force
+from .contact_lag import Lagged, _dissipation, _normal, lag_rows, penalty_gradient
+from .vertex_rows import VertexRows
 
 PROJECTION_PASSES = 4
 # the velocity pass reaches the thickness times (1 + this): the position passes leave their
 # contacts at the thickness, where rounding put about half of them outside it (their
 # approaching velocity kept, and a step's outcome split by perturbations of 1e-9)
 VELOCITY_REACH = 1e-6
-
-
-@ti.func
-def _normal(g, d):
-    return g / ti.max(d, 1e-30)
 
 
 @ti.func
@@ -155,88 +154,6 @@ def _active(cl: ti.template(), count: ti.i32, x: ti.template()) -> ti.types.vect
 
 
 # -- backward Euler --------------------------------------------------------------------------
-@ti.data_oriented
-class Lagged:
-    """What the contact law keeps per row of the candidate list for backward Euler: the
-    lagged normal force, normal and weights at the step's start, and the Hessian's
-    weights, penalty and dissipation blocks (``capacity`` rows)."""
-
-    def __init__(self, capacity):
-        real = runtime.real()
-        self.capacity = capacity
-        self.fn = ti.field(real, shape=capacity)
-        self.n = ti.Vector.field(3, real, shape=capacity)
-        self.alpha0 = ti.Vector.field(4, real, shape=capacity)
-        self.alpha = ti.Vector.field(4, real, shape=capacity)
-        self.penalty = ti.Matrix.field(3, 3, real, shape=capacity)
-        self.damping = ti.Matrix.field(3, 3, real, shape=capacity)
-
-
-@ti.func
-def lagged(cl, c, x0):
-    """(fn, n, alpha) of candidate c at the step's start x0: its normal force k (T - d)
-    (0 where it does not touch), normal and weights."""
-    prm = ti.static(cl.table.params)
-    alpha, g = cl.gap(cl.ids[c], cl.kind[c], x0)
-    d = g.norm()
-    fn = 0.0
-    if cl.repels[c] and d > 0.0 and d < prm[0]:
-        fn = prm[1] * (prm[0] - d)
-    return fn, _normal(g, d), alpha
-
-
-@ti.kernel
-def _lag(cl: ti.template(), lag: ti.template(), count: ti.i32, x0: ti.template()):
-    """Each candidate's normal force, normal and weights at the step's start."""
-    ti.loop_config(serialize=ti.static(serial(cl.ids)))
-    for c in range(count):
-        lag.fn[c], lag.n[c], lag.alpha0[c] = lagged(cl, c, x0)
-
-
-@ti.func
-def dissipation(cl, ids, fn0, n0, alpha0, x, x0, h):
-    """(energy, gradient, Hessian) in the relative motion sum_k alpha0_k x_k of a contact's
-    normal damping and friction as convex potentials of the end velocity (the colliders'
-    ``add_dissipation`` between two moving sides), with its lagged normal force fn0,
-    normal n0 and weights alpha0 (``lagged``); no damping where every particle of the
-    contact is pinned."""
-    prm = ti.static(cl.table.params)
-    e = 0.0
-    g = ti.Vector.zero(float, 3)
-    block = ti.Matrix.zero(float, 3, 3)
-    if fn0 > 0.0:
-        w = cl.inverse_mass(ids, alpha0)
-        v = ti.Vector.zero(float, 3)
-        for j in ti.static(range(4)):
-            v += alpha0[j] * (x[ids[j]] - x0[ids[j]]) / h
-        cd = 0.0
-        if w > 0.0:
-            cd = 2.0 * prm[3] * ti.sqrt(prm[1] / w)
-        e, g, block = add_dissipation(e, g, block, v, n0, fn0, cd, prm[2], prm[4], h)
-    return e, g, block
-
-
-@ti.func
-def _dissipation(cl, lag, c, x, x0, h):
-    """``dissipation`` of candidate c with its values lagged by ``_lag``."""
-    return dissipation(cl, cl.ids[c], lag.fn[c], lag.n[c], lag.alpha0[c], x, x0, h)
-
-
-@ti.func
-def penalty_gradient(cl, c, x):
-    """(ids, alpha, depth T - d, the penalty's gradient in the gap -k (T - d) n) of
-    candidate c at x: the gradient zero where it does not touch."""
-    prm = ti.static(cl.table.params)
-    ids = cl.ids[c]
-    alpha, g = cl.gap(ids, cl.kind[c], x)
-    d = g.norm()
-    depth = prm[0] - d
-    grad = ti.Vector.zero(float, 3)
-    if cl.repels[c] and depth > 0.0:
-        grad = -prm[1] * depth * _normal(g, d)
-    return ids, alpha, depth, grad
-
-
 @ti.kernel
 def _incremental(cl: ti.template(), lag: ti.template(), count: ti.i32, x: ti.template(),
                  x0: ti.template(), h: float, with_grad: ti.template(),
@@ -395,21 +312,26 @@ class SelfContact(Term):
     feature = SELF_COLLISION
     implicit = "potential"
     projective = "projection"
-    provides = frozenset({"couplings", "projection"})
+    provides = frozenset({"couplings", "projection", "vertex_system"})
     in_kernel = False          # its list is the stage's, which Python grows and rebuilds
     in_batch = True            # a batch stops where the stage needs Python (batch.py)
+    # jacobi: built for VBD, whose sweeps evaluate each particle's rows (``vertex_system``)
+    options = {"jacobi": False}
 
     @staticmethod
     def present(model):
         return model.self_collision is not None
 
-    def __init__(self, model):
+    def __init__(self, model, jacobi=False):
         self.table = model.self_collision
         self.stage = model.contact
         self.inv_mass = model.inv_mass
         self._scratch = {}
         self.lag = None             # ``Lagged``, as long as the stage's list at least
         self.log = ProjectionLog(1)     # its full size once ``record`` is on
+        self.jacobi = bool(jacobi)
+        # VBD's: each particle's rows of the list, indexed at each step's start
+        self.rows = VertexRows(model.particle_count) if self.jacobi else None
 
     def _field(self, key, make):
         if key not in self._scratch:
@@ -448,7 +370,20 @@ class SelfContact(Term):
         cl = self.stage.candidates
         if self.lag is None or self.lag.capacity < cl.capacity:    # the list grew
             self.lag = Lagged(cl.capacity)
-        _lag(cl, self.lag, self.stage.count, x0)
+        lag_rows(cl, self.lag, self.stage.count, x0)
+        if self.rows is not None:
+            self.rows.index(cl, self.stage.count, self.lag)
+
+    def layout(self):
+        """An int that changes where the fields ``vertex_system`` reads were made again
+        (a kernel that calls it compiles again)."""
+        return self.rows.layout
+
+    @ti.func
+    def vertex_system(self, p, x, x0, h):
+        """(gradient, Hessian block) of particle p at x from its rows of the list, each
+        evaluated afresh (VBD's sweeps: its partners moved since): ``VertexRows``'s."""
+        return self.rows.system(p, x, x0, h)
 
     def add_incremental(self, x, x0, h, with_grad, acc, grad):
         """acc[0] += the contacts' part of E at x (acc[1] its magnitude); with_grad:
