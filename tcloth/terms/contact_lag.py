@@ -10,15 +10,16 @@ from .colliders import add_dissipation
 
 
 @ti.func
-def _normal(g, d):
+def unit_normal(g, d):
+    """g over its length d (zero where d is)."""
     return g / ti.max(d, 1e-30)
 
 
 @ti.data_oriented
 class Lagged:
-    """What the contact law keeps per row of the candidate list for backward Euler: the
-    lagged normal force, normal and weights at the step's start, and the Hessian's
-    weights, penalty and dissipation blocks (``capacity`` rows)."""
+    """What the contact law keeps per row of the candidate list for backward Euler and
+    VBD: the lagged normal force, normal and weights at the step's start, and the
+    Hessian's weights, penalty and dissipation blocks (``capacity`` rows)."""
 
     def __init__(self, capacity):
         real = runtime.real()
@@ -41,7 +42,7 @@ def lagged(cl, c, x0):
     fn = 0.0
     if cl.repels[c] and d > 0.0 and d < prm[0]:
         fn = prm[1] * (prm[0] - d)
-    return fn, _normal(g, d), alpha
+    return fn, unit_normal(g, d), alpha
 
 
 @ti.kernel
@@ -76,8 +77,8 @@ def dissipation(cl, ids, fn0, n0, alpha0, x, x0, h):
 
 
 @ti.func
-def _dissipation(cl, lag, c, x, x0, h):
-    """``dissipation`` of candidate c with its values lagged by ``_lag``."""
+def row_dissipation(cl, lag, c, x, x0, h):
+    """``dissipation`` of candidate c with its values lagged by ``lag_rows``."""
     return dissipation(cl, cl.ids[c], lag.fn[c], lag.n[c], lag.alpha0[c], x, x0, h)
 
 
@@ -92,5 +93,5 @@ def penalty_gradient(cl, c, x):
     depth = prm[0] - d
     grad = ti.Vector.zero(float, 3)
     if cl.repels[c] and depth > 0.0:
-        grad = -prm[1] * depth * _normal(g, d)
+        grad = -prm[1] * depth * unit_normal(g, d)
     return ids, alpha, depth, grad

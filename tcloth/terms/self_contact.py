@@ -42,11 +42,12 @@ and exact blocks particle by particle inside its sweeps (``vertex_system``: each
 rows, indexed at the step's start, evaluated at the current positions). Projective
 dynamics projects after its iterations: Gauss-Seidel passes over the penetrating
 contacts moving the particles apart to distance T (an impulse along the contact's
-weights, inverse-mass weighted: momentum is kept), then one over the contacts within T (those left at T included) removing
-approaching normal velocity and cutting tangential velocity by mu times that (Coulomb),
-along the surfaces' normal where it separates the contact (``normals.contact_normal``:
-between two layers the closest points' direction of offset edges tilts along them, and
-removing approach along it took a sliding cloth's speed). Each correction can be kept
+weights, inverse-mass weighted: momentum is kept), then one over the contacts within T
+(those left at T included) removing approaching normal velocity and cutting tangential
+velocity by mu times that (Coulomb), along the surfaces' normal where it separates the
+contact (``normals.contact_normal``: between two layers the closest points' direction of
+offset edges tilts along them, and removing approach along it took a sliding cloth's
+speed). Each correction can be kept
 (``ProjectionLog``) for the gradient (``grad/projected.py``).
 """
 import taichi as ti
@@ -60,7 +61,8 @@ from ..features.self_collision import SELF_COLLISION
 from ..runtime import serial
 from .base import Term
 from .colliders import contact_force
-from .contact_lag import Lagged, _dissipation, _normal, lag_rows, penalty_gradient
+from .contact_lag import (Lagged, lag_rows, penalty_gradient, row_dissipation,
+                          unit_normal)
 from .vertex_rows import VertexRows
 
 PROJECTION_PASSES = 4
@@ -83,7 +85,7 @@ def pair_force(cl, c, x, v):
     touches = False
     f = ti.Vector.zero(float, 3)
     if cl.repels[c] and d > 0.0 and d < thickness:
-        n = _normal(g, d)
+        n = unit_normal(g, d)
         v_rel = ti.Vector.zero(float, 3)
         for j in ti.static(range(4)):
             v_rel += alpha[j] * v[ids[j]]
@@ -170,7 +172,7 @@ def _incremental(cl: ti.template(), lag: ti.template(), count: ti.i32, x: ti.tem
             if ti.static(with_grad):
                 for j in ti.static(range(4)):
                     grad_out[ids[j]] += alpha[j] * grad
-        e_d, g_d, _ = _dissipation(cl, lag, c, x, x0, h)
+        e_d, g_d, _ = row_dissipation(cl, lag, c, x, x0, h)
         if ti.static(with_grad):
             alpha0 = lag.alpha0[c]
             for j in ti.static(range(4)):
@@ -195,9 +197,9 @@ def _blocks(cl: ti.template(), lag: ti.template(), count: ti.i32, x: ti.template
         d = g.norm()
         penalty = ti.Matrix.zero(float, 3, 3)
         if cl.repels[c] and d < prm[0]:
-            n = _normal(g, d)
+            n = unit_normal(g, d)
             penalty = prm[1] * n.outer_product(n)
-        _, _, block = _dissipation(cl, lag, c, x, x0, h)
+        _, _, block = row_dissipation(cl, lag, c, x, x0, h)
         alpha0 = lag.alpha0[c]
         lag.alpha[c] = alpha
         lag.penalty[c] = penalty
@@ -280,7 +282,7 @@ def _project_pass(cl: ti.template(), count: ti.i32, x: ti.template(), v: ti.temp
         ids, kind = cl.ids[c], cl.kind[c]
         alpha, g = cl.gap(ids, kind, x)
         a, b = sides(ids, cl.table.normals)
-        n, choice = _normal(g, g.norm()), 0
+        n, choice = unit_normal(g, g.norm()), 0
         v_rel = ti.Vector.zero(float, 3)
         if ti.static(velocity):
             n, choice = contact_normal(ids, kind, x, cl.table.normals, g, prm[0])

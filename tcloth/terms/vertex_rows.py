@@ -3,7 +3,7 @@ contacts inside its own update (VBD's sweeps: ``SelfContact.vertex_system``)."""
 import taichi as ti
 
 from ..runtime import serial
-from .contact_lag import _dissipation, penalty_gradient
+from .contact_lag import penalty_gradient, row_dissipation
 
 
 @ti.data_oriented
@@ -46,7 +46,7 @@ class VertexRows:
                 n = grad.normalized()
                 g += alpha[j] * grad
                 block += alpha[j] * alpha[j] * prm[1] * n.outer_product(n)
-            _e, g_d, block_d = _dissipation(self.of, self.lag, c, x, x0, h)
+            _e, g_d, block_d = row_dissipation(self.of, self.lag, c, x, x0, h)
             a0 = self.lag.alpha0[c][j]
             g += a0 * g_d
             block += a0 * a0 * block_d
