@@ -121,7 +121,7 @@ class VBD(ForceCache, Integrator):
         n, real = model.particle_count, model.mass.dtype
         self.model = model
         self._configure()
-        self.potential = IncrementalPotential(model, jacobi=True)
+        self.potential = IncrementalPotential(model, jacobi=True, per_vertex=True)
         self.springs = self.potential.springs
         self.has_springs = self.springs is not None
         self.adj_start, self.adj = (self.springs or Springs(model)).adjacency()

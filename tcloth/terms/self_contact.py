@@ -47,8 +47,8 @@ weights, inverse-mass weighted: momentum is kept), then one over the contacts wi
 velocity by mu times that (Coulomb), along the surfaces' normal where it separates the
 contact (``normals.contact_normal``: between two layers the closest points' direction of
 offset edges tilts along them, and removing approach along it took a sliding cloth's
-speed). Each correction can be kept
-(``ProjectionLog``) for the gradient (``grad/projected.py``).
+speed). Each correction can be kept (``ProjectionLog``) for the gradient
+(``grad/projected.py``).
 """
 import taichi as ti
 
@@ -317,23 +317,23 @@ class SelfContact(Term):
     provides = frozenset({"couplings", "projection", "vertex_system"})
     in_kernel = False          # its list is the stage's, which Python grows and rebuilds
     in_batch = True            # a batch stops where the stage needs Python (batch.py)
-    # jacobi: built for VBD, whose sweeps evaluate each particle's rows (``vertex_system``)
-    options = {"jacobi": False}
+    # per_vertex: built for VBD, whose sweeps evaluate each particle's rows
+    # (``vertex_system``) from an index made at each step's start
+    options = {"per_vertex": False}
 
     @staticmethod
     def present(model):
         return model.self_collision is not None
 
-    def __init__(self, model, jacobi=False):
+    def __init__(self, model, per_vertex=False):
         self.table = model.self_collision
         self.stage = model.contact
         self.inv_mass = model.inv_mass
         self._scratch = {}
         self.lag = None             # ``Lagged``, as long as the stage's list at least
         self.log = ProjectionLog(1)     # its full size once ``record`` is on
-        self.jacobi = bool(jacobi)
         # VBD's: each particle's rows of the list, indexed at each step's start
-        self.rows = VertexRows(model.particle_count) if self.jacobi else None
+        self.rows = VertexRows(model.particle_count) if per_vertex else None
 
     def _field(self, key, make):
         if key not in self._scratch:

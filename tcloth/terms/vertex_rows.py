@@ -3,7 +3,7 @@ contacts inside its own update (VBD's sweeps: ``SelfContact.vertex_system``)."""
 import taichi as ti
 
 from ..runtime import serial
-from .contact_lag import penalty_gradient, row_dissipation
+from .contact_lag import penalty_gradient, row_dissipation, unit_normal
 
 
 @ti.data_oriented
@@ -43,7 +43,7 @@ class VertexRows:
             c, j = self.entries[e][0], self.entries[e][1]
             _ids, alpha, depth, grad = penalty_gradient(self.of, c, x)
             if self.of.repels[c] and depth > 0.0:
-                n = grad.normalized()
+                n = unit_normal(grad, grad.norm())     # zero at d = 0, as the force
                 g += alpha[j] * grad
                 block += alpha[j] * alpha[j] * prm[1] * n.outer_product(n)
             _e, g_d, block_d = row_dissipation(self.of, self.lag, c, x, x0, h)
