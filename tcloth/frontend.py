@@ -16,12 +16,23 @@ The texts are Taichi's own, character for character (``tests/test_frontend.py``)
 saves: 3 % (symplectic Euler) to 23 % (backward Euler) of building a simulator, a fifth of
 tests/test_live.py's time (docs/benchmarks.md, "Taichi's frontend"). ``install`` is a
 no-op on another Taichi than 1.7 or where the names moved.
+
+It also counts the kernels Taichi compiles (``compilations``: each new instance of a
+kernel, a template argument or a field it has not seen before), so that a test can assert
+that a simulator compiles nothing after its first frame.
 """
 import functools
 
 import taichi as ti
 
 _installed = False
+_compiled = [0]
+
+
+def compilations():
+    """How many kernel instances Taichi has compiled in this process (None where the
+    count could not be installed: another Taichi than 1.7)."""
+    return _compiled[0] if _installed else None
 
 
 def position_key(context, node):
@@ -59,6 +70,15 @@ def install():
 
     get_pos_info.original = original
     ASTTransformerContext.get_pos_info = get_pos_info
+    materialize = kernel_impl.Kernel.materialize
+
+    def counted(self, key=None, args=None, arg_features=None):
+        if (key if key is not None else (self.func, 0, self.autodiff_mode)) \
+                not in self.compiled_kernels:
+            _compiled[0] += 1
+        return materialize(self, key, args, arg_features)
+
+    kernel_impl.Kernel.materialize = counted
     kernel_impl.getsourcelines, kernel_impl.getsourcefile = (
         functools.lru_cache(maxsize=None)(f) for f in sources)
     _installed = True

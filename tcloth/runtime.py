@@ -213,6 +213,12 @@ def to_numpy(field):
     return out
 
 
+def compilations():
+    """How many kernel instances Taichi has compiled in this process so far (None on
+    another Taichi than 1.7); the difference across a frame is what it compiled."""
+    return frontend.compilations()
+
+
 def check_generation(gen, what="simulator"):
     if gen != _Runtime.generation:
         raise StaleSimulatorError(

@@ -97,10 +97,21 @@ def render_script(path, args):
     render = cfg["render"]
     writers = [] if args.usd is None else [
         UsdWriter(sim, args.usd, fps, render.get("cloth_colours"), render.get("particle_radius"))]
-    return record(sim, out, frames=cfg["frames"], steps_per_frame=steps, fps=cfg["fps"],
-                  width=cfg["width"], height=cfg["height"], camera=cfg["camera"],
-                  supersample=cfg["supersample"], progress=not args.quiet,
-                  mesh_dir=args.meshes, writers=writers, **render)
+    stats = record(sim, out, frames=cfg["frames"], steps_per_frame=steps, fps=cfg["fps"],
+                   width=cfg["width"], height=cfg["height"], camera=cfg["camera"],
+                   supersample=cfg["supersample"], progress=not args.quiet,
+                   mesh_dir=args.meshes, writers=writers, **render)
+    print(f"tcloth: {split_summary(sim.step_stats(), sim.num_steps)}", file=sys.stderr)
+    return stats
+
+
+def split_summary(stats, steps):
+    """One line on how a run's steps were split (``Simulator.step_stats``)."""
+    if not stats["split_steps"]:
+        return f"all {steps} steps whole (none split)"
+    return (f"{stats['split_steps']} of {steps} steps split into {stats['pieces']} pieces "
+            f"(at most {stats['finest']} a step; {stats['retries']} failed attempts "
+            f"taken again finer)")
 
 
 def view_script(path, args):

@@ -28,6 +28,19 @@ def _vec_field(n):
     return ti.Vector.field(3, runtime.real(), shape=n)
 
 
+@ti.kernel
+def _copy_state(out: ti.template(), src: ti.template()):
+    ti.loop_config(serialize=ti.static(runtime.serial(out.x)))
+    for p in range(out.x.shape[0]):
+        out.x[p], out.v[p], out.f[p] = src.x[p], src.v[p], src.f[p]
+
+
+def copy_state(out, src):
+    """State ``out``'s x, v, f and t made ``src``'s (one launch)."""
+    _copy_state(out, src)
+    out.t = src.t
+
+
 @ti.data_oriented
 class State:
     """Per-step particle state (kernels and ``ti.func``s take a State whole).

@@ -17,6 +17,8 @@ gust, a GPU, a large scene). With self-collision the batch checks each step as t
 contact stage would, and stops at a step that needs the stage's Python (a rebuild of
 the proximity list, a pair to correct, a path a collider cut): the simulator finishes
 that step with ``ContactStage.batch_finish`` and starts the next batch after it.
+``Batches`` runs them for a simulator: it keeps their kernels and finds a batch's first
+bad step.
 """
 import taichi as ti
 
@@ -87,3 +89,108 @@ def kernel(integrator, limiter, contact, budget, a, b, start, x_bound, v_bound):
                 break
         return result
     return run
+
+
+class Batches:
+    """A simulator's batches (``Simulator.step`` where ``fusion()`` is None): their
+    kernels, one per (integrator, strain limiter, State) and contact list layout, and a
+    State holding a batch's start."""
+
+    def __init__(self, sim):
+        self.sim = sim
+        self.start = None
+        # (integrator, limiter, State) -> (the contact stage's batch_key, its batch kernel)
+        self.kernels = {}
+
+    def forget(self):
+        """Drop the kernels (the integrator or its options changed: they compile anew)."""
+        self.kernels.clear()
+
+    def run(self, n, limiter):
+        """n steps in one launch, whose kernel checks every substep's
+        particles and kinetic and gravitational energy; the stored energy and the strain
+        are checked at the end, and where they fail the steps run again one at a time
+        from the batch's start to find the first bad one. An integrator whose step costs
+        many force passes (``Integrator.checked_steps``: VBD, XPBD) runs one step a launch,
+        each checked whole. A step that needs the contact stage's Python ends the batch
+        there (``_finish``). Returns the steps done."""
+        sim = self.sim
+        a, b = sim._states
+        if self.start is None:
+            self.start = sim.model.state()
+        key = (sim.integrator, limiter, a)
+        fields = sim._contact and sim._contact.batch_key()
+        if key not in self.kernels or self.kernels[key][0] != fields:
+            self.kernels[key] = fields, kernel(
+                sim.integrator, limiter, sim._contact, sim.budget, a, b,
+                self.start, sim.position_bound, sim.velocity_bound)
+        run = self.kernels[key][1]
+        counts = sim._contact and sim._contact.batch_counts()
+        fresh = 0 if sim.integrator.holds_forces(a) else 1
+        args = (fresh, sim._time_base, sim.num_steps - sim._step_base, sim.dt)
+        done, error, changed = n, None, False
+        if sim.integrator.checked_steps:
+            done, error = self._checked_steps(run, a, n, args)
+            code = -1
+        else:
+            code = run(n, *args)
+        if code <= -2:      # step done needs the rest of the stage's guard
+            done = -2 - code
+            changed = self._finish(a, sim.num_steps + done)
+            done += 1
+            code = -1
+        if code >= 0:
+            done, bad = divmod(code, 2 * sim.model.particle_count)
+            # a holds the bad state: checked whole, its stored energy in the message; the
+            # steps before it again, each checked whole (the kernel checked S only)
+            error = (sim._checker.verify(a, sim.num_steps + done)
+                     or sim._checker.error(sim.num_steps + done, bad))
+            self._restore_start(a, counts)
+            done, earlier = self._checked_steps(run, a, done, args)
+            error = earlier or error
+        elif error is None and sim._checker.verify(a, sim.num_steps + done - 1) is not None:
+            self._restore_start(a, counts)
+            done, error = self._checked_steps(run, a, done, args)
+        sim.num_steps += done
+        sim.state.t = sim.time
+        swept = sim._contact is not None and sim._contact.batch_cut_last()
+        if limiter is None and error is None and not swept and not changed:
+            sim.integrator.adopt_forces(sim.state)
+        else:
+            sim.integrator.invalidate()
+        if error is not None:
+            raise error
+        return done
+
+    def _finish(self, a, steps):
+        """The rest of the contact stage's guard (``ContactStage.batch_finish``) for step
+        steps + 1, whose end a holds as a batch left it; whether it changed a."""
+        sim = self.sim
+        return sim._contact.batch_finish(a.x, a.v, sim.time_at(steps), sim.dt)
+
+    def _restore_start(self, a, counts=None):
+        """a and the contact stage's counts (``batch_counts``, where given) as the batch
+        started, for its steps to run again one at a time."""
+        sim = self.sim
+        for name in ("x", "v", "f"):
+            getattr(a, name).copy_from(getattr(self.start, name))
+        if counts:
+            sim._contact.batch_replay(counts)
+
+    def _checked_steps(self, run, a, n, args):
+        """n steps of the batch kernel ``run`` one at a time, each state checked with its
+        stored energy and strain. Returns (good steps, the InstabilityError of the first
+        bad one or None), State a at the last good state."""
+        sim = self.sim
+        fresh, time_base, before, dt = args
+        for k in range(n):
+            changed = False                                 # run keeps a's state as the start
+            if run(1, fresh, time_base, before + k, dt) <= -2:
+                changed = self._finish(a, sim.num_steps + k)
+            error = sim._checker.verify(a, sim.num_steps + k)
+            if error is not None:
+                self._restore_start(a)
+                return k, error
+            fresh = 1 if changed or (sim._contact is not None
+                                     and sim._contact.batch_cut_last()) else 0
+        return n, None

@@ -225,7 +225,8 @@ def save(sim, path):
             "settings": sim.settings, "precision": sim.precision,
             "num_steps": sim.num_steps, "time_base": sim._time_base,
             "step_base": sim._step_base, "grabbed": _plain(sim.grabbed),
-            "forces_valid": sim.integrator.holds_forces(sim.state)}
+            "forces_valid": sim.integrator.holds_forces(sim.state),
+            "splits": sim._splitter.saved()}
     state = sim.state
     payload = {f"scene_{k}": v for k, v in arrays.items()}
     payload.update(meta=np.array(json.dumps(meta)), state_x=state.x.to_numpy(),
@@ -327,6 +328,7 @@ def load(simulator_class, path):
     sim.num_steps = int(meta["num_steps"])
     sim._time_base = float(meta.get("time_base", 0.0))
     sim._step_base = int(meta.get("step_base", 0))
+    sim._splitter.restore(meta.get("splits"))
     state.t = sim.time
     if meta.get("grabbed"):
         held = meta["grabbed"]

@@ -56,8 +56,9 @@ class Diagnostics:
     def stored(self, x, t):
         """(P, strain) at positions x and time t: the potential energy of every term but
         gravity (springs, bending, membrane, pressure, contacts, attraction, the grab
-        spring; J) and the largest strain of a spring or a membrane triangle (None
-        without either), for the instability test (``budget.py``)."""
+        spring; J) and the largest strain of a membrane triangle or of a spring pulling
+        harder than ``set_load``'s tension (None without either), for the instability
+        test (``instability.py``)."""
         total, strain = 0.0, None
         for term in self.terms:
             if term.name == "gravity":
@@ -67,6 +68,11 @@ class Diagnostics:
             if stretch is not None:
                 strain = float(stretch) if strain is None else max(strain, float(stretch))
         return total, strain
+
+    def set_load(self, newtons):
+        """The tension below which a spring may pass the strain bound (``stored``)."""
+        if self.springs is not None:
+            self.springs.load = float(newtons)
 
     def self_contacts(self, state):
         """Active self-contacts by kind (see ``SelfContact.active``)."""

@@ -1,7 +1,21 @@
 """The instability test after every step of a ``Simulator``: the state's particles, its
 energy with the part stored in springs, hinges, the membrane, pressure and contacts (the
 budget: ``budget.py``), and the strain bound; and the InstabilityError a bad step raises,
-with a hint at what to change."""
+with a hint at what to change. A failing step is split before anything is raised
+(``split.py``).
+
+The strain bound stands for a torn cloth: a spring stretched past ``strain_bound`` (default
+1, twice its rest length) while it pulls harder than twice the weight of the scene's free
+particles, 2 M |g|. The weight is what a cloth's springs hold at rest (a pinned corner's
+springs carry about all of it) and twice it what a load dropped onto them can pull at most
+(a weight let go on an unstretched spring stretches it twice as far as it hangs), so a
+spring pulling harder than that is torn by the solver, not by the scene: the case of an
+unconverged solve that lets a landing cloth stretch through its springs, whose energy can
+stay inside the budget where the tear is local. A spring that holds no more than that may
+stretch as far as the physics takes it: a soft cloth hanging under its own weight
+(``scenes/strain_limiting.py``'s left cloth, at strain 1.2 and more) is stretched, not
+torn. Without gravity the bound holds for every spring. A membrane triangle (a fabric's
+measured stiffness) is held to the bound alone."""
 import numpy as np
 
 from ..scene import stability
@@ -19,29 +33,32 @@ class StepCheck:
     def __init__(self, sim):
         self.sim = sim
 
-    def verify(self, state, steps):
+    def verify(self, state, steps, t=None, dt=None):
         """None when the state reached by step steps + 1 is good, else the
-        InstabilityError to raise for it."""
+        InstabilityError to raise for it; t and dt: the state's time and the step's length
+        where it is a piece of a split step (``split.py``)."""
         sim = self.sim
-        t = sim.time_at(steps + 1)
+        t = sim.time_at(steps + 1) if t is None else t
         stored, strain = sim.diagnostics.stored(state.x, t)
         stored = stored - sim.budget.floor if np.isfinite(stored) else np.inf
         bad = check_state(sim.budget, state.x, state.v, t, sim.position_bound,
                           sim.velocity_bound, stored)
         if bad >= 0:
-            return self.error(steps, bad, stored)
+            return self.error(steps, bad, stored, t=t, dt=dt)
         if sim.strain_bound is not None and strain is not None and \
                 not strain <= sim.strain_bound:
-            return self.error(steps, None, stored, strain)
+            return self.error(steps, None, stored, strain, t, dt)
         return None
 
-    def error(self, steps, code, stored=0.0, strain=None):
+    def error(self, steps, code, stored=0.0, strain=None, t=None, dt=None):
         """The InstabilityError of step steps + 1 (the state after ``steps`` is kept):
         code < particles: a bad particle; code >= particles: the energy budget (code -
-        particles the fastest particle); code None: the strain bound."""
+        particles the fastest particle); code None: the strain bound. t and dt: as for
+        ``verify``."""
         sim = self.sim
         step = steps + 1
-        t = sim.time_at(step)
+        t = sim.time_at(step) if t is None else t
+        dt = sim.dt if dt is None else dt
         n = sim.model.particle_count
         if code is None:
             what = (f"stretched a spring or membrane triangle to strain {strain:.3g}, beyond "
@@ -58,7 +75,7 @@ class StepCheck:
                     f"{budget.values['time']:.6g} s, budget.py; the fastest particle is "
                     f"{code - n})")
         return InstabilityError(
-            f"step {step} (t = {t:.6g} s, dt = {sim.dt:.3g} s) of integrator "
+            f"step {step} (t = {t:.6g} s, dt = {dt:.3g} s) of integrator "
             f"'{sim.integrator_name}' {what}; the last good state (t = "
             f"{sim.time_at(steps):.6g} s) is kept. Hint: {self.hint()}.",
             step=step, time=t, integrator=sim.integrator_name)

@@ -1,17 +1,19 @@
 """Simulator: a Scene turned into a Model, two States and an integrator."""
 import numpy as np
 
-from . import batch, checkpoint
+from . import checkpoint
+from .batch import Batches
 from .. import runtime
 from .budget import EnergyBudget
 from .constraints import StrainLimiter
 from .diagnostics import Diagnostics
-from ..errors import SceneError
+from ..errors import InstabilityError, SceneError
 from ..features.wind import wind_velocity
 from .instability import StepCheck
 from .live import LiveParameters
+from .split import StepSplitter, check_split
 from ..integrators import INTEGRATORS
-from ..model.model import Model
+from ..model.model import Model, copy_state
 from ..runtime import serial_count
 from ..scene.scene import Scene
 from ..terms.grab import GrabSpring
@@ -46,15 +48,20 @@ class Simulator(LiveParameters):
             hinges, membrane, pressure, contacts) than it can supply (``budget.py``: the
             energy at the last baseline plus what wind, moving colliders and moving pins
             can add, plus a margin of the scene's energy scale).
-        strain_bound: a step that stretches a spring or a membrane triangle beyond this
-            strain (default 1.0: twice its rest length, beyond any woven or knitted
-            fabric's breaking strain) raises InstabilityError; None switches it off
-            (rubber bands, soft ropes).
+        strain_bound: a step that stretches a membrane triangle, or a spring that pulls
+            harder than twice the scene's weight, beyond this strain (default 1.0: twice
+            its rest length, beyond any woven or knitted fabric's breaking strain) fails
+            the instability test (``instability.py`` says why the weight); None switches
+            it off.
         energy_bound: apply that energy budget (default True); False leaves only the
             non-finite values and the two bounds (to study how an integrator's energy
             grows, as forward Euler's does on undamped springs).
         strain_limiting: apply the scene's strain limit (default True; see
             ``set_strain_limiting``).
+        split: a step that fails the instability test is taken again from its start as
+            2, 4, ... steps of dt / 2, dt / 4, ..., up to this many (default True: 64;
+            False or 1: raise at once), and InstabilityError is raised only past that;
+            ``step_stats()`` counts the splits (``split.py``).
         colliders_off: indices into ``scene.colliders`` of colliders switched off
             (see ``set_collider_enabled``).
         grab: build the grab spring (``grab``/``release``: the viewer's mouse drag);
@@ -74,7 +81,8 @@ class Simulator(LiveParameters):
 
     def __init__(self, scene, integrator="symplectic_euler", dt=1e-3, grid_stencil=True,
                  position_bound=1e6, velocity_bound=1e8, strain_bound=1.0, energy_bound=True,
-                 strain_limiting=True, colliders_off=(), grab=False, batch=True, **options):
+                 strain_limiting=True, colliders_off=(), grab=False, batch=True, split=True,
+                 **options):
         if not isinstance(scene, Scene):
             raise SceneError(f"scene must be a tcloth.Scene (got {type(scene).__name__})")
         integrator_class = _integrator_class(integrator)
@@ -89,7 +97,7 @@ class Simulator(LiveParameters):
                          self.position_bound, "velocity_bound": self.velocity_bound,
                          "strain_bound": self.strain_bound, "energy_bound": bool(energy_bound),
                          "strain_limiting": bool(strain_limiting), "colliders_off": off,
-                         "grab": bool(grab), "batch": bool(batch)}
+                         "grab": bool(grab), "batch": bool(batch), "split": check_split(split)}
         self.model = Model(scene, grid_stencil=bool(grid_stencil), colliders_off=off,
                            grab=GrabSpring() if grab else None)
         self.precision = runtime.precision()
@@ -102,11 +110,10 @@ class Simulator(LiveParameters):
         self.diagnostics = Diagnostics(self.model)
         self.budget = EnergyBudget(self.model, bool(energy_bound))
         self._checker = StepCheck(self)
+        self._splitter = StepSplitter(self, self.settings["split"])
         self.num_steps = 0
         self._time_base, self._step_base = 0.0, 0      # the time at step _step_base
-        self._batch_start = None                        # a batch's start state (batch.py)
-        # (integrator, limiter, State) -> (the contact stage's batch_key, its batch kernel)
-        self._batch_kernels = {}
+        self._batches = Batches(self)
         self._fusion = None          # (fusion(),) once computed; reset by the live changes
         self._contact = self.model.contact
         if self._contact is not None:
@@ -131,35 +138,63 @@ class Simulator(LiveParameters):
         runtime.check_generation(self._generation)
 
     def step(self, n=1):
-        """Advance n steps of dt. Raises InstabilityError on a bad step, keeping the last
-        good state. Where ``fusion()`` is None the n steps run in one kernel launch."""
+        """Advance n steps of dt. A step that fails the instability test is taken again
+        as 2, 4, ... shorter steps (``split``, ``split.py``); past the finest split it
+        raises InstabilityError, keeping the last good state. Where ``fusion()`` is None
+        the n steps run in one kernel launch."""
         self._check()
         if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
             raise SceneError(f"n must be an integer >= 0 (got {n!r})")
         limiter = self._limiter if self.settings["strain_limiting"] else None
-        if n and self.fusion() is None:
-            done = 0
-            while done < n:
-                done += self._step_batch(int(n) - done, limiter)
-            return
-        for _ in range(int(n)):
-            s_in, s_out = self._states
-            self.model.colliders.advance(self.time, self.dt)     # moving mesh colliders
-            self.integrator.simulate(self.model, s_in, s_out, self.dt)
-            if limiter is not None:
-                limiter.apply(s_out, self.dt)
-                self.integrator.invalidate()
-            if self._contact is not None and self._contact.end_step(
-                    s_in.x, s_out.x, s_out.v, s_in.t, self.dt):
-                self.integrator.invalidate()
-            t_end = self.time + self.dt
-            self._see_gust(t_end)
-            error = self._checker.verify(s_out, self.num_steps)
-            if error is not None:
-                raise error
-            self._states.reverse()
+        target = self.num_steps + int(n)
+        while self.num_steps < target:
+            if self._splitter.pieces == 1 and self.fusion() is None:
+                try:
+                    self._batches.run(target - self.num_steps, limiter)
+                except InstabilityError as error:
+                    self._splitter.recover(error, limiter)
+            else:
+                self._splitter.step(limiter)
+
+    def _advance(self, limiter, t0=None, dt=None):
+        """One step from the current state at time t0 (default: ``time``) of dt (default:
+        ``dt``), checked: None (the states swapped, the clock left to the caller where t0
+        is given), or the InstabilityError of a bad step (the state before it kept)."""
+        whole = t0 is None
+        t0, dt = (self.time, self.dt) if whole else (t0, dt)
+        s_in, s_out = self._states
+        self.model.colliders.advance(t0, dt)     # moving mesh colliders
+        self.integrator.simulate(self.model, s_in, s_out, dt)
+        if limiter is not None:
+            limiter.apply(s_out, dt)
+            self.integrator.invalidate()
+        if self._contact is not None and self._contact.end_step(
+                s_in.x, s_out.x, s_out.v, s_in.t, dt):
+            self.integrator.invalidate()
+        self._see_gust(t0 + dt)
+        error = self._checker.verify(s_out, self.num_steps, t0 + dt, dt)
+        if error is not None:
+            return error
+        # the end copied into the start's State rather than the two swapped, so that
+        # every kernel that takes a State sees the same two and compiles once
+        cached = self.integrator.holds_forces(s_out)
+        copy_state(s_in, s_out)
+        if cached:
+            self.integrator.adopt_forces(s_in)
+        if whole:
             self.num_steps += 1
             self.state.t = self.time
+        else:
+            self.state.t = t0 + dt
+        return None
+
+    def step_stats(self):
+        """dict of how the steps were split (``split.py``): split_steps (steps that took
+        several pieces), pieces (how many they took), retries (failed attempts taken again
+        finer), finest (the most pieces a step took), pieces_now (the split the next step
+        starts with: 1 is the whole step)."""
+        self._check()
+        return self._splitter.stats()
 
     def fusion(self):
         """None where ``step(n)`` runs its n substeps in one kernel launch (``batch.py``),
@@ -189,94 +224,9 @@ class Simulator(LiveParameters):
             why = self._limiter.batch_obstacle()
         return why
 
-    def _step_batch(self, n, limiter):
-        """n steps in one launch (``batch.py``), whose kernel checks every substep's
-        particles and kinetic and gravitational energy; the stored energy and the strain
-        are checked at the end, and where they fail the steps run again one at a time
-        from the batch's start to find the first bad one. An integrator whose step costs
-        many force passes (``Integrator.checked_steps``: VBD, XPBD) runs one step a launch,
-        each checked whole. A step that needs the contact stage's Python ends the batch
-        there (``_finish``). Returns the steps done."""
-        a, b = self._states
-        if self._batch_start is None:
-            self._batch_start = self.model.state()
-        key = (self.integrator, limiter, a)
-        fields = self._contact and self._contact.batch_key()
-        if key not in self._batch_kernels or self._batch_kernels[key][0] != fields:
-            self._batch_kernels[key] = fields, batch.kernel(
-                self.integrator, limiter, self._contact, self.budget, a, b,
-                self._batch_start, self.position_bound, self.velocity_bound)
-        run = self._batch_kernels[key][1]
-        counts = self._contact and self._contact.batch_counts()
-        fresh = 0 if self.integrator.holds_forces(a) else 1
-        args = (fresh, self._time_base, self.num_steps - self._step_base, self.dt)
-        done, error, changed = n, None, False
-        if self.integrator.checked_steps:
-            done, error = self._checked_steps(run, a, n, args)
-            code = -1
-        else:
-            code = run(n, *args)
-        if code <= -2:      # step done needs the rest of the stage's guard
-            done = -2 - code
-            changed = self._finish(a, self.num_steps + done)
-            done += 1
-            code = -1
-        if code >= 0:
-            done, bad = divmod(code, 2 * self.model.particle_count)
-            # a holds the bad state: checked whole, its stored energy in the message; the
-            # steps before it again, each checked whole (the kernel checked S only)
-            error = (self._checker.verify(a, self.num_steps + done)
-                     or self._checker.error(self.num_steps + done, bad))
-            self._restore_batch_start(a, counts)
-            done, earlier = self._checked_steps(run, a, done, args)
-            error = earlier or error
-        elif error is None and self._checker.verify(a, self.num_steps + done - 1) is not None:
-            self._restore_batch_start(a, counts)
-            done, error = self._checked_steps(run, a, done, args)
-        self.num_steps += done
-        self.state.t = self.time
-        swept = self._contact is not None and self._contact.batch_cut_last()
-        if limiter is None and error is None and not swept and not changed:
-            self.integrator.adopt_forces(self.state)
-        else:
-            self.integrator.invalidate()
-        if error is not None:
-            raise error
-        return done
-
-    def _finish(self, a, steps):
-        """The rest of the contact stage's guard (``ContactStage.batch_finish``) for step
-        steps + 1, whose end a holds as a batch left it; whether it changed a."""
-        return self._contact.batch_finish(a.x, a.v, self.time_at(steps), self.dt)
-
-    def _restore_batch_start(self, a, counts=None):
-        """a and the contact stage's counts (``batch_counts``, where given) as the batch
-        started, for its steps to run again one at a time."""
-        for name in ("x", "v", "f"):
-            getattr(a, name).copy_from(getattr(self._batch_start, name))
-        if counts:
-            self._contact.batch_replay(counts)
-
     def time_at(self, steps):
         """The time after ``steps`` steps in all (at the current dt since its last change)."""
         return self._time_base + (steps - self._step_base) * self.dt
-
-    def _checked_steps(self, run, a, n, args):
-        """n steps of the batch kernel ``run`` one at a time, each state checked with its
-        stored energy and strain. Returns (good steps, the InstabilityError of the first
-        bad one or None), State a at the last good state."""
-        fresh, time_base, before, dt = args
-        for k in range(n):
-            changed = False                                 # run keeps a's state as the start
-            if run(1, fresh, time_base, before + k, dt) <= -2:
-                changed = self._finish(a, self.num_steps + k)
-            error = self._checker.verify(a, self.num_steps + k)
-            if error is not None:
-                self._restore_batch_start(a)
-                return k, error
-            fresh = 1 if changed or (self._contact is not None
-                                     and self._contact.batch_cut_last()) else 0
-        return n, None
 
     def _see_gust(self, t):
         """A callable gust's speed at t into the energy budget (its fastest so far)."""
@@ -289,6 +239,9 @@ class Simulator(LiveParameters):
         """A new energy baseline at the current state (``budget.py``): after a change
         that adds or removes energy from outside the equations of motion."""
         state = self.state
+        scene = self.scene
+        free = float(scene.masses[~np.asarray(scene.pinned, dtype=bool)].sum())
+        self.diagnostics.set_load(2.0 * free * float(np.linalg.norm(scene.gravity)))
         self.budget.rebase(self.diagnostics.energy(state), runtime.to_numpy(state.x),
                             runtime.to_numpy(state.v), self.time,
                             self.settings["colliders_off"])
@@ -322,10 +275,15 @@ class Simulator(LiveParameters):
             if arr.shape != (n, 3):
                 raise SceneError(f"{name} must have shape ({n}, 3) (got {arr.shape})")
             field.from_numpy(arr.astype(npr))
+        self._state_changed()
+        self._rebase()
+
+    def _state_changed(self):
+        """The state was set from outside the step (``set_state``, a split step's start
+        restored): the integrator's caches dropped, the contact list made to cover it."""
         self.integrator.invalidate()
         if self._contact is not None:
             self._contact.refresh(self.state.x)
-        self._rebase()
 
     def reset(self, dt=None):
         """Back to the scene's initial positions and velocities at t = 0, optionally with a
@@ -339,6 +297,7 @@ class Simulator(LiveParameters):
         self.state.t = 0.0
         if self._contact is not None:
             self._contact.reset_stats()          # a new run counts from zero
+        self._splitter.reset()
         self.set_state(self.scene.positions, self.scene.velocities)
 
     # -- live changes ------------------------------------------------------------------------
@@ -348,7 +307,7 @@ class Simulator(LiveParameters):
         self._check()
         self.integrator = _integrator_class(integrator)(self.model, **options)
         self.integrator_name = integrator
-        self._batch_kernels.clear()
+        self._batches.forget()
         self._fusion = None
 
     def set_integrator_options(self, **changes):
@@ -357,7 +316,7 @@ class Simulator(LiveParameters):
         kernels; the batches, which compile options in, compile again."""
         self._check()
         self.integrator.set_options(**changes)
-        self._batch_kernels.clear()
+        self._batches.forget()
         self._fusion = None
 
     def set_dt(self, dt):

@@ -190,20 +190,26 @@ def grid_springs(grids, k, families: ti.template(), first: ti.template(), x, v, 
 # -- diagnostics ------------------------------------------------------------------------------
 @ti.kernel
 def spring_sums(x: ti.template(), pairs: ti.template(), ks: ti.template(),
-                rest: ti.template(), count: ti.i32,
-                out: ti.template()) -> ti.types.vector(2, ti.f64):
-    """[spring potential sum k_s/2 (|x_ij| - l0)^2, max strain (|x_ij| - l0)/l0],
+                rest: ti.template(), count: ti.i32, load: float,
+                out: ti.template()) -> ti.types.vector(3, ti.f64):
+    """[spring potential sum k_s/2 (|x_ij| - l0)^2, max strain (|x_ij| - l0)/l0, max
+    strain of the springs whose tension k_s (|x_ij| - l0) exceeds ``load`` (N)],
     accumulated in ``out``'s type."""
     out[0] = 0
     out[1] = -1e30
+    out[2] = -1e30
     ti.loop_config(serialize=ti.static(serial(pairs)))
     for s in range(count):
         i, j = pairs[s][0], pairs[s][1]
         length = (x[i] - x[j]).norm()
         stretch = length - rest[s]
         out[0] += ti.cast(0.5 * ks[s] * stretch * stretch, out.dtype)
-        ti.atomic_max(out[1], ti.cast(stretch / rest[s], out.dtype))
-    return ti.Vector([ti.cast(out[0], ti.f64), ti.cast(out[1], ti.f64)])
+        strain = ti.cast(stretch / rest[s], out.dtype)
+        ti.atomic_max(out[1], strain)
+        if ks[s] * stretch > load:
+            ti.atomic_max(out[2], strain)
+    return ti.Vector([ti.cast(out[0], ti.f64), ti.cast(out[1], ti.f64),
+                      ti.cast(out[2], ti.f64)])
 
 
 # -- backward Euler over the spring list ------------------------------------------------------
@@ -290,6 +296,9 @@ class Springs(Term, ColouredConstraints):
         self._grid_forces = None
         self._adjacency = None
         self._implicit = None
+        # the tension (N) below which a spring is not held to the strain bound
+        # (``stored``); the diagnostics set it from the scene's weight
+        self.load = 0.0
         if constraints:
             self.inv_mass = model.inv_mass
             self.constraints_begin(self.pairs.to_numpy()[:self.count], model.particle_count, 1)
@@ -342,14 +351,18 @@ class Springs(Term, ColouredConstraints):
 
     def sums(self, x, out):
         """(spring energy, max strain) over all springs."""
-        values = spring_sums(x, self.pairs, self.ks, self.rest, self.count, out)
+        values = spring_sums(x, self.pairs, self.ks, self.rest, self.count, 0.0, out)
         return float(values[0]), float(values[1])
 
     def energy(self, x, t, out):
         return self.sums(x, out)[0]
 
     def stored(self, x, t, out):
-        return self.sums(x, out)
+        """(spring energy, the largest strain of a spring that pulls harder than
+        ``load``): the strain bound's part of the instability test (``sim/instability.py``
+        says why a spring holding no more than the scene's weight may stretch further)."""
+        values = spring_sums(x, self.pairs, self.ks, self.rest, self.count, self.load, out)
+        return float(values[0]), float(values[2])
 
     def adjacency(self):
         """The springs at each particle, for per-particle gathers (built on first use).

@@ -120,14 +120,15 @@ class Controls:
 
     def stats(self, every=1):
         """dict: fps, ms_per_substep (medians of the last 30 frames), energy (J),
-        max_strain, time (s), integrator, contacts (``Simulator.contact_stats``). every=k
+        max_strain, time (s), integrator, contacts (``Simulator.contact_stats``), splits
+        (``Simulator.step_stats``). every=k
         reuses the energy, strain and contacts of the last call for k - 1 calls (the
         panel: they cost more than a 64 x 64 cloth's frame)."""
         sim = self.sim
         self._stats_age += 1
         if self._measured is None or self._stats_age >= every:
             self._measured = {"energy": sim.energy()["total"], "max_strain": sim.max_strain(),
-                              "contacts": sim.contact_stats()}
+                              "contacts": sim.contact_stats(), "splits": sim.step_stats()}
             self._stats_age = 0
         return {"fps": 1.0 / np.median(self.frame_seconds) if self.frame_seconds else 0.0,
                 "ms_per_substep": 1e3 * np.median(self.substep_seconds)
@@ -172,6 +173,14 @@ def _typical(values):
 def _copy(values):
     return {k: ({kk: list(vv) for kk, vv in v.items()} if isinstance(v, dict) else
                 list(v) if isinstance(v, list) else v) for k, v in values.items()}
+
+
+def split_line(stats):
+    """The panel's line for ``Simulator.step_stats()``: how many steps were split so far,
+    and the split the next step takes."""
+    now = stats["pieces_now"]
+    return (f"split steps: {stats['split_steps']} (finest 1/{stats['finest']}), "
+            f"now {'whole' if now == 1 else f'1/{now}'}")
 
 
 def contact_lines(stats):

@@ -18,7 +18,7 @@ from ..integrators import INTEGRATORS
 from ..render.framing import ground_and_checker
 from ..render.render import COLLIDER_COLOUR, PARTICLE_COLOUR
 from .camera import OrbitCamera
-from .controls import Controls, contact_lines
+from .controls import Controls, contact_lines, split_line
 from .display import DisplayError, check_display
 from .meshes import collider_mesh, collider_moves, tiles, vertex_normals
 
@@ -200,6 +200,7 @@ class Viewer:
             w.text(f"{st['fps']:.0f} frames/s, {st['ms_per_substep']:.3f} ms/substep")
             w.text(f"t = {st['time']:.3f} s   energy {st['energy']:.4g} J")
             w.text(f"max strain {100 * st['max_strain']:.1f} %")
+            w.text(split_line(st["splits"]))
             for line in contact_lines(st["contacts"]):
                 w.text(line)
             if c.message:
