@@ -37,7 +37,7 @@ def test_xpbd_converges_near_the_backward_euler_step(f64):
     moved = np.abs(be.positions() - x0).max()
     # the steps from Python, whose iteration count is read each step (a batch's is
     # compiled in: tests/test_batch.py)
-    xpbd = tcloth.Simulator(scene(), "xpbd", dt=1 / 60, batch=False)
+    xpbd = tcloth.Simulator(scene(), "xpbd", dt=1 / 60, substeps=1, batch=False)
     gaps = []
     for iterations in (1, 10, 100, 1000):
         xpbd.set_integrator_options(iterations=iterations)
@@ -104,7 +104,7 @@ def test_xpbd_is_stable_on_stiff_cloth_at_one_step_per_frame(f64, k):
         peaks.append(max(energy))
     assert peaks[1] < peaks[0]
     budgeted = tcloth.Simulator(cloth(k, kd=1.0, n=n, pinned=[(0, 0), (n - 1, 0)]), "xpbd",
-                                dt=1 / 60, iterations=10)
+                                dt=1 / 60, iterations=10, substeps=1, split=False)
     with pytest.raises(tcloth.InstabilityError, match="more energy than the scene can supply"
                        ".*substeps='auto'"):
         budgeted.step(60)

@@ -3,6 +3,8 @@ substep count."""
 import math
 from types import MappingProxyType
 
+import taichi as ti
+
 from ..scene import stability
 from ..errors import SceneError
 from ..terms.forces import Forces
@@ -28,6 +30,19 @@ def substep_count(substeps, dt, iterations, explicit_limit):
     if explicit_limit is None:
         return substeps
     return max(1, math.ceil(dt / (iterations * explicit_limit) - 1e-9))
+
+
+@ti.func
+def substeps_in_kernel(substeps: ti.template(), dt, iterations: ti.template(),
+                       explicit_limit: ti.template()):
+    """``substep_count`` inside a kernel (a batch's ``advance``), in float64 as there;
+    ``explicit_limit`` 0 where ``substeps`` is a number."""
+    count = 1
+    if ti.static(explicit_limit > 0.0):
+        count = ti.max(1, ti.cast(ti.ceil(dt / (iterations * explicit_limit) - 1e-9), ti.i32))
+    else:
+        count = substeps
+    return count
 
 
 class Integrator:

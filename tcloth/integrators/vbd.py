@@ -60,7 +60,8 @@ from ..graph import colour_graph, colour_order, csr_layout
 from ..runtime import serial
 from ..terms import springs as spring_term
 from ..terms.springs import Springs
-from .base import ForceCache, Integrator, check_substeps, substep_count
+from .base import (ForceCache, Integrator, check_substeps, substep_count,
+                   substeps_in_kernel)
 from .linalg import copy, copy_into
 from .potential import IncrementalPotential
 
@@ -89,9 +90,11 @@ class VBD(ForceCache, Integrator):
     initial_guess ("adaptive"): where the iterations start: "start" (x_t), "inertia"
         (x_t + h v_t), "gravity" (x_t + h v_t + h^2 g), or "adaptive" (the paper's:
         gravity scaled by how much of it the last step's acceleration had, in [0, 1]).
-    substeps (1): steps of dt / substeps a step, or "auto" (``base.substep_count``: enough
-        that the iterations outrun a stress wave, which a Gauss-Seidel sweep carries one
-        particle further: a stiff cloth at one step per frame needs several).
+    substeps ("auto"): steps of dt / substeps a step; "auto" (``base.substep_count``)
+        takes enough that the iterations outrun a stress wave, which a Gauss-Seidel sweep
+        carries one particle further: at one substep a cloth landing on a capsule or
+        hanging on stiff springs is left stretched far past what its fall can explain
+        (docs/realtime.md, "The frame-rate solvers' substeps").
     bounds (False): with self-collision, keep every move inside Offset Geometric Contact's
         conservative displacement bounds (module docstring). The solve then never takes
         cloth through cloth and the contact guard has almost nothing to do, but the
@@ -112,7 +115,7 @@ class VBD(ForceCache, Integrator):
     batched = True
     checked_steps = True
     defaults = {"iterations": 10, "rho": 0.9, "initial_guess": "adaptive", "bounds": False,
-                "substeps": 1}
+                "substeps": "auto"}
     live_options = frozenset({"iterations", "rho", "initial_guess", "substeps"})
 
     def __init__(self, model, **options):
@@ -256,8 +259,6 @@ class VBD(ForceCache, Integrator):
         """None where a step can run inside a batch of substeps (``batch.py``): not with
         self-contact (gathered from Python every iteration) or colliders (their contacts
         at the step's start are stored by a launch)."""
-        if self.options["substeps"] != 1:
-            return "vbd runs its substeps from Python"
         if self.pair_terms or self.vertex_terms:
             return ("vbd gathers its Jacobi terms (pressure) and self-contact's rows from "
                     "Python every iteration or step")
@@ -272,29 +273,34 @@ class VBD(ForceCache, Integrator):
     def advance(self, a, b, t, dt, fresh):
         """``simulate`` of State a in place (b.v holds v0, b.x the unused x_hat copy), as a
         ``ti.func`` for the batches (where ``batch_obstacle`` is None): the same
-        functions in the same order. Its iteration count is compiled in:
-        ``set_integrator`` changes it."""
-        h = ti.cast(dt, float)
-        copy(b.v, a.v)
-        self.potential.begin_particles(a.x, a.v, h, b.x)
-        if ti.static(self.has_springs):
-            self.springs.begin_directions(self.potential.x0)
-        if ti.static(self.potential.has_lagged):
-            self.potential.lagged.accumulate(a.x, a.v, ti.cast(t, float), self.potential.f_lag)
-        kind = self.guess_kind
-        if ti.static(self.options["initial_guess"] == "adaptive"):
-            if fresh:
-                kind = GRAVITY_GUESS
-        self.guess(a.x, a.f, h, kind)
-        t1 = ti.cast(t + dt, float)
-        for it in range(1, self.options["iterations"] + 1):
-            if ti.static(self.options["rho"] > 0.0):
-                self.remember(a.x)
-            self.sweep_in_order(a.x, h, t1)
-            if ti.static(self.options["rho"] > 0.0):
-                if it > 1:
-                    self.accelerate(a.x, ti.cast(self.omegas[it], float))
-        self.finish(a.x, b.v, ti.cast(1.0 / dt, float), a.v, a.f)
+        functions in the same order. Its iteration count (and substep count, but for
+        "auto") is compiled in: ``set_integrator`` changes them."""
+        count = substeps_in_kernel(self.options["substeps"], dt, self.options["iterations"],
+                                   self._explicit_limit or 0.0)
+        h64 = dt / count
+        h = ti.cast(h64, float)
+        for sub in range(count):
+            copy(b.v, a.v)
+            self.potential.begin_particles(a.x, a.v, h, b.x)
+            if ti.static(self.has_springs):
+                self.springs.begin_directions(self.potential.x0)
+            t0 = ti.cast(t + sub * h64, float)
+            if ti.static(self.potential.has_lagged):
+                self.potential.lagged.accumulate(a.x, a.v, t0, self.potential.f_lag)
+            kind = self.guess_kind
+            if ti.static(self.options["initial_guess"] == "adaptive"):
+                if fresh and sub == 0:
+                    kind = GRAVITY_GUESS
+            self.guess(a.x, a.f, h, kind)
+            t1 = ti.cast(t + (sub + 1) * h64, float)
+            for it in range(1, self.options["iterations"] + 1):
+                if ti.static(self.options["rho"] > 0.0):
+                    self.remember(a.x)
+                self.sweep_in_order(a.x, h, t1)
+                if ti.static(self.options["rho"] > 0.0):
+                    if it > 1:
+                        self.accelerate(a.x, ti.cast(self.omegas[it], float))
+            self.finish(a.x, b.v, ti.cast(1.0 / h64, float), a.v, a.f)
 
     def _contacts(self, x, h):
         """The pair terms' (self-contact's) gradient and diagonal blocks at x, held through

@@ -55,7 +55,7 @@ from ..errors import SceneError
 from ..terms.forces import Forces
 from ..runtime import serial
 from ..terms.colliders import Colliders
-from .base import Integrator, check_substeps, substep_count
+from .base import Integrator, check_substeps, substep_count, substeps_in_kernel
 
 
 @ti.data_oriented
@@ -63,17 +63,18 @@ class XPBD(Integrator):
     """XPBD with substeps. Options (defaults):
 
     iterations (10): Gauss-Seidel passes over the springs a substep.
-    substeps (1): substeps a step (Small Steps: many substeps of one iteration each are
-        more accurate than one substep of many iterations, at the same cost), or "auto"
-        (``base.substep_count``: enough that the iterations outrun a stress wave; a stiff
-        cloth at one step per frame needs several).
+    substeps ("auto"): substeps a step (Small Steps: many substeps of one iteration each
+        are more accurate than one substep of many iterations, at the same cost); "auto"
+        (``base.substep_count``) takes enough that the iterations outrun a stress wave: at
+        one substep a stiff cloth or one landing on a capsule is left stretched far past
+        what the scene can explain (docs/realtime.md, "The frame-rate solvers' substeps").
 
     ``colours`` is the springs' colour count.
     """
     name = "xpbd"
     batched = True
     checked_steps = True
-    defaults = {"iterations": 10, "substeps": 1}
+    defaults = {"iterations": 10, "substeps": "auto"}
     live_options = frozenset({"iterations", "substeps"})
 
     def __init__(self, model, **options):
@@ -112,7 +113,6 @@ class XPBD(Integrator):
         if not (isinstance(value, int) and value >= 1):
             raise SceneError(f"xpbd's iterations must be an int >= 1 (got {value!r})")
         self._explicit_limit = check_substeps("xpbd", self.options["substeps"], self.scene)
-        self.auto_substeps = self._explicit_limit is not None
 
     def simulate(self, model, state_in, state_out, dt):
         opt = self.options
@@ -197,12 +197,8 @@ class XPBD(Integrator):
         ``batch_obstacle`` is None: no projections); the same functions, in the same
         order. Its iteration count (and substep count, but for "auto") is compiled in:
         ``set_integrator`` changes them."""
-        count = 1
-        if ti.static(self.auto_substeps):      # base.substep_count, in float64 as there
-            count = ti.max(1, ti.cast(ti.ceil(dt / (self.options["iterations"]
-                                                    * self._explicit_limit) - 1e-9), ti.i32))
-        else:
-            count = self.options["substeps"]
+        count = substeps_in_kernel(self.options["substeps"], dt, self.options["iterations"],
+                                   self._explicit_limit or 0.0)
         # h and 1 / h in float64 first, then rounded, as simulate's Python floats are
         h64 = dt / count
         h = ti.cast(h64, float)
