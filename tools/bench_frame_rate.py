@@ -23,8 +23,14 @@ split_steps, finest_split, retries, substeps (the solver's own, median), first_s
 compiles the kernels), ms_per_step (median of the rest), slowest_step_s, wall_s (the rest),
 wall_per_simulated_s.
 
+``--split-cost``: what splitting costs where nothing fails: each case and solver as
+simulators with the split on and off, stepped in turn (``--rounds`` rounds of ``--steps``
+steps after a warm-up), printing ``frame_rate.<case>.<solver>.split_cost: ratio`` (the
+medians' ratio, on over off).
+
 Usage: python tools/bench_frame_rate.py [--cases capsule,stiff] [--solvers projective,vbd]
                                         [--csv docs/frame_rate.csv]
+       python tools/bench_frame_rate.py --split-cost [--cases stiff] [--rounds 5]
 """
 import argparse
 import time
@@ -132,14 +138,47 @@ def run(case, solver, dt=1 / 60, seconds=1.0):
             else float("nan")}
 
 
+def split_cost(case, solver, rounds=5, steps=10, dt=1 / 60):
+    """(median ms a step with the split on, with it off): two simulators of one case,
+    stepped ``steps`` at a time in turn after a warm-up step each."""
+    sims = {}
+    for split in (True, False):
+        scene, x, v = CASES[case]()
+        sims[split] = tcloth.Simulator(scene, solver, dt=dt, split=split)
+        sims[split].set_state(positions=x, velocities=v)
+        sims[split].step()
+    times = {True: [], False: []}
+    for _ in range(rounds):
+        for split, sim in sims.items():
+            for _ in range(steps):
+                start = time.perf_counter()
+                sim.step()
+                times[split].append(time.perf_counter() - start)
+    if any(sim.step_stats()["split_steps"] for sim in sims.values()):
+        raise RuntimeError(f"{case} with {solver} split a step: not a case where nothing fails")
+    return 1e3 * float(np.median(times[True])), 1e3 * float(np.median(times[False]))
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", default=",".join(CASES))
     ap.add_argument("--solvers", default=",".join(SOLVERS))
     ap.add_argument("--precision", default="f32")
     ap.add_argument("--csv", help="also write the rows to this CSV file")
+    ap.add_argument("--split-cost", action="store_true",
+                    help="measure what the split costs where nothing fails instead")
+    ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--steps", type=int, default=10)
     args = ap.parse_args(argv)
     tcloth.init(arch="cpu", precision=args.precision)
+    if args.split_cost:
+        for case in args.cases.split(","):
+            for solver in args.solvers.split(","):
+                on, off = split_cost(case, solver, args.rounds, args.steps)
+                print(f"frame_rate.{case}.{solver}.ms_split_on: {on:.3f}")
+                print(f"frame_rate.{case}.{solver}.ms_split_off: {off:.3f}")
+                print(f"frame_rate.{case}.{solver}.split_cost: {on / off:.3f}", flush=True)
+        return
     rows = []
     for case in args.cases.split(","):
         for solver in args.solvers.split(","):
