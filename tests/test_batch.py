@@ -111,8 +111,9 @@ def test_a_batch_with_self_collision_equals_single_steps_bit_for_bit(f32, integr
     if integrator != "symplectic_euler":    # the replay is the simulator's: checked once
         return
     verify = sim._checker.verify
-    sim._checker.verify = lambda state, step: (
-        InstabilityError("made to fail", step) if step == corrected[0] else verify(state, step))
+    sim._checker.verify = lambda state, step, *piece: (
+        InstabilityError("made to fail", step) if step == corrected[0]
+        else verify(state, step, *piece))
     ends = []
     for batching in (False, True):
         start_falling(sim)
