@@ -20,7 +20,7 @@ def cloth(k, kd=1.0, n=8, pinned=None):
 @pytest.mark.parametrize("k", [1e4, 1e6])
 def test_stiff_cloth_explodes_explicitly_but_is_stable_and_dissipative_implicitly(f64, k):
     with pytest.raises(InstabilityError):
-        tcloth.Simulator(cloth(k), "symplectic_euler", dt=1 / 60).step(200)
+        tcloth.Simulator(cloth(k), "symplectic_euler", dt=1 / 60, split=False).step(200)
     sim = tcloth.Simulator(cloth(k, n=6), "backward_euler", dt=1 / 60)
     energy = [sim.energy()["total"]]
     for _ in range(20):
