@@ -24,7 +24,8 @@ def test_every_term_declares_what_it_gives():
 
 def test_a_term_that_hides_or_overstates_a_capability_is_refused():
     with pytest.raises(TypeError, match="does not declare 'local_system'"):
-        type("Hidden", (Term,), {"local_system": lambda self: None})
+        type("Hidden", (Term,), {"local_system": lambda self: None,
+                                 "local_energy": lambda self: None})
     with pytest.raises(TypeError, match="provides 'constant_matrix' without constant_matrix"):
         type("Overstated", (Term,), {"provides": frozenset({"constant_matrix"})})
     with pytest.raises(TypeError, match="unknown capabilities"):

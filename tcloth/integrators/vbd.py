@@ -19,19 +19,20 @@ there.
 Hinge bending (``terms/bending.py``) and the triangle membrane (``terms/membrane.py``)
 are Gauss-Seidel like the springs: a vertex's gradient and block are summed over its
 hinges and triangles at the current positions, and vertices sharing a hinge or a
-triangle get different colours. Self-contact couples vertices through
-the contact list, which changes every step: each vertex's rows are evaluated afresh in its
-update too (``SelfContact.vertex_system``, from a per-vertex index made at the step's
-start, as Newton's VBD does), but they are not in the colouring, so two vertices of one
-colour may share a row. Held through an iteration's colours instead (a Jacobi update,
-until stop 76), its exact blocks moved both sides of a contact at once and overshot
-(``docs/contact.md``);
-each iteration ends keeping the contact stage's pairs on their sides of their separating
-planes (``ContactStage.begin_solve`` at the step's start with the initial guess as the
-predicted motion, searched again where an iterate leaves it; ``guard.keep_apart``), and
-Chebyshev's mix is skipped in an iteration after one whose planes moved a vertex
-(extrapolating a plane's move tore the fold at its first step); the contact stage's
-guard (``contact/guard.py``) keeps the step free of crossings as for every integrator. Pressure couples every vertex of a chamber (``terms/pressure.py``): it
+triangle get different colours. Self-contact couples vertices through the contact list,
+which changes every step: each vertex's rows are evaluated afresh in its update too
+(``SelfContact.vertex_system``, from a per-vertex index made at the step's start), but
+they are not in the colouring, so two vertices of one colour may share a row. The
+penalty's stiffness switches on at the thickness, where a Newton step
+from outside overshoots: a step that can bring a row into contact is searched along
+(``vbd_local.py``), so that VBD converges to backward Euler's step in contact too
+(tested). Each iteration ends keeping the contact stage's pairs on their sides of their
+separating planes (``ContactStage.begin_solve`` at the step's start with the initial
+guess as the predicted motion, searched again where an iterate leaves it;
+``guard.keep_apart``), and Chebyshev's mix is skipped in an iteration after one whose
+planes moved a vertex (extrapolating a plane's move tore the fold at its first step);
+the contact stage's guard (``contact/guard.py``) keeps the step free of crossings as for
+every integrator. Pressure couples every vertex of a chamber (``terms/pressure.py``): it
 is a Jacobi term too, with diagonal blocks that bound its rank-one part so that the
 vertices' simultaneous moves do not overshoot the chamber's volume. With
 ``bounds=True`` every move is kept inside its vertex's conservative displacement bound
@@ -64,6 +65,7 @@ from .base import (ForceCache, Integrator, check_substeps, substep_count,
                    substeps_in_kernel)
 from .linalg import copy, copy_into
 from .potential import IncrementalPotential
+from .vbd_local import VertexLocal
 
 GUESSES = ("start", "inertia", "gravity", "adaptive")
 GRAVITY_GUESS = GUESSES.index("gravity")
@@ -79,7 +81,7 @@ def chebyshev(rho, iterations):
 
 
 @ti.data_oriented
-class VBD(ForceCache, Integrator):
+class VBD(VertexLocal, ForceCache, Integrator):
     """Vertex Block Descent on backward Euler's incremental potential. Options (defaults):
 
     iterations (10): colour sweeps a step (VBD does not test convergence: the count is
@@ -149,7 +151,7 @@ class VBD(ForceCache, Integrator):
         self.colours = len(self.colour_start) - 1
         self.prev, self.prev2, self.contact_grad, self.v_start, self.dx = (
             ti.Vector.field(3, real, shape=n) for _ in range(5))
-        self.hits = ti.field(ti.i32, shape=n)
+        self.hits, self.deferred = (ti.field(ti.i32, shape=n) for _ in range(2))
         stage = model.contact
         # mesh colliders: their planes as a penalty after the sweeps (``hold.py``)
         self.hold_stage = stage if self.potential.hold is not None else None
@@ -340,10 +342,11 @@ class VBD(ForceCache, Integrator):
 
     @ti.func
     def _local(self, p, x, h, t):
-        """(g_i, H_i): vertex p's gradient of E and its 3 x 3 Hessian block, the springs'
-        projected (the self-contacts' from the iteration's start; the bending's and the
-        membrane's at x)."""
+        """(g_i, H_i, clearance): vertex p's gradient of E and its 3 x 3 Hessian block at
+        x, the springs' projected (the Jacobi terms' from the iteration's start), and how
+        far it may move before a self-contact row of its own comes into contact."""
         g = self.mass[p] / (h * h) * (x[p] - self.potential.x_hat[p])
+        clearance = 1e30
         for term in ti.static(self.potential.particle_terms):
             _, _, g_t = term.incremental(p, x, self.potential.x0, h, t)
             g += g_t
@@ -359,9 +362,10 @@ class VBD(ForceCache, Integrator):
             g += g_t
             block += block_t
         for term in ti.static(self.vertex_terms):
-            g_t, block_t = term.vertex_system(p, x, self.potential.x0, h)
+            g_t, block_t, clear_t = term.vertex_system(p, x, self.potential.x0, h)
             g += g_t
             block += block_t
+            clearance = ti.min(clearance, clear_t)
         if ti.static(self.has_springs):
             d0 = ti.static(self.springs.d0)
             for a in range(self.adj_start[p], self.adj_start[p + 1]):
@@ -373,7 +377,7 @@ class VBD(ForceCache, Integrator):
                 _, projected = spring_term.hessian_blocks(x[p], x[q], self.ks[s], self.kd[s],
                                                           self.rest[s], d0[s], h)
                 block += projected
-        return g, block
+        return g, block, clearance
 
     def _sweep(self, x, h, t):
         self._sweep_kernel(x, h, t, self._layout())
@@ -390,10 +394,12 @@ class VBD(ForceCache, Integrator):
     def sweep(self, x, h, t):
         """One iteration: a Newton step on each free vertex, colour after colour, the
         vertices of a colour in parallel (one launch: the colours' loops are unrolled,
-        each a top-level loop)."""
+        each a top-level loop); then the steps deferred to a line search, in order."""
         for c in ti.static(range(self.colours)):
             for k in range(ti.static(self.colour_start[c]), ti.static(self.colour_start[c + 1])):
                 self._update(self.order[k], x, h, t)
+        if ti.static(bool(self.vertex_terms)):
+            self.deferred_pass(x, h, t)
 
     @ti.func
     def sweep_in_order(self, x, h, t):
@@ -406,10 +412,18 @@ class VBD(ForceCache, Integrator):
 
     @ti.func
     def _update(self, p, x, h, t):
-        """Vertex p's Newton step, if it is free."""
+        """Vertex p's Newton step, if it is free; with self-contact, deferred to the
+        sweep's line search where it can bring a row into contact (``vbd_local.py``)."""
         if self.potential.inv_mass[p] > 0.0:
-            g, block = self._local(p, x, h, t)
-            x[p] = self._bounded(p, x[p] - block.inverse() @ g)
+            g, block, clearance = self._local(p, x, h, t)
+            step = -(block.inverse() @ g)
+            defer = False
+            if ti.static(bool(self.vertex_terms)):
+                defer = step.norm() >= clearance
+            if defer:
+                self.deferred[p] = 1
+            else:
+                x[p] = self._bounded(p, x[p] + step)
 
     @ti.func
     def _bounded(self, p, y):
@@ -425,25 +439,6 @@ class VBD(ForceCache, Integrator):
         for p in range(x.shape[0]):
             if self.potential.inv_mass[p] > 0.0:
                 x[p] = self._bounded(p, x[p])
-
-    def local_system(self, x, h, t, p):
-        """(g_i, H_i) of vertex p at positions x (a field) within the step begun last, as
-        NumPy; for tests."""
-        self._contacts(x, h)
-        out = self._local_kernel(x, h, t, p, self._layout())
-        out = np.asarray(out)
-        return out[0], out[1:]
-
-    @ti.kernel
-    def _local_kernel(self, x: ti.template(), h: float, t: float, p: ti.i32,
-                      layout: ti.template()) -> ti.types.matrix(4, 3, ti.f64):
-        g, block = self._local(p, x, h, t)
-        out = ti.Matrix.zero(ti.f64, 4, 3)
-        for j in ti.static(range(3)):
-            out[0, j] = g[j]
-            for i in ti.static(range(3)):
-                out[1 + i, j] = block[i, j]
-        return out
 
     @ti.kernel
     def _remember(self, x: ti.template()):

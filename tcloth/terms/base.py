@@ -46,9 +46,9 @@ solvers call them for each spring or grid offset. The other potential terms that
 particles (bending, the membrane, self-contact) give backward Euler ``add_incremental``,
 ``prepare_blocks``, ``diagonal_block(p)`` and ``add_product`` (their Hessian's couplings
 times a vector, for CG); bending and the membrane also ``local_system(p, x, x0, h)`` (a
-particle's gradient and Hessian block at x) for VBD's Gauss-Seidel sweeps and
-``constant_matrix()`` for projective dynamics' matrix (an object with ``set_step(h)``,
-a per-particle scalar ``diagonal`` and ``add_product``).
+particle's gradient and Hessian block at x) and ``local_energy`` for VBD's Gauss-Seidel
+sweeps and ``constant_matrix()`` for projective dynamics' matrix (an object with
+``set_step(h)``, a per-particle scalar ``diagonal`` and ``add_product``).
 
 What a term gives beyond the above is declared, not guessed: its class lists its
 capabilities in ``provides`` (names of ``CAPABILITIES``, below, each with the methods it
@@ -78,13 +78,17 @@ CAPABILITIES = {
     # and the couplings' product with a vector, for CG
     "couplings": ("add_incremental", "prepare_blocks", "diagonal_block", "add_product"),
     # VBD's Gauss-Seidel sweeps: particle p's gradient and Hessian block at x (ti.func
-    # ``local_system(p, x, x0, h)``); a coupled term without it is taken Jacobi-style
-    "local_system": ("local_system",),
+    # ``local_system(p, x, x0, h)``) and its energy as a function of x[p] alone, up to a
+    # constant (``local_energy(p, x, x0, h)``, for the line search); a coupled term
+    # without them is taken Jacobi-style
+    "local_system": ("local_system", "local_energy"),
     # VBD's sweeps, for a coupling that changes every step (self-contact): particle p's
-    # gradient and Hessian block at x from its rows evaluated afresh (ti.func
-    # ``vertex_system(p, x, x0, h)``), the couplings left out of the colouring; and
-    # ``layout()``, an int that changes where the fields it reads were made again
-    "vertex_system": ("vertex_system", "layout"),
+    # gradient, Hessian block and clearance (how far it may move before a coupling of its
+    # own switches on) at x from its rows evaluated afresh (ti.func ``vertex_system(p, x,
+    # x0, h)``), the couplings left out of the colouring; its energy as ``local_energy``'s
+    # (``vertex_energy``); and ``layout()``, an int that changes where the fields it reads
+    # were made again
+    "vertex_system": ("vertex_system", "vertex_energy", "layout"),
     # projective dynamics' matrix: ``constant_matrix()``, a ``ConstantMatrix``
     "constant_matrix": ("constant_matrix",),
     # XPBD's compliant constraints (built with the option ``constraints=True`` where the

@@ -146,6 +146,16 @@ class Bending(Term, ConstantMatrix, ColouredConstraints):
             g += self.weights[k][slot] * self.hinge_vector(k, x)
         return g, self.diagonal_block(p)
 
+    @ti.func
+    def local_energy(self, p, x, x0, h):
+        """The energy of particle p's hinges at x, sum of |s|^2 / 2 (as a function of x[p]
+        alone, the energy up to a constant)."""
+        e = 0.0
+        for k in range(self.start[p], self.start[p + 1]):
+            s = self.hinge_vector(self.entries[k][0], x)
+            e += 0.5 * s.dot(s)
+        return e
+
     @ti.kernel
     def _energy(self, x: ti.template(), out: ti.template()) -> ti.f64:
         out[0] = 0

@@ -348,6 +348,19 @@ class Membrane(Term, ColouredConstraints):
             block += self.vertex_block(b, slot, uu, uv, vv)
         return g, block
 
+    @ti.func
+    def local_energy(self, p, x, x0, h):
+        """The energy and damping potential of particle p's triangles at x (as a function
+        of x[p] alone, the incremental potential's part up to a constant)."""
+        e = 0.0
+        for k in range(self.start[p], self.start[p + 1]):
+            tri = self.entries[k][0]
+            fu, fv = self.frame(tri, x)
+            f0u, f0v = self.frame(tri, x0)
+            w, _gu, _gv = self.incremental(fu, fv, f0u, f0v, self.c[tri], h)
+            e += w
+        return e
+
 
 @ti.data_oriented
 class MembraneBound(ConstantMatrix):

@@ -39,7 +39,8 @@ the curvature term, which is negative, and the dissipation's blocks) spread over
 particles: the diagonal blocks in the block-Jacobi preconditioner, the couplings between
 them applied matrix-free in CG's products (``add_product``). VBD takes the same gradient
 and exact blocks particle by particle inside its sweeps (``vertex_system``: each particle's
-rows, indexed at the step's start, evaluated at the current positions). Projective
+rows, indexed at the step's start, evaluated at the current positions), and their energy
+(``vertex_energy``) for its line search where a move can bring a row into contact. Projective
 dynamics projects after its iterations: Gauss-Seidel passes over the penetrating
 contacts moving the particles apart to distance T (an impulse along the contact's
 weights, inverse-mass weighted: momentum is kept), then one over the contacts within T
@@ -383,9 +384,16 @@ class SelfContact(Term):
 
     @ti.func
     def vertex_system(self, p, x, x0, h):
-        """(gradient, Hessian block) of particle p at x from its rows of the list, each
-        evaluated afresh (VBD's sweeps: its partners moved since): ``VertexRows``'s."""
+        """(gradient, Hessian block, clearance) of particle p at x from its rows of the
+        list, each evaluated afresh (VBD's sweeps: its partners moved since):
+        ``VertexRows.system``'s."""
         return self.rows.system(p, x, x0, h)
+
+    @ti.func
+    def vertex_energy(self, p, x, x0, h):
+        """The contacts' part of E at x as a function of x[p] alone, up to a constant
+        (VBD's line search): ``VertexRows.energy``."""
+        return self.rows.energy(p, x, x0, h)
 
     def add_incremental(self, x, x0, h, with_grad, acc, grad):
         """acc[0] += the contacts' part of E at x (acc[1] its magnitude); with_grad:

@@ -33,24 +33,45 @@ class VertexRows:
 
     @ti.func
     def system(self, p, x, x0, h):
-        """(gradient, Hessian block) at x of particle p's rows: the penalty's and the
-        lagged dissipation's, with the exact blocks alpha_j^2 k n n^T and alpha0_j^2 B
-        (k the list's table's stiffness)."""
+        """(gradient, Hessian block, clearance) at x of particle p's rows: the penalty's
+        and the lagged dissipation's, with the exact blocks alpha_j^2 k n n^T and
+        alpha0_j^2 B (k the list's table's stiffness); the clearance is the least d - T of
+        its repelling rows out of contact (1e30 without one): a row's distance moves at
+        most as far as p, so a move of p shorter than that brings none into contact."""
         prm = ti.static(self.of.table.params)
         g = ti.Vector.zero(float, 3)
         block = ti.Matrix.zero(float, 3, 3)
+        clearance = 1e30
         for e in range(self.start[p], self.start[p + 1]):
             c, j = self.entries[e][0], self.entries[e][1]
             _ids, alpha, depth, grad = penalty_gradient(self.of, c, x)
-            if self.of.repels[c] and depth > 0.0:
-                n = unit_normal(grad, grad.norm())     # zero at d = 0, as the force
-                g += alpha[j] * grad
-                block += alpha[j] * alpha[j] * prm[1] * n.outer_product(n)
+            if self.of.repels[c]:
+                if depth > 0.0:
+                    n = unit_normal(grad, grad.norm())     # zero at d = 0, as the force
+                    g += alpha[j] * grad
+                    block += alpha[j] * alpha[j] * prm[1] * n.outer_product(n)
+                else:
+                    clearance = ti.min(clearance, -depth)
             _e, g_d, block_d = row_dissipation(self.of, self.lag, c, x, x0, h)
             a0 = self.lag.alpha0[c][j]
             g += a0 * g_d
             block += a0 * a0 * block_d
-        return g, block
+        return g, block, clearance
+
+    @ti.func
+    def energy(self, p, x, x0, h):
+        """The penalty and the lagged dissipation of particle p's rows at x: the contacts'
+        part of the incremental potential as a function of x[p] alone, up to a constant."""
+        prm = ti.static(self.of.table.params)
+        e = 0.0
+        for k in range(self.start[p], self.start[p + 1]):
+            c = self.entries[k][0]
+            _ids, _alpha, depth, _grad = penalty_gradient(self.of, c, x)
+            if self.of.repels[c] and depth > 0.0:
+                e += 0.5 * prm[1] * depth * depth
+            e_d, _g_d, _block_d = row_dissipation(self.of, self.lag, c, x, x0, h)
+            e += e_d
+        return e
 
 
 @ti.kernel
