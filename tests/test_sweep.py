@@ -238,3 +238,14 @@ def test_plots_keep_markers_and_labels_readable(tmp_path, monkeypatch):
     labels = [t.get_text() for legend in precision.legends for t in legend.get_texts()]
     assert not any("nan" in label for label in labels)
     assert any("one stable point" in label for label in labels), labels
+
+
+def test_a_case_studies_its_own_dt():
+    """A sweep's case is not split where a step fails (a split step is a smaller dt, and
+    the case's verdict is about its own), unless its options ask for it."""
+    from tcloth.app.sweep import worker
+    for options, pieces in (({}, 1), ({"split": 8}, 8)):
+        settings = {"integrator": "symplectic_euler", "dt": 1e-3, "precision": "f32",
+                    "options": options}
+        sim = worker._simulator(SCENE, "cpu", {}, settings, ("split", pieces))
+        assert sim.settings["split"] == pieces

@@ -13,7 +13,9 @@ Keys (top level):
     reference  integrator, dt, precision, options of the run that ``error`` is measured
                against (the RMS distance over particles at each case's end time).
     integrator, dt, precision, options   fixed simulator settings (default: the script's
-               CONFIG, precision "f32").
+               CONFIG, precision "f32"). A case's steps are not split where they fail
+               (``Simulator(split=False)``, unless its options say ``split``): a case
+               studies its own dt.
     arch       Taichi arch of the cases (default "cpu").
     energy_limit   J: a case whose total energy grows by more than this counts as unstable
                (default: none, only a non-finite or unbounded state does).

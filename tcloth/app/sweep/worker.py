@@ -49,7 +49,7 @@ def _simulator(scene_path, arch, build, settings, group):
     else:
         module, _ = load_script(scene_path)
         sim = Simulator(module.build(**build), settings["integrator"], dt=settings["dt"],
-                        **settings["options"])
+                        **{"split": False, **settings["options"]})
         try:
             sim.step(2)
         except InstabilityError:
