@@ -72,17 +72,28 @@ class BatchSteps:
         return changed > 0
 
     def batch_counts(self):
-        """The counts of ``stats`` and of the batches' collider cuts as they stand at a
-        batch's start, for ``batch_replay``."""
-        return dict(self.stats), int(self.batch_cuts[0])
+        """The counts of ``stats``, of the batches' collider cuts and of the mesh fields'
+        fallbacks as they stand at a batch's start, for ``batch_replay``."""
+        return dict(self.stats), int(self.batch_cuts[0]), self._fallbacks(None)
 
     def batch_replay(self, counts):
         """The counts back to a batch's start (``batch_counts``), whose steps run again
         one at a time (after a bad step): each step is then counted once. The time spent
         (``seconds``) and the list's builds, which were done, stay."""
-        stats, cuts = counts
+        stats, cuts, fallbacks = counts
         self.stats = {**stats, "seconds": self.stats["seconds"]}
         self.batch_cuts[0] = cuts
+        self._fallbacks(fallbacks)
+
+    def _fallbacks(self, value):
+        """The mesh fields' fallback count (None without fields), set to ``value`` unless
+        that is None."""
+        sdf = self.colliders.sdf if self.colliders is not None else None
+        if sdf is None:
+            return None
+        if value is not None:
+            sdf.fallbacks[None] = value
+        return int(sdf.fallbacks[None])
 
     def batch_key(self):
         """The fields a batch's kernel reads that the stage makes again (the proximity
@@ -94,8 +105,11 @@ class BatchSteps:
 
     def batch_obstacle(self):
         """Why a batch of substeps cannot run this stage's steps, or None."""
-        return ("mesh colliders search their pairs between steps"
-                if self.obstacle is not None else None)
+        if self.obstacle is not None:
+            return "mesh colliders search their pairs between steps"
+        if self.colliders is not None and self.colliders.moving:
+            return "keyframed mesh colliders are posed from Python before each step"
+        return None
 
     def batch_cut_last(self):
         """Whether the collider sweep cut a path in a batch's last step (its velocities

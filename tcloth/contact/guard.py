@@ -52,6 +52,7 @@ from .. import runtime
 from ..runtime import jacobi_apply, jacobi_zero, serial
 from ..geometry.shapes import SHAPES
 from .broad import near
+from .field_sweep import field_paths
 from .normals import LEAST_GAP, VERTEX_PAIRS, normal_margin, spans, vertex_normals
 from .search import POINT_TRIANGLE
 
@@ -415,14 +416,17 @@ def sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held, log: ti.template(
     collider's frame (it moves by dt times its velocity): a path from outside that enters
     it ends at the entry, riding with the collider, its velocity into it removed; a
     particle that started inside and would end deeper stays where it was relative to it.
-    Returns how many paths were cut;
+    Returns how many paths were cut (a mesh field's: ``field_sweep.py``);
     ``held`` gets the collider's outward normal at the stop of each particle cut."""
     clamped = 0
     ti.loop_config(serialize=ti.static(serial(x1)))
     for p in range(x1.shape[0]):
         if inv_mass[p] > 0.0:
             for g in ti.static(table.groups):
-                # a mesh's paths are kept off it by its pairs' planes (``obstacle.py``)
+                # a certified mesh's paths are kept off it by its pairs' planes
+                # (``obstacle.py``), a field's by its own sweep
+                if ti.static(SHAPES[g.shape].meshed and table.fields > 0):
+                    clamped += field_paths(table, g, p, x0, x1, v1, t0, dt, held, BACK_OFF)
                 if ti.static(not SHAPES[g.shape].meshed):
                     for k in range(g.first, g.first + g.count):
                         col = table.data[k]

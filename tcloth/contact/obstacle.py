@@ -116,7 +116,10 @@ class ObstaclePairs:
         self.table, self.store = model.colliders, model.colliders.meshes
         self.inv_mass = model.inv_mass
         self.thickness = thickness
-        self.static = all(not moves(c) for c in self.table.mesh_colliders)
+        # the meshes on this path (``collider_table``: the others are distance fields)
+        self.certified = _ints([int(m in self.table.certified)
+                                for m in range(len(self.table.mesh_colliders))], ())
+        self.static = all(not moves(self.table.mesh_colliders[m]) for m in self.table.certified)
         # a cloth triangle's query lists the pairs of its own vertices and edges too (each
         # from the first triangle that has it: ``own_cv``, ``own_ce``); points and edges
         # in no triangle (loose particles, ropes) have queries of their own

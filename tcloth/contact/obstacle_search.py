@@ -161,6 +161,8 @@ def _edge_pairs(o: ti.template(), rows: ti.template(), slot, e, t, tri, lo, hi):
 def _query(o: ti.template(), rows: ti.template(), slot, kind, q, lo, hi, t0, dt, grow):
     """Every obstacle triangle whose swept box meets (lo, hi): ``_emit``."""
     for m in range(o.store.meshes.shape[0]):
+        if not o.certified[m]:
+            continue
         info = o.store.meshes[m]
         col = o.table.data[o.mesh_row[m]]
         r0, c0 = pose(col, t0)

@@ -80,6 +80,9 @@ STATS = {
                      "far"),
     "obstacle_carried": ("cloth vertices the mesh colliders' fail-safe carried with the "
                          "obstacle so far"),
+    "sdf_fallbacks": ("queries of a mesh collider's distance field beyond its band that the "
+                      "exact mesh answered within the caller's reach, so far (motion "
+                      "beyond the band: geometry/sdf.py)"),
     "solve_searches": ("candidate searches for solvers' iterations (one at a step's start "
                        "where the proximity list does not cover its predicted motion, and "
                        "again where an iterate left what was searched)"),
@@ -139,9 +142,11 @@ class ContactStage(BatchSteps):
         self.solve_near = False     # whether that list is a near search (``begin_solve``)
         self._planes = {}           # the guard's ``Planes`` beside each list, by its owner
         self.obstacle = None
-        if self.colliders is not None and self.colliders.meshes is not None:
+        if self.colliders is not None and self.colliders.meshes is not None \
+                and self.colliders.certified:
+            meshes = self.colliders.mesh_colliders
             self.obstacle = ObstaclePairs(model, primitives, max(
-                c["thickness"] for c in self.colliders.mesh_colliders))
+                meshes[m]["thickness"] for m in self.colliders.certified))
 
     # -- the proximity list ------------------------------------------------------------------
     @property
@@ -457,12 +462,18 @@ class ContactStage(BatchSteps):
         return cl, count, covered
 
     def contact_stats(self):
-        """A copy of ``stats`` with the current candidate and rebuild counts."""
+        """A copy of ``stats`` with the current candidate and rebuild counts, and with
+        mesh colliders ``mesh_paths``: each one's ``SdfStore.paths`` entry (in the order
+        of ``ColliderTable.mesh_colliders``: its path, field or certified pairs, and
+        why)."""
         out = dict(self.stats)
         out["collider_paths_cut"] += int(self.batch_cuts[0])
         if self.broad is not None:
             out["candidates"] = self.broad.count
             out["rebuilds"] = self.broad.rebuilds
+        if self.colliders is not None and self.colliders.sdf is not None:
+            out["sdf_fallbacks"] = int(self.colliders.sdf.fallbacks[None])
+            out["mesh_paths"] = [dict(p) for p in self.colliders.sdf.paths]
         if self.obstacle is not None:
             out["obstacle_pairs"] = self.obstacle.count
             out["obstacle_searches"] = self.obstacle.searches
@@ -476,6 +487,8 @@ class ContactStage(BatchSteps):
         self.stats = {key: 0 for key in STATS}
         self.stats["seconds"] = 0.0
         self.batch_cuts.fill(0)
+        if self.colliders is not None and self.colliders.sdf is not None:
+            self.colliders.sdf.fallbacks.fill(0)
         if self.broad is not None:
             self.broad.rebuilds = 0
         if self.obstacle is not None:

@@ -30,6 +30,7 @@ STACK = 64        # the traversal's stack (a tree of 2^32 leaves needs 33)
 TINY = 1e-12      # m: below this a distance has no direction of its own
 QUERY_WORK = 64   # a query of the hierarchy costs about this many simple loop items
                   # (``runtime.serial``: a loop of a few thousand queries runs threaded)
+DEPTH_START = 1e-3   # ``depth``'s rays start this fraction of their length below a face
 GRAZING = 1e-3    # an edge this near its plane (|cos| to the normal) lies in a triangle's
                   # plane: it touches it, and float32's rounding would make a hit of it
 
@@ -244,15 +245,13 @@ class MeshStore:
         return pn
 
     @ti.func
-    def contact(self, col, x, t, reach):
-        """(phi, outward unit normal, surface velocity) of x at time t (module docstring),
-        searched within ``reach`` (phi = reach beyond it)."""
-        m = col.mesh
-        r, c = self._frame(col, t)
-        q = r.transpose() @ (x - c)
-        s = self._share(m, t)
+    def signed(self, m, q, s, reach):
+        """(phi, unit normal from the mesh toward q, closest point, triangle, weights) of
+        q in mesh m's frame (at share s of a deforming one's step), searched within
+        ``reach``: phi the distance to the closest point, negative inside a closed mesh
+        (the pseudo normal's side); triangle -1 and phi = reach where nothing is nearer."""
         tri, w, dist2 = self.closest(m, q, s, reach)
-        phi, n, u = reach, ti.Vector([0.0, 1.0, 0.0]), col.velocity
+        phi, nl, point = reach, ti.Vector([0.0, 1.0, 0.0]), q
         if tri >= 0:
             i = self.tris[tri]
             point = (w[0] * self._vertex(i[0], s) + w[1] * self._vertex(i[1], s)
@@ -267,6 +266,19 @@ class MeshStore:
                 phi, nl = -d, -nl
             elif d <= TINY and self.meshes[m][5]:
                 nl = pn.normalized()
+        return phi, nl, point, tri, w
+
+    @ti.func
+    def contact(self, col, x, t, reach):
+        """(phi, outward unit normal, surface velocity) of x at time t (module docstring),
+        searched within ``reach`` (phi = reach beyond it)."""
+        m = col.mesh
+        r, c = self._frame(col, t)
+        s = self._share(m, t)
+        phi, nl, point, tri, w = self.signed(m, r.transpose() @ (x - c), s, reach)
+        n, u = ti.Vector([0.0, 1.0, 0.0]), col.velocity
+        if tri >= 0:
+            i = self.tris[tri]
             n = r @ nl
             u = col.velocity + col.spin.cross(r @ point)
             if self.meshes[m][6]:
@@ -285,14 +297,15 @@ class MeshStore:
         r, c = self._frame(col, t)
         ol = r.transpose() @ (ti.cast(o, float) - c)
         dl = r.transpose() @ ti.cast(d, float)
-        best = self._first_hit(m, ol, dl, self._share(m, t), 1e30, -1, -1, 0.0)
+        best = self.first_hit(m, ol, dl, self._share(m, t), 1e30, -1, -1, 0.0, False)
         return best if best < 1e30 else -1.0
 
     @ti.func
-    def _first_hit(self, m, o, d, s, limit, skip_a, skip_b, grazing):
+    def first_hit(self, m, o, d, s, limit, skip_a, skip_b, grazing, entering: ti.template()):
         """The nearest 0 < hit < limit along the ray o + hit d in mesh m's frame (at share
         s of a deforming one's step) on a triangle with neither vertex skip_a nor skip_b
-        that the ray does not graze (|d . n| > ``grazing``, n its unit normal); ``limit``
+        that the ray does not graze (|d . n| > ``grazing``, n its unit normal) and, with
+        ``entering``, that it enters (d . n < 0: a closed mesh's faces face out); ``limit``
         where none is."""
         info = self.meshes[m]
         leaves, node0, tri0, tris = info[4], info[3], info[0], info[1]
@@ -308,8 +321,9 @@ class MeshStore:
                         tri = (k - leaves) * trimesh.LEAF + j
                         if tri < tris:
                             i = self.tris[tri0 + tri]
-                            if ((i != skip_a).all() and (i != skip_b).all() and
-                                    abs(d.dot(self.face_n[tri0 + tri].normalized())) > grazing):
+                            cos = d.dot(self.face_n[tri0 + tri].normalized())
+                            if ((i != skip_a).all() and (i != skip_b).all()
+                                    and abs(cos) > grazing and (not entering or cos < 0.0)):
                                 h = raycast.hit_triangle(o, d, self._vertex(i[0], s),
                                                          self._vertex(i[1], s),
                                                          self._vertex(i[2], s))
@@ -326,6 +340,14 @@ class MeshStore:
         first vertex; one in the triangle's plane touches it: ``GRAZING``)."""
         return int(_crossed(self, m, self.records[m]["tri_first"],
                             len(self.records[m]["tris"]))) > 0
+
+    def depth(self, m, limit):
+        """The least depth of closed mesh m under its faces (m): from each face's centre,
+        how far a ray into the solid (against the face's normal) runs before it meets
+        the mesh again, ``limit`` where it runs farther; the thickness of its thinnest
+        plate, rod or wall."""
+        r = self.records[m]
+        return float(_depth(self, m, r["tri_first"], len(r["tris"]), limit))
 
     @ti.func
     def normal(self, col, p, t):
@@ -355,11 +377,24 @@ def _crossed(store: ti.template(), m: ti.i32, first: ti.i32, count: ti.i32) -> t
             along = store.va[b] - store.va[a]
             length = along.norm()
             if length > 0.0:
-                hit = store._first_hit(m, store.va[a], along / length, 0.0, length, a, b,
-                                       GRAZING)
+                hit = store.first_hit(m, store.va[a], along / length, 0.0, length, a, b,
+                                      GRAZING, False)
                 if hit < length:
                     crossings += 1
     return crossings
+
+
+@ti.kernel
+def _depth(store: ti.template(), m: ti.i32, first: ti.i32, count: ti.i32,
+           limit: float) -> float:
+    least = limit
+    for f in range(first, first + count):
+        i = store.tris[f]
+        n = store.face_n[f].normalized()
+        # from just below the face (its own plane then lies behind the ray)
+        start = (store.va[i[0]] + store.va[i[1]] + store.va[i[2]]) / 3.0 - DEPTH_START * limit * n
+        ti.atomic_min(least, store.first_hit(m, start, -n, 0.0, limit, -1, -1, 0.0, False))
+    return least
 
 
 def _boxes(v, tris):

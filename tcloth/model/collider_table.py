@@ -1,7 +1,8 @@
 """A scene's colliders as Taichi data: ``ColliderTable``, a struct field with named
 members sorted by shape, and its groups (one per shape the scene has, static for the
-kernels); the mesh colliders' geometry in a ``meshstore.MeshStore``, and their motion
-step by step (``advance``)."""
+kernels); the mesh colliders' geometry in a ``meshstore.MeshStore``, those that can be
+signed distance fields baked in an ``sdf.SdfStore``, and their motion step by step
+(``advance``)."""
 import warnings
 from dataclasses import dataclass
 
@@ -9,7 +10,8 @@ import numpy as np
 import taichi as ti
 
 from .. import runtime
-from ..geometry.meshstore import MeshStore
+from ..geometry.meshstore import MeshStore, pose
+from ..geometry.sdf import CERTIFIED, SdfStore
 from ..geometry.shapes import SHAPE_NAMES, SHAPES, shape_of
 from ..scene.meshcollider import step_pose, world_vertices
 
@@ -57,6 +59,9 @@ class ColliderTable:
         count: number of colliders; kinds: (count,) shape index per row (NumPy).
         meshes: the mesh colliders' ``MeshStore`` (None without); moving: the rows whose
             pose or vertices ``advance`` sets each step (keyframed, deforming).
+        sdf: the ``SdfStore`` of the mesh colliders (None without); fields: how many are
+            distance fields; certified: the store's meshes on the certified pairs
+            (``contact/obstacle.py``).
 
     differentiable: the table's ``data`` carries gradients (``tcloth.grad``); mesh colliders
     cannot be in it.
@@ -88,6 +93,10 @@ class ColliderTable:
                 warnings.warn("a mesh collider crosses itself: it is taken as open "
                               "(two-sided)", stacklevel=4)
                 self.meshes.open(m)
+        self.sdf = SdfStore(self.meshes, meshed) if meshed else None
+        self.fields = self.sdf.count if meshed else 0
+        self.certified = [m for m, p in enumerate(self.sdf.paths if meshed else ())
+                          if p["path"] == CERTIFIED]
         # (the fastest any collider's surface moves, m/s: a spinning mesh's rim; the
         # thickest collider, m): bounds for the solvers' reach at a step's start
         self.bounds = ti.field(runtime.real(), shape=2)
@@ -151,7 +160,19 @@ class ColliderTable:
             reach = col.extent[0]
             if beyond >= 0.0:
                 reach = ti.min(reach, col.thickness + beyond)
-            phi, n, u = self.meshes.contact(col, x, t, reach)
+            exact = True
+            if ti.static(self.fields > 0):
+                k = self.sdf.of_mesh[col.mesh]
+                if k >= 0:
+                    inside = False
+                    phi, n, u, inside = self.sdf.contact(col, k, x, t)
+                    # beyond the band, the exact mesh where the caller needs more
+                    exact = not inside and beyond >= 0.0 and reach > self.sdf.band[k]
+            if exact:
+                phi, n, u = self.meshes.contact(col, x, t, reach)
+                if ti.static(self.fields > 0):
+                    if phi < reach and self.sdf.of_mesh[col.mesh] >= 0:
+                        ti.atomic_add(self.sdf.fallbacks[None], 1)
         else:
             phi, n = SHAPES[shape].signed_distance(col, x, t)
         return phi, n, u

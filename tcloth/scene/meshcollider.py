@@ -25,6 +25,7 @@ from ..errors import SceneError
 from ..validate import as_points, as_rotation, as_scalar, as_vec3, fmt
 from .builders import check_faces, fan, read_mesh
 from ..geometry import trimesh
+from ..geometry.sdf import plan
 
 REACH = 0.25     # m: how far from the mesh its distance is searched, beyond the thickness
 
@@ -109,9 +110,11 @@ def deformed_vertices(deform, t, count, scale, fps):
 
 
 def add_mesh_collider(scene, mesh, position, rotation, scale, common, velocity,
-                      angular_velocity, keyframes, deform, deform_fps, prim):
+                      angular_velocity, keyframes, deform, deform_fps, prim, sdf="auto"):
     """``Scene.add_mesh_collider`` (its docstring); ``common`` the arguments every
     collider takes, for ``Scene.add_collider``."""
+    if not (isinstance(sdf, bool) or isinstance(sdf, str) and sdf == "auto"):
+        raise SceneError(f"sdf must be \"auto\", True or False (got {fmt(sdf)})")
     vertices, faces, name = _mesh_input(mesh, prim)
     vertices = as_points(f"{name}'s vertices", vertices)
     try:
@@ -143,12 +146,13 @@ def add_mesh_collider(scene, mesh, position, rotation, scale, common, velocity,
              "keyframes": None if keyframes is None else _keyframes(keyframes),
              "deform": None if deform is None else _deform(deform, len(own)),
              "deform_fps": as_scalar("deform_fps", deform_fps, minimum=0.0, strict=True),
-             "reach": REACH + common["thickness"]}
+             "reach": REACH + common["thickness"], "sdf": sdf}
     if shape["deform"] is not None:
         shape["vertices"] = deformed_vertices(shape["deform"], 0.0, len(own), scale,
                                               shape["deform_fps"])
     if shape["keyframes"] is not None:
         shape["center"], shape["rotation"] = keyframe_pose(shape["keyframes"], 0.0)
+    plan(shape, closed, common["thickness"])       # sdf=True that cannot be: said now
     return scene.add_collider("mesh", shape, velocity=(0.0, 0.0, 0.0) if velocity is None
                               else velocity, **common)
 

@@ -264,7 +264,8 @@ class Scene:
     def add_mesh_collider(self, mesh, position=(0.0, 0.0, 0.0), rotation=None, scale=1.0,
                           friction=0.0, thickness=0.005, stiffness=1000.0, damping=0.5,
                           stick_velocity=1e-3, velocity=None, angular_velocity=None,
-                          keyframes=None, deform=None, deform_fps=30.0, prim=None):
+                          keyframes=None, deform=None, deform_fps=30.0, prim=None,
+                          sdf="auto"):
         """Add a triangle mesh as an obstacle (docs/mesh_colliders.md).
 
         Args:
@@ -280,6 +281,13 @@ class Scene:
                 constant; keyframes [(time, position, rotation), ...] interpolated;
                 deform, a callable t -> (V,3) vertices (the mesh's own frame, before the
                 pose) or a (frames, V, 3) array at deform_fps.
+            sdf: "auto" (default): a closed rigid mesh with no part thinner than two of
+                its cells (a cell is the thickness) is baked into a signed distance
+                field, sampled per particle like the analytic shapes (no particle's path
+                enters the mesh); any other keeps the certified pairs (no cloth edge
+                crosses a mesh triangle either). True: the field, or a SceneError saying
+                why not; False: the pairs. ``Simulator.contact_stats()["mesh_paths"]``
+                says which each took and why (docs/mesh_colliders.md).
         Returns:
             dict describing the collider.
         """
@@ -288,7 +296,7 @@ class Scene:
                   "stiffness": stiffness, "damping": damping, "stick_velocity": stick_velocity}
         return meshcollider.add_mesh_collider(self, mesh, position, rotation, scale, common,
                                               velocity, angular_velocity, keyframes, deform,
-                                              deform_fps, prim)
+                                              deform_fps, prim, sdf)
 
     def add_collider(self, kind, shape, friction=0.0, velocity=(0.0, 0.0, 0.0),
                      thickness=0.005, stiffness=1000.0, damping=0.5, stick_velocity=1e-3):

@@ -138,7 +138,7 @@ def _mesh_to_arrays(k, c, arrays):
     if c["deform"] is not None:
         arrays[f"collider{k}_deform"] = c["deform"] * c["scale"]
     keep = ("kind", "center", "rotation", "velocity", "spin", "keyframes", "deform_fps",
-            *(name for name, _ in COMMON if name != "velocity"))
+            "sdf", *(name for name, _ in COMMON if name != "velocity"))
     return {key: _plain(c[key]) if key != "keyframes" or c[key] is None
             else [[t, p.tolist(), r.tolist()] for t, p, r in c[key]] for key in keep}
 
@@ -152,6 +152,7 @@ def _mesh_from_arrays(scene, k, c, arrays):
         velocity=None if moving else c["velocity"],
         angular_velocity=None if moving else c["spin"], keyframes=c["keyframes"],
         deform=arrays.get(f"collider{k}_deform"), deform_fps=c["deform_fps"],
+        sdf=c.get("sdf", "auto"),       # absent before mesh fields
         **{name: c[name] for name, _ in COMMON if name != "velocity"})
 
 

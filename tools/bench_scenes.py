@@ -1,0 +1,178 @@
+"""Every shipped scene at its CONFIG, simulation only: wall time per simulated second, the
+contact stage's share, kernels compiled after the first frame, and crossings counted.
+
+For each scene script (scenes/*.py, or ``--scenes a,b``) the simulator its CONFIG makes
+(integrator, dt, options, steps a frame, frames) is stepped frame by frame with nothing
+else (no rendering); the first frame, which compiles the kernels, is timed apart. Per
+scene:
+
+  build_s, first_frame_s: the simulator's construction (a mesh field's bake included)
+      and its first frame;
+  wall_per_sim_s: the other frames' wall time over their simulated time (1 = real time);
+  falling_per_sim_s: the same over the frames before any particle touches a collider;
+  resting_per_sim_s: over the last half of the frames;
+  contact_share: the contact stage's time (``contact_stats()["seconds"]``) over the wall
+      time of those frames;
+  compiles_after_first: Taichi kernels compiled after the first frame (each a stall);
+  inside: the most particles inside a closed mesh collider (``crossings.inside_mask``)
+      or an analytic sphere, plane or box at a frame's end;
+  paths_through: particle paths through a rigid mesh collider over the frames, each
+      frame's path taken in the mesh's own frame (a straight segment there), summed;
+  edge_crossings: the most cloth edges through mesh triangles plus mesh edges through
+      cloth triangles at a frame's end (``crossings.count_obstacle_crossings``);
+  self_crossings: the most cloth edges through cloth triangles at a frame's end, in a
+      scene with self-collision (``crossings.count_crossings``).
+
+Lines: ``scenes.<scene>.<figure>: <value>``; with --out DIR, DIR/scenes.csv.
+
+Usage: python tools/bench_scenes.py [--scenes table,turntable] [--frames N] [--out DIR]
+"""
+import argparse
+import glob
+import os
+import sys
+import time
+from types import SimpleNamespace
+
+import numpy as np
+import taichi.lang.kernel_impl as kernel_impl
+
+import tcloth
+from tcloth.app.script import build_scene, load_script, timing
+from tcloth.scene.meshcollider import world_vertices
+from bench_contact import signed_distances
+from benchcsv import write_csv
+from crossings import (box_pairs, count_crossings, count_obstacle_crossings, inside_mask,
+                       segments_through_triangles)
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+SCENES = os.path.join(HERE, "..", "scenes")
+ANALYTIC = ("sphere", "plane", "box")        # the shapes ``signed_distances`` knows
+
+
+class Compiles:
+    """Counts the Taichi kernels compiled (a new instance of a kernel) while it is on."""
+
+    def __init__(self):
+        self.count, self.on = 0, False
+        original = kernel_impl.Kernel.materialize
+
+        def materialize(kernel, key=None, args=None, arg_features=None):
+            if self.on and (key if key is not None else
+                            (kernel.func, 0, kernel.autodiff_mode)) not in kernel.compiled_kernels:
+                self.count += 1
+            return original(kernel, key, args, arg_features)
+        kernel_impl.Kernel.materialize = materialize
+
+
+def pose(c, t):
+    """(centre, rotation) of a rigid mesh collider at t, from its vertices (least squares
+    of the map from its own frame to the world)."""
+    own = np.asarray(c["vertices"], dtype=np.float64)
+    m, *_ = np.linalg.lstsq(np.c_[own, np.ones(len(own))], world_vertices(c, t), rcond=None)
+    return m[3], m[:3].T
+
+
+def paths_through(c, x0, x1, t0, t1):
+    """How many particle paths x0 -> x1 (over t0 .. t1) pass through the rigid mesh c's
+    triangles, each path a segment in the mesh's own frame."""
+    (c0, r0), (c1, r1) = pose(c, t0), pose(c, t1)
+    a, b = (x0 - c0) @ r0, (x1 - c1) @ r1
+    v, f = np.asarray(c["vertices"], dtype=np.float64), np.asarray(c["faces"])
+    tri = v[f]
+    cell = float(np.median(np.linalg.norm(tri[:, 1] - tri[:, 0], axis=1)))
+    i, j = box_pairs(np.minimum(a, b), np.maximum(a, b), tri.min(axis=1), tri.max(axis=1),
+                     max(cell, 1e-9))
+    hit = segments_through_triangles(a[i], b[i], tri[j, 0], tri[j, 1], tri[j, 2])
+    return int(len(np.unique(i[hit])))
+
+
+def crossings(scene, x0, x1, t0, t1, triangles):
+    """dict of one frame's counts (module docstring) at its end x1, t1."""
+    out = {"inside": 0, "paths_through": 0, "edge_crossings": 0}
+    for c in scene.colliders:
+        if c["kind"] != "mesh":
+            continue
+        world = world_vertices(c, t1)
+        if c["closed"]:
+            out["inside"] += int(inside_mask(x1, world, c["faces"]).sum())
+        if c["deform"] is None:
+            out["paths_through"] += paths_through(c, x0, x1, t0, t1)
+        out["edge_crossings"] += count_obstacle_crossings(x1, triangles, world, c["faces"])
+    analytic = [k for k, c in enumerate(scene.colliders) if c["kind"] in ANALYTIC]
+    if analytic:
+        shapes = SimpleNamespace(colliders=[scene.colliders[k] for k in analytic])
+        out["inside"] += int((signed_distances(shapes, x1, t1) < 0.0).any(axis=1).sum())
+    if scene.self_collision is not None:
+        out["self_crossings"] = count_crossings(x1, triangles)
+    return out
+
+
+def run(path, frames, compiles):
+    """The figures of one scene script (module docstring)."""
+    module, cfg = load_script(path)
+    tcloth.init("cpu", cfg["precision"])
+    scene = build_scene(module, path)
+    dt, steps = timing(cfg, scene)
+    frames = frames or cfg["frames"]
+    start = time.perf_counter()
+    sim = tcloth.Simulator(scene, cfg["integrator"], dt=dt, **cfg["options"])
+    figures = {"build_s": time.perf_counter() - start}
+    triangles = scene.triangles
+    wall, stage, touching, counts = [], [], [], []
+    x, t = sim.positions().astype(np.float64), sim.time
+    for frame in range(frames):
+        compiles.on = frame > 0
+        seconds = sim.contact_stats().get("seconds", 0.0)
+        start = time.perf_counter()
+        sim.step(steps)
+        wall.append(time.perf_counter() - start)
+        compiles.on = False
+        stats = sim.contact_stats()
+        stage.append(stats.get("seconds", 0.0) - seconds)
+        touching.append(stats.get("collider", 0))
+        x1, t1 = sim.positions().astype(np.float64), sim.time
+        counts.append(crossings(scene, x, x1, t, t1, triangles))
+        x, t = x1, t1
+    frame_s = steps * dt
+    wall, stage = np.array(wall), np.array(stage)
+    rest = wall[1:]
+    figures.update(first_frame_s=wall[0], wall_per_sim_s=rest.sum() / (len(rest) * frame_s),
+                   resting_per_sim_s=wall[frames // 2:].sum() / ((frames - frames // 2)
+                                                                 * frame_s),
+                   contact_share=stage[1:].sum() / max(rest.sum(), 1e-30),
+                   compiles_after_first=compiles.count)
+    first_touch = next((k for k, n in enumerate(touching) if n), len(touching))
+    falling = wall[1:first_touch]
+    if len(falling):
+        figures["falling_per_sim_s"] = falling.sum() / (len(falling) * frame_s)
+    for key in ("inside", "edge_crossings", "self_crossings"):
+        if key in counts[0]:
+            figures[key] = max(c[key] for c in counts)
+    figures["paths_through"] = sum(c["paths_through"] for c in counts)
+    return figures
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--scenes", default=None, help="names, comma-separated (default: all)")
+    ap.add_argument("--frames", type=int, default=None, help="frames (default: CONFIG's)")
+    ap.add_argument("--out", default=None)
+    args = ap.parse_args(argv)
+    names = (args.scenes.split(",") if args.scenes else
+             sorted(os.path.splitext(os.path.basename(p))[0]
+                    for p in glob.glob(os.path.join(SCENES, "*.py"))))
+    compiles, rows = Compiles(), []
+    for name in names:
+        compiles.count = 0
+        figures = run(os.path.join(SCENES, name + ".py"), args.frames, compiles)
+        for key, value in figures.items():
+            print(f"scenes.{name}.{key}: {value:.6g}")
+            rows.append({"scene": name, "figure": key, "value": value})
+        sys.stdout.flush()
+    if args.out:
+        write_csv(os.path.join(args.out, "scenes.csv"), rows)
+
+
+if __name__ == "__main__":
+    main()
