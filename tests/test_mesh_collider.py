@@ -59,7 +59,8 @@ def _contacts(table: ti.template(), x: ti.types.ndarray(), t: float,
 @pytest.mark.parametrize("closed", [True, False])
 def test_distance_normal_and_surface_velocity_match_a_brute_force(f64, closed):
     """A turned, moving and spinning mesh (a closed sphere, or its open upper half) at
-    t = 0.3 s: phi is the distance to the nearest triangle (brute force over all of them),
+    t = 0.3 s, queried exactly (sdf=False; its field: tests/test_mesh_fields.py): phi is
+    the distance to the nearest triangle (brute force over all of them),
     negative exactly for the points inside the closed one (ray parity), the normal points
     from the closest point to x (into the outside), and the surface's velocity there is
     the finite difference of that material point's motion."""
@@ -71,7 +72,8 @@ def test_distance_normal_and_surface_velocity_match_a_brute_force(f64, closed):
     scene = tcloth.Scene()
     rot = tcloth.scene.meshcollider.rotation_about(np.array([0.6, 0.0, 0.8]), 0.7)
     c = scene.add_mesh_collider((v, f), position=(0.1, 0.2, -0.1), rotation=rot,
-                                velocity=(0.3, -0.2, 0.1), angular_velocity=(0.0, 2.0, 1.0))
+                                velocity=(0.3, -0.2, 0.1), angular_velocity=(0.0, 2.0, 1.0),
+                                sdf=False)
     assert c["closed"] == closed
     table = ColliderTable(scene.colliders)
     t = 0.3
@@ -155,19 +157,21 @@ def test_ray_hit_is_the_first_triangle_a_ray_meets(f64):
 def drape(collider, mesh):
     """A 12 x 12 cloth of 0.24 m laid on top of a sphere of radius 0.25 or of a box, held by
     projective dynamics at one step per frame for 1 s (it takes the sphere's cap without
-    folding, so its rest shape is unique): the positions."""
+    folding, so its rest shape is unique): the positions. The meshes keep the certified
+    pairs (sdf=False; their fields drape in tests/test_mesh_fields.py)."""
     scene = tcloth.Scene(gravity=(0.0, -9.81, 0.0), air_damping=2.0)
     scene.add_cloth(resolution=(12, 12), size=(0.24, 0.24), center=(0.0, 0.51, 0.0),
                     mass=0.05, plane="xz", **CLOTH)
     if collider == "sphere":
         if mesh:
             v, f = icosphere(0.25, 4)
-            scene.add_mesh_collider((v, f), position=(0.0, 0.25, 0.0), friction=0.5)
+            scene.add_mesh_collider((v, f), position=(0.0, 0.25, 0.0), friction=0.5,
+                                    sdf=False)
         else:
             scene.add_sphere((0.0, 0.25, 0.0), 0.25, friction=0.5)
     elif mesh:
         scene.add_mesh_collider(box_mesh(np.array([0.2, 0.1, 0.2])), position=(0, 0.1, 0),
-                                friction=0.5)
+                                friction=0.5, sdf=False)
     else:
         scene.add_box((0.0, 0.1, 0.0), (0.2, 0.1, 0.2), friction=0.5)
     sim = tcloth.Simulator(scene, "projective", dt=1.0 / 60.0)

@@ -42,8 +42,8 @@ from tcloth.app.script import build_scene, load_script, timing
 from tcloth.scene.meshcollider import world_vertices
 from bench_contact import signed_distances
 from benchcsv import write_csv
-from crossings import (box_pairs, count_crossings, count_obstacle_crossings, inside_mask,
-                       segments_through_triangles)
+from crossings import (count_crossings, count_obstacle_crossings, count_paths_through,
+                       inside_mask)
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 SCENES = os.path.join(HERE, "..", "scenes")
@@ -74,17 +74,10 @@ def pose(c, t):
 
 
 def paths_through(c, x0, x1, t0, t1):
-    """How many particle paths x0 -> x1 (over t0 .. t1) pass through the rigid mesh c's
-    triangles, each path a segment in the mesh's own frame."""
+    """How many particle paths x0 -> x1 (over t0 .. t1) pass through the rigid mesh
+    collider c, each path a segment in the mesh's own frame."""
     (c0, r0), (c1, r1) = pose(c, t0), pose(c, t1)
-    a, b = (x0 - c0) @ r0, (x1 - c1) @ r1
-    v, f = np.asarray(c["vertices"], dtype=np.float64), np.asarray(c["faces"])
-    tri = v[f]
-    cell = float(np.median(np.linalg.norm(tri[:, 1] - tri[:, 0], axis=1)))
-    i, j = box_pairs(np.minimum(a, b), np.maximum(a, b), tri.min(axis=1), tri.max(axis=1),
-                     max(cell, 1e-9))
-    hit = segments_through_triangles(a[i], b[i], tri[j, 0], tri[j, 1], tri[j, 2])
-    return int(len(np.unique(i[hit])))
+    return count_paths_through((x0 - c0) @ r0, (x1 - c1) @ r1, c["vertices"], c["faces"])
 
 
 def crossings(scene, x0, x1, t0, t1, triangles):

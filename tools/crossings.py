@@ -12,7 +12,8 @@ the same against a triangle-mesh obstacle: cloth edges through obstacle triangle
 obstacle edges through cloth triangles (a cloth triangle cut by the obstacle has one or
 the other at each end of the cut). ``count_inside(positions, obstacle_vertices,
 obstacle_triangles)``: the points strictly inside a closed obstacle (ray parity, see
-``inside_mask``).
+``inside_mask``). ``count_paths_through(a, b, obstacle_vertices, obstacle_triangles)``:
+the segments a -> b (particles' paths, in the obstacle's frame) through its triangles.
 
 Broad phase: a uniform grid; each triangle is listed in the cells its bounding box
 overlaps, each edge looks in the cells its box overlaps (only within the region where
@@ -177,6 +178,21 @@ def count_obstacle_crossings(positions, triangles, obstacle_vertices, obstacle_t
     cloth_through, obstacle_through = obstacle_crossing_pairs(
         positions, triangles, obstacle_vertices, obstacle_triangles)
     return int(len(cloth_through) + len(obstacle_through))
+
+
+def count_paths_through(a, b, obstacle_vertices, obstacle_triangles):
+    """How many segments a[i] -> b[i] ((N, 3) each: particles' paths over a step, in the
+    obstacle's frame) pass through one or more of the obstacle's triangles."""
+    v = np.asarray(obstacle_vertices, dtype=np.float64)
+    tri = v[np.asarray(obstacle_triangles, dtype=np.int64).reshape(-1, 3)]
+    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    if not len(tri) or not len(a):
+        return 0
+    cell = max(float(np.median(np.linalg.norm(tri[:, 1] - tri[:, 0], axis=1))), 1e-9)
+    i, j = box_pairs(np.minimum(a, b), np.maximum(a, b), tri.min(axis=1), tri.max(axis=1),
+                     cell)
+    hit = segments_through_triangles(a[i], b[i], tri[j, 0], tri[j, 1], tri[j, 2])
+    return int(len(np.unique(i[hit])))
 
 
 def _side_of_edges(v, edges, p):

@@ -388,12 +388,14 @@ def _crossed(store: ti.template(), m: ti.i32, first: ti.i32, count: ti.i32) -> t
 def _depth(store: ti.template(), m: ti.i32, first: ti.i32, count: ti.i32,
            limit: float) -> float:
     least = limit
+    below = DEPTH_START * limit
     for f in range(first, first + count):
         i = store.tris[f]
         n = store.face_n[f].normalized()
         # from just below the face (its own plane then lies behind the ray)
-        start = (store.va[i[0]] + store.va[i[1]] + store.va[i[2]]) / 3.0 - DEPTH_START * limit * n
-        ti.atomic_min(least, store.first_hit(m, start, -n, 0.0, limit, -1, -1, 0.0, False))
+        start = (store.va[i[0]] + store.va[i[1]] + store.va[i[2]]) / 3.0 - below * n
+        ti.atomic_min(least, below + store.first_hit(m, start, -n, 0.0, limit - below, -1,
+                                                     -1, 0.0, False))
     return least
 
 

@@ -42,6 +42,7 @@ BLOCK = 8            # cells along a block's side
 NODES = (BLOCK + 1) ** 3
 BAND = 8             # cells of the band beyond the thickness
 THIN = 2             # a closed mesh thinner than this many cells somewhere keeps the pairs
+SLACK = 1e-3         # a depth within this fraction of THIN cells is THIN cells (rounding)
 MAX_NODES = 1 << 24  # nodes a scene's fields may hold (64 MB in float32)
 SDF, CERTIFIED = "sdf", "certified"
 EMPTY = -1           # a block no point of the band lies in
@@ -128,7 +129,7 @@ class SdfStore:
                  "depth": None, "nodes": 0, "bake_seconds": 0.0}
         if path == SDF:
             entry["depth"] = store.depth(m, 4 * THIN * cell)
-            if entry["depth"] < THIN * cell:
+            if entry["depth"] < THIN * cell * (1.0 - SLACK):
                 entry["path"], entry["reason"] = _refuse(c.get("sdf", "auto"), (
                     f"its thinnest part, {1e3 * entry['depth']:.1f} mm, is under {THIN} "
                     f"cells of {1e3 * cell:.1f} mm"))

@@ -150,11 +150,14 @@ class ColliderTable:
                                        world_vertices(c, t0 + dt))
 
     @ti.func
-    def contact(self, shape: ti.template(), col, x, t, beyond=-1.0):
+    def contact(self, shape: ti.template(), col, x, t, beyond=-1.0, far: ti.template() = False):
         """(phi, outward normal, the surface's velocity there) of x against collider row
         ``col`` of shape index ``shape`` at time t. ``beyond`` >= 0: only phi below the
         collider's thickness plus that much is needed (a mesh searches no farther and
-        answers that bound for points beyond it)."""
+        answers that bound for points beyond it). A mesh field answers from its band, and
+        beyond it its band (a lower bound); with ``far`` (a caller whose ``beyond`` can
+        reach past the band: the solvers' planes) the exact mesh answers there, counted
+        in ``sdf.fallbacks`` where it finds the surface within reach."""
         phi, n, u = 0.0, ti.Vector.zero(float, 3), col.velocity
         if ti.static(SHAPES[shape].meshed):
             reach = col.extent[0]
@@ -166,13 +169,15 @@ class ColliderTable:
                 if k >= 0:
                     inside = False
                     phi, n, u, inside = self.sdf.contact(col, k, x, t)
-                    # beyond the band, the exact mesh where the caller needs more
-                    exact = not inside and beyond >= 0.0 and reach > self.sdf.band[k]
-            if exact:
-                phi, n, u = self.meshes.contact(col, x, t, reach)
-                if ti.static(self.fields > 0):
-                    if phi < reach and self.sdf.of_mesh[col.mesh] >= 0:
-                        ti.atomic_add(self.sdf.fallbacks[None], 1)
+                    exact = False
+                    if ti.static(far):
+                        exact = not inside and reach > self.sdf.band[k]
+            if ti.static(far or self.fields < len(self.mesh_rows)):
+                if exact:
+                    phi, n, u = self.meshes.contact(col, x, t, reach)
+                    if ti.static(far and self.fields > 0):
+                        if phi < reach and self.sdf.of_mesh[col.mesh] >= 0:
+                            ti.atomic_add(self.sdf.fallbacks[None], 1)
         else:
             phi, n = SHAPES[shape].signed_distance(col, x, t)
         return phi, n, u
@@ -204,18 +209,19 @@ class ColliderTable:
         return n
 
     @ti.func
-    def for_each_contact(self, x, p, t, body: ti.template(), zero, ctx, beyond=-1.0):
+    def for_each_contact(self, x, p, t, body: ti.template(), zero, ctx, beyond=-1.0,
+                         far: ti.template() = False):
         """The sum over this table's colliders c of ``body(col, c, x, p, phi, n, ctx)``,
         with (phi, n) the signed distance and outward normal of x[p] (read afresh for each
         collider, so that a body may move the particle) and ``col.velocity`` the
         surface's velocity at the closest point (a turning or deforming mesh's own);
-        ``zero`` starts the sum; ``beyond``: as ``contact``'s (bodies then see phi no
-        larger than the thickness plus it)."""
+        ``zero`` starts the sum; ``beyond`` and ``far``: as ``contact``'s (bodies then see
+        phi no larger than the thickness plus ``beyond``, or than a field's band)."""
         acc = zero
         for g in ti.static(self.groups):
             for c in range(g.first, g.first + g.count):
                 col = self.data[c]
-                phi, n, u = self.contact(g.shape, col, x[p], t, beyond)
+                phi, n, u = self.contact(g.shape, col, x[p], t, beyond, far)
                 col.velocity = u
                 acc += body(col, c, x, p, phi, n, ctx)
         return acc

@@ -339,7 +339,7 @@ class Colliders(Term):
             # the farthest _plane_body looks: searched no farther
             beyond = h * (v0[p].norm() + speed) + h * h * g.norm() + thick
             self.table.for_each_contact(x0, p, t0, self._plane_body, 0,
-                                        (v0[p], h, h * h * g.norm()), beyond)
+                                        (v0[p], h, h * h * g.norm()), beyond, True)
 
     @ti.func
     def _plane_body(self, col, c, x0, p, phi, n, ctx):
