@@ -21,27 +21,8 @@ from tcloth.sim.checkpoint import scene_to_arrays
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "tools"))
-from crossings import inside_mask  # noqa: E402
+from crossings import closest_on_triangles, inside_mask  # noqa: E402
 from thrown_mesh import CLOTH, INTEGRATORS, OBSTACLES, box_mesh, thrown  # noqa: E402
-
-def closest_on_triangles(p, a, b, c):
-    """(closest points (F, 3), their distances) of point p to triangles a, b, c (F, 3):
-    the nearest of the face's plane point where it lies inside and the three edges'."""
-    n = np.cross(b - a, c - a)
-    n /= np.linalg.norm(n, axis=1, keepdims=True)
-    q = p - np.einsum("ij,ij->i", p - a, n)[:, None] * n
-    inside = np.ones(len(a), bool)
-    for u, v in ((a, b), (b, c), (c, a)):
-        inside &= np.einsum("ij,ij->i", np.cross(v - u, q - u), n) >= 0
-    best = np.where(inside[:, None], q, np.inf)
-    for u, v in ((a, b), (b, c), (c, a)):
-        e = v - u
-        s = np.clip(np.einsum("ij,ij->i", p - u, e) / np.einsum("ij,ij->i", e, e), 0, 1)
-        point = u + s[:, None] * e
-        closer = np.linalg.norm(p - point, axis=1) < np.linalg.norm(p - best, axis=1)
-        best[closer] = point[closer]
-    return best, np.linalg.norm(p - best, axis=1)
-
 
 @ti.kernel
 def _contacts(table: ti.template(), x: ti.types.ndarray(), t: float,

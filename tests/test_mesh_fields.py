@@ -21,10 +21,9 @@ from tcloth.sim.checkpoint import scene_from_arrays, scene_to_arrays
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "tools"))
 sys.path.insert(0, os.path.join(HERE, "..", "scenes"))
-from crossings import inside_mask  # noqa: E402
+from crossings import closest_on_triangles, inside_mask  # noqa: E402
 from thrown_mesh import CLOTH, box_mesh, thrown  # noqa: E402
 from turntable import lathe  # noqa: E402
-from test_mesh_collider import closest_on_triangles  # noqa: E402
 
 CELL = 0.005        # the colliders' default thickness, which is a field's cell
 

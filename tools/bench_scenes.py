@@ -8,9 +8,11 @@ scene:
 
   build_s, first_frame_s: the simulator's construction (a mesh field's bake included)
       and its first frame;
-  wall_per_sim_s: the other frames' wall time over their simulated time (1 = real time);
-  falling_per_sim_s: the same over the frames before any particle touches a collider;
-  resting_per_sim_s: over the last half of the frames;
+  wall_per_sim_s: the other frames' wall time over their simulated time (1 = real time),
+      stalls (kernels compiled after the first frame) included;
+  falling_per_sim_s: the median frame's wall time over a frame's simulated time, of the
+      frames before any particle touches a collider;
+  resting_per_sim_s: the same of the last half of the frames;
   contact_share: the contact stage's time (``contact_stats()["seconds"]``) over the wall
       time of those frames;
   compiles_after_first: Taichi kernels compiled after the first frame (each a stall);
@@ -21,7 +23,12 @@ scene:
   edge_crossings: the most cloth edges through mesh triangles plus mesh edges through
       cloth triangles at a frame's end (``crossings.count_obstacle_crossings``);
   self_crossings: the most cloth edges through cloth triangles at a frame's end, in a
-      scene with self-collision (``crossings.count_crossings``).
+      scene with self-collision (``crossings.count_crossings``);
+  edge_depth_mm: at the last frame, how deep the cloth's edges reach inside a closed
+      mesh collider (``crossings.edge_depth``);
+  mesh<k>_field, mesh<k>_nodes, mesh<k>_bake_s: whether mesh collider k is a distance
+      field (1) or on the certified pairs (0), its field's nodes and bake time
+      (``contact_stats()["mesh_paths"]``).
 
 Lines: ``scenes.<scene>.<figure>: <value>``; with --out DIR, DIR/scenes.csv.
 
@@ -43,7 +50,7 @@ from tcloth.scene.meshcollider import world_vertices
 from bench_contact import signed_distances
 from benchcsv import write_csv
 from crossings import (count_crossings, count_obstacle_crossings, count_paths_through,
-                       inside_mask)
+                       edge_depth, inside_mask, triangle_edges)
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 SCENES = os.path.join(HERE, "..", "scenes")
@@ -131,18 +138,24 @@ def run(path, frames, compiles):
     wall, stage = np.array(wall), np.array(stage)
     rest = wall[1:]
     figures.update(first_frame_s=wall[0], wall_per_sim_s=rest.sum() / (len(rest) * frame_s),
-                   resting_per_sim_s=wall[frames // 2:].sum() / ((frames - frames // 2)
-                                                                 * frame_s),
+                   resting_per_sim_s=np.median(wall[frames // 2:]) / frame_s,
                    contact_share=stage[1:].sum() / max(rest.sum(), 1e-30),
                    compiles_after_first=compiles.count)
     first_touch = next((k for k, n in enumerate(touching) if n), len(touching))
-    falling = wall[1:first_touch]
-    if len(falling):
-        figures["falling_per_sim_s"] = falling.sum() / (len(falling) * frame_s)
+    if first_touch > 1:
+        figures["falling_per_sim_s"] = np.median(wall[1:first_touch]) / frame_s
     for key in ("inside", "edge_crossings", "self_crossings"):
         if key in counts[0]:
             figures[key] = max(c[key] for c in counts)
     figures["paths_through"] = sum(c["paths_through"] for c in counts)
+    closed = [c for c in scene.colliders if c["kind"] == "mesh" and c["closed"]]
+    if closed:
+        edges = triangle_edges(triangles)
+        figures["edge_depth_mm"] = 1e3 * max(edge_depth(x, edges, world_vertices(c, t),
+                                                        c["faces"]) for c in closed)
+    for k, path in enumerate(sim.contact_stats().get("mesh_paths", ())):
+        figures.update({f"mesh{k}_field": float(path["path"] == "sdf"),
+                        f"mesh{k}_nodes": path["nodes"], f"mesh{k}_bake_s": path["bake_seconds"]})
     return figures
 
 

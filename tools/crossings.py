@@ -14,6 +14,9 @@ the other at each end of the cut). ``count_inside(positions, obstacle_vertices,
 obstacle_triangles)``: the points strictly inside a closed obstacle (ray parity, see
 ``inside_mask``). ``count_paths_through(a, b, obstacle_vertices, obstacle_triangles)``:
 the segments a -> b (particles' paths, in the obstacle's frame) through its triangles.
+``edge_depth(positions, edges, obstacle_vertices, obstacle_triangles)``: how deep the
+cloth's edges reach inside a closed obstacle. ``closest_on_triangles(p, a, b, c)``: a
+point's closest points on triangles and their distances, by brute force.
 
 Broad phase: a uniform grid; each triangle is listed in the cells its bounding box
 overlaps, each edge looks in the cells its box overlaps (only within the region where
@@ -193,6 +196,41 @@ def count_paths_through(a, b, obstacle_vertices, obstacle_triangles):
                      cell)
     hit = segments_through_triangles(a[i], b[i], tri[j, 0], tri[j, 1], tri[j, 2])
     return int(len(np.unique(i[hit])))
+
+
+def closest_on_triangles(p, a, b, c):
+    """(closest points (F, 3), their distances) of point p to triangles a, b, c (F, 3):
+    the nearest of the face's plane point where it lies inside and the three edges'."""
+    n = np.cross(b - a, c - a)
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    q = p - np.einsum("ij,ij->i", p - a, n)[:, None] * n
+    inside = np.ones(len(a), bool)
+    for u, v in ((a, b), (b, c), (c, a)):
+        inside &= np.einsum("ij,ij->i", np.cross(v - u, q - u), n) >= 0
+    best = np.where(inside[:, None], q, np.inf)
+    for u, v in ((a, b), (b, c), (c, a)):
+        e = v - u
+        s = np.clip(np.einsum("ij,ij->i", p - u, e) / np.einsum("ij,ij->i", e, e), 0, 1)
+        point = u + s[:, None] * e
+        closer = np.linalg.norm(p - point, axis=1) < np.linalg.norm(p - best, axis=1)
+        best[closer] = point[closer]
+    return best, np.linalg.norm(p - best, axis=1)
+
+
+def edge_depth(positions, edges, obstacle_vertices, obstacle_triangles, samples=16):
+    """The deepest any of the cloth's edges (rows of particle ids) reaches inside the
+    closed obstacle, m: each edge sampled at ``samples`` points, each sample inside
+    (``inside_mask``) at its distance to the nearest triangle (0 where none is inside)."""
+    x = np.asarray(positions, dtype=np.float64)
+    v = np.asarray(obstacle_vertices, dtype=np.float64)
+    t = np.asarray(obstacle_triangles, dtype=np.int64).reshape(-1, 3)
+    s = np.linspace(0.0, 1.0, samples)[None, :, None]
+    points = (x[edges[:, 0]][:, None] * (1.0 - s) + x[edges[:, 1]][:, None] * s).reshape(-1, 3)
+    deepest = 0.0
+    for p in points[inside_mask(points, v, t)]:
+        deepest = max(deepest, float(closest_on_triangles(p, v[t[:, 0]], v[t[:, 1]],
+                                                          v[t[:, 2]])[1].min()))
+    return deepest
 
 
 def _side_of_edges(v, edges, p):
