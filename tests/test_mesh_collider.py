@@ -24,9 +24,12 @@ sys.path.insert(0, os.path.join(HERE, "..", "tools"))
 from crossings import closest_on_triangles, inside_mask  # noqa: E402
 from thrown_mesh import CLOTH, INTEGRATORS, OBSTACLES, box_mesh, thrown  # noqa: E402
 
+
 @ti.kernel
-def _contacts(table: ti.template(), x: ti.types.ndarray(), t: float,
-              out: ti.types.ndarray()):
+def collider_contacts(table: ti.template(), x: ti.types.ndarray(), t: float,
+                      out: ti.types.ndarray()):
+    """out[k] = (phi, normal, surface velocity) of point x[k] against the table's one
+    collider at time t (``ColliderTable.contact``)."""
     for k in range(x.shape[0]):
         p = ti.Vector([x[k, 0], x[k, 1], x[k, 2]])
         for g in ti.static(table.groups):
@@ -62,7 +65,7 @@ def test_distance_normal_and_surface_velocity_match_a_brute_force(f64, closed):
     rng = np.random.default_rng(3)
     x = world.mean(axis=0) + rng.uniform(-0.55, 0.55, (300, 3))
     out = np.zeros((len(x), 7))
-    _contacts(table, x, t, out)
+    collider_contacts(table, x, t, out)
     a, b, cc = (world[c["faces"][:, k]] for k in range(3))
     inside = inside_mask(x, world, c["faces"]) if closed else np.zeros(len(x), bool)
     near = 0
@@ -311,7 +314,7 @@ def test_bad_meshes_are_refused_with_the_file_face_or_vertex_named(f32, tmp_path
     with pytest.warns(UserWarning, match="crosses itself"):
         table = ColliderTable(crossing.colliders)
     out = np.zeros((1, 7))
-    _contacts(table, np.array([[0.1, 0.0, 0.0]]), 0.0, out)     # inside both: unsigned
+    collider_contacts(table, np.array([[0.1, 0.0, 0.0]]), 0.0, out)     # inside both: unsigned
     assert out[0, 0] > 0.0
 
 
@@ -345,7 +348,7 @@ def test_faces_in_one_plane_are_no_self_crossing(f32):
         warnings.simplefilter("error")
         table = ColliderTable(scene.colliders)
     out = np.zeros((1, 7))
-    _contacts(table, np.array([[0.0, 0.2, 0.0]]), 0.0, out)     # in the column: inside
+    collider_contacts(table, np.array([[0.0, 0.2, 0.0]]), 0.0, out)     # in the column: inside
     assert out[0, 0] < 0.0
 
 

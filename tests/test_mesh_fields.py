@@ -8,7 +8,6 @@ import sys
 
 import numpy as np
 import pytest
-import taichi as ti
 
 import tcloth
 from tcloth.errors import SceneError
@@ -24,20 +23,9 @@ sys.path.insert(0, os.path.join(HERE, "..", "scenes"))
 from crossings import closest_on_triangles, inside_mask  # noqa: E402
 from thrown_mesh import CLOTH, box_mesh, thrown  # noqa: E402
 from turntable import lathe  # noqa: E402
+from test_mesh_collider import collider_contacts  # noqa: E402
 
 CELL = 0.005        # the colliders' default thickness, which is a field's cell
-
-
-@ti.kernel
-def _contacts(table: ti.template(), x: ti.types.ndarray(), t: float,
-              out: ti.types.ndarray()):
-    for k in range(x.shape[0]):
-        p = ti.Vector([x[k, 0], x[k, 1], x[k, 2]])
-        for g in ti.static(table.groups):
-            phi, n, u = table.contact(g.shape, table.data[g.first], p, t)
-            out[k, 0] = phi
-            for j in ti.static(range(3)):
-                out[k, 1 + j] = n[j]
 
 
 def _largest_dihedral(v, f):
@@ -84,8 +72,8 @@ def test_a_field_s_distance_and_normal_match_the_exact_mesh(f64, mesh):
         exact[k], direction[k] = d[j], (p - points[j]) / d[j]
     inside = inside_mask(x, world, faces)
     exact[inside], direction[inside] = -exact[inside], -direction[inside]
-    out = np.zeros((len(x), 4))
-    _contacts(table, x, t, out)
+    out = np.zeros((len(x), 7))
+    collider_contacts(table, x, t, out)
     near = np.abs(exact) < band
     assert near.sum() > 500
     tolerance = (0.1 if mesh == "sphere" else 0.25) * CELL

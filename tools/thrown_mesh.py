@@ -2,10 +2,11 @@
 thick or a mesh sphere (still, spinning or breathing), every integrator, with the NumPy
 counts of crossings and particles inside (``crossings.py``) after every step.
 
-``thrown(integrator, collider, motion, dt=None, sdf=False)`` runs one case and returns what it found;
-``tests/test_mesh_collider.py`` asserts on every case at 1/60 s and the integrators' own
-dt. As a tool it runs the matrix at a dt of your choosing (the issue's guarantee holds up
-to 1/30 s) and prints one line a case, as the benchmarks print their figures:
+``thrown(integrator, collider, motion, dt=None, sdf=False)`` runs one case and returns what
+it found; ``tests/test_mesh_collider.py`` asserts on every case at 1/60 s and the
+integrators' own dt (``tests/test_mesh_fields.py`` on some with sdf="auto"). As a tool it
+runs the matrix at a dt of your choosing (the issue's guarantee holds up to 1/30 s) and
+prints one line a case, as the benchmarks print their figures:
 
     python tools/thrown_mesh.py --dt 1/30 [--integrators projective,vbd] [--colliders plate]
                                 [--sdf]
