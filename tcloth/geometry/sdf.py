@@ -164,7 +164,6 @@ class SdfStore:
         slot = 0
         for k, (m, near) in enumerate(zip(fields, kept)):
             started = time.perf_counter()
-            cell = self.paths[m]["cell"]
             count = int(near.sum())
             _bake_nodes(self, store, k, m, slot, count, self.reach(k))
             slot += count

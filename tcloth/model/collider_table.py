@@ -10,7 +10,7 @@ import numpy as np
 import taichi as ti
 
 from .. import runtime
-from ..geometry.meshstore import MeshStore, pose
+from ..geometry.meshstore import MeshStore
 from ..geometry.sdf import CERTIFIED, SdfStore
 from ..geometry.shapes import SHAPE_NAMES, SHAPES, shape_of
 from ..scene.meshcollider import step_pose, world_vertices
