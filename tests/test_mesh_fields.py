@@ -66,10 +66,13 @@ def test_a_field_s_distance_and_normal_match_the_exact_mesh(f64, mesh):
     x = rng.uniform(world.min(axis=0) - band, world.max(axis=0) + band, (3000, 3))
     a, b, cc = (world[faces[:, k]] for k in range(3))
     exact, direction = np.zeros(len(x)), np.zeros((len(x), 3))
-    for k, p in enumerate(x):
-        points, d = closest_on_triangles(p, a, b, cc)
-        j = np.argmin(d)
-        exact[k], direction[k] = d[j], (p - points[j]) / d[j]
+    for k in range(0, len(x), 200):
+        p = x[k:k + 200]
+        points, d = closest_on_triangles(p[:, None], a, b, cc)
+        j = np.argmin(d, axis=1)
+        rows = np.arange(len(p))
+        exact[k:k + 200] = d[rows, j]
+        direction[k:k + 200] = (p - points[rows, j]) / d[rows, j, None]
     inside = inside_mask(x, world, faces)
     exact[inside], direction[inside] = -exact[inside], -direction[inside]
     out = np.zeros((len(x), 7))

@@ -199,22 +199,25 @@ def count_paths_through(a, b, obstacle_vertices, obstacle_triangles):
 
 
 def closest_on_triangles(p, a, b, c):
-    """(closest points (F, 3), their distances) of point p to triangles a, b, c (F, 3):
-    the nearest of the face's plane point where it lies inside and the three edges'."""
+    """(closest points, their distances) of point p (3,) to triangles a, b, c (F, 3): the
+    nearest of the face's plane point where it lies inside and the three edges'; (F, 3)
+    and (F,). Points (P, 1, 3) give (P, F, 3) and (P, F), each row one point's."""
+    def dot(u, v):
+        return np.einsum("...j,...j->...", u, v)
     n = np.cross(b - a, c - a)
     n /= np.linalg.norm(n, axis=1, keepdims=True)
-    q = p - np.einsum("ij,ij->i", p - a, n)[:, None] * n
-    inside = np.ones(len(a), bool)
+    q = p - dot(p - a, n)[..., None] * n
+    inside = True
     for u, v in ((a, b), (b, c), (c, a)):
-        inside &= np.einsum("ij,ij->i", np.cross(v - u, q - u), n) >= 0
-    best = np.where(inside[:, None], q, np.inf)
+        inside = inside & (dot(np.cross(v - u, q - u), n) >= 0)
+    best = np.where(inside[..., None], q, np.inf)
     for u, v in ((a, b), (b, c), (c, a)):
         e = v - u
-        s = np.clip(np.einsum("ij,ij->i", p - u, e) / np.einsum("ij,ij->i", e, e), 0, 1)
-        point = u + s[:, None] * e
-        closer = np.linalg.norm(p - point, axis=1) < np.linalg.norm(p - best, axis=1)
-        best[closer] = point[closer]
-    return best, np.linalg.norm(p - best, axis=1)
+        s = np.clip(dot(p - u, e) / dot(e, e), 0, 1)
+        point = u + s[..., None] * e
+        closer = np.linalg.norm(p - point, axis=-1) < np.linalg.norm(p - best, axis=-1)
+        best = np.where(closer[..., None], point, best)
+    return best, np.linalg.norm(p - best, axis=-1)
 
 
 def edge_depth(positions, edges, obstacle_vertices, obstacle_triangles, samples=16):
