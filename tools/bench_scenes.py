@@ -15,7 +15,8 @@ scene:
   resting_per_sim_s: the same of the last half of the frames;
   contact_share: the contact stage's time (``contact_stats()["seconds"]``) over the wall
       time of those frames;
-  compiles_after_first: Taichi kernels compiled after the first frame (each a stall);
+  compiles_after_first: Taichi kernels compiled after the first frame, in the steps
+      (``tcloth.runtime.compilations``; each a stall);
   inside: the most particles inside a closed mesh collider (``crossings.inside_mask``)
       or an analytic sphere, plane or box at a frame's end;
   paths_through: particle paths through a rigid mesh collider over the frames, each
@@ -32,17 +33,26 @@ scene:
 
 Lines: ``scenes.<scene>.<figure>: <value>``; with --out DIR, DIR/scenes.csv.
 
+With ``--trees A,B`` the same scenes run with the tcloth package of each work tree in
+turn (A then B, ``--repeats`` times, each scene in a process of its own with that tree
+first on the import path; this folder's tools measure both), and each figure is the
+median over the repeats: ``scenes.<scene>.<tree>.<figure>: <value>``, tree the folder's
+name (before/after on one loaded machine: the trees alternate, so a change of load falls
+on both).
+
 Usage: python tools/bench_scenes.py [--scenes table,turntable] [--frames N] [--out DIR]
+                                    [--trees /work/main,. --repeats 3]
 """
 import argparse
 import glob
+import json
 import os
+import subprocess
 import sys
 import time
 from types import SimpleNamespace
 
 import numpy as np
-import taichi.lang.kernel_impl as kernel_impl
 
 import tcloth
 from tcloth.app.script import build_scene, load_script, timing
@@ -55,21 +65,6 @@ from crossings import (count_crossings, count_obstacle_crossings, count_paths_th
 HERE = os.path.dirname(os.path.abspath(__file__))
 SCENES = os.path.join(HERE, "..", "scenes")
 ANALYTIC = ("sphere", "plane", "box")        # the shapes ``signed_distances`` knows
-
-
-class Compiles:
-    """Counts the Taichi kernels compiled (a new instance of a kernel) while it is on."""
-
-    def __init__(self):
-        self.count, self.on = 0, False
-        original = kernel_impl.Kernel.materialize
-
-        def materialize(kernel, key=None, args=None, arg_features=None):
-            if self.on and (key if key is not None else
-                            (kernel.func, 0, kernel.autodiff_mode)) not in kernel.compiled_kernels:
-                self.count += 1
-            return original(kernel, key, args, arg_features)
-        kernel_impl.Kernel.materialize = materialize
 
 
 def pose(c, t):
@@ -108,7 +103,7 @@ def crossings(scene, x0, x1, t0, t1, triangles):
     return out
 
 
-def run(path, frames, compiles):
+def run(path, frames):
     """The figures of one scene script (module docstring)."""
     module, cfg = load_script(path)
     tcloth.init("cpu", cfg["precision"])
@@ -121,13 +116,15 @@ def run(path, frames, compiles):
     triangles = scene.triangles
     wall, stage, touching, counts = [], [], [], []
     x, t = sim.positions().astype(np.float64), sim.time
+    compiles = 0
     for frame in range(frames):
-        compiles.on = frame > 0
         seconds = sim.contact_stats().get("seconds", 0.0)
+        before = tcloth.runtime.compilations()
         start = time.perf_counter()
         sim.step(steps)
         wall.append(time.perf_counter() - start)
-        compiles.on = False
+        if frame > 0 and before is not None:
+            compiles += tcloth.runtime.compilations() - before
         stats = sim.contact_stats()
         stage.append(stats.get("seconds", 0.0) - seconds)
         touching.append(stats.get("collider", 0))
@@ -140,7 +137,7 @@ def run(path, frames, compiles):
     figures.update(first_frame_s=wall[0], wall_per_sim_s=rest.sum() / (len(rest) * frame_s),
                    resting_per_sim_s=np.median(wall[frames // 2:]) / frame_s,
                    contact_share=stage[1:].sum() / max(rest.sum(), 1e-30),
-                   compiles_after_first=compiles.count)
+                   compiles_after_first=compiles)
     first_touch = next((k for k, n in enumerate(touching) if n), len(touching))
     if first_touch > 1:
         figures["falling_per_sim_s"] = np.median(wall[1:first_touch]) / frame_s
@@ -164,20 +161,52 @@ def main(argv=None):
     ap.add_argument("--scenes", default=None, help="names, comma-separated (default: all)")
     ap.add_argument("--frames", type=int, default=None, help="frames (default: CONFIG's)")
     ap.add_argument("--out", default=None)
+    ap.add_argument("--trees", default=None,
+                    help="work trees whose tcloth to run in turn, comma-separated")
+    ap.add_argument("--repeats", type=int, default=1, help="runs of each tree (--trees)")
+    ap.add_argument("--json", action="store_true", help=argparse.SUPPRESS)   # --trees' child
     args = ap.parse_args(argv)
     names = (args.scenes.split(",") if args.scenes else
              sorted(os.path.splitext(os.path.basename(p))[0]
                     for p in glob.glob(os.path.join(SCENES, "*.py"))))
-    compiles, rows = Compiles(), []
+    rows = []
     for name in names:
-        compiles.count = 0
-        figures = run(os.path.join(SCENES, name + ".py"), args.frames, compiles)
-        for key, value in figures.items():
-            print(f"scenes.{name}.{key}: {value:.6g}")
-            rows.append({"scene": name, "figure": key, "value": value})
+        path = os.path.join(SCENES, name + ".py")
+        if args.trees:
+            results = side_by_side(name, args.trees.split(","), args.repeats, args.frames)
+        else:
+            results = {None: run(path, args.frames)}
+        if args.json:
+            print(json.dumps(results[None]))
+            return
+        for tree, figures in results.items():
+            label = name if tree is None else f"{name}.{tree}"
+            for key, value in figures.items():
+                print(f"scenes.{label}.{key}: {value:.6g}")
+                rows.append({"scene": name, "tree": tree or "", "figure": key,
+                             "value": value})
         sys.stdout.flush()
     if args.out:
         write_csv(os.path.join(args.out, "scenes.csv"), rows)
+
+
+def side_by_side(name, trees, repeats, frames):
+    """{tree's folder name: {figure: median over ``repeats``}} of scene ``name`` run with
+    each tree's tcloth in turn (module docstring)."""
+    runs = {os.path.basename(os.path.abspath(tree)): [] for tree in trees}
+    for _ in range(repeats):
+        for tree in trees:
+            env = {**os.environ, "PYTHONPATH": os.path.abspath(tree)}
+            command = [sys.executable, os.path.abspath(__file__), "--scenes", name, "--json"]
+            if frames:
+                command += ["--frames", str(frames)]
+            out = subprocess.run(command, env=env, check=True, capture_output=True,
+                                 text=True).stdout
+            runs[os.path.basename(os.path.abspath(tree))].append(
+                json.loads(out.strip().splitlines()[-1]))
+    return {tree: {key: float(np.median([r[key] for r in done if key in r]))
+                   for key in dict.fromkeys(k for r in done for k in r)}
+            for tree, done in runs.items()}
 
 
 if __name__ == "__main__":
