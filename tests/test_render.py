@@ -3,6 +3,7 @@ import glob
 import os
 import subprocess
 import sys
+import threading
 
 import imageio_ffmpeg
 import numpy as np
@@ -11,7 +12,8 @@ import pytest
 import tcloth
 from tcloth import Camera
 from tcloth.render.framing import ground_and_checker
-from tcloth.render.render import COLLIDER_ID, LIGHT_DIR
+from tcloth.render.raster import COLLIDER_ID
+from tcloth.render.render import LIGHT_DIR
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RED, GREEN, BLUE = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)
@@ -99,6 +101,54 @@ def test_record_writes_mp4_with_requested_frames_and_size(f32, tmp_path):
     assert meta["size"] == (96, 64) and len(frames) == 7
     assert all(len(f) == 96 * 64 * 3 for f in frames)
     assert not glob.glob(str(tmp_path / "*partial*"))
+
+
+def writer_threads():
+    return [t for t in threading.enumerate() if t.name == "tcloth frame writer"]
+
+
+def test_an_encoder_error_ends_the_run_and_leaves_nothing_partial(f32, tmp_path, monkeypatch):
+    """Frames are encoded on a thread of their own: its error (a full disk at the third
+    frame) comes back to the caller, the run stops, the thread ends and no partial
+    output is left."""
+    from tcloth.render import video
+    written = []
+
+    def write_png(path, image):
+        if len(written) == 2:
+            raise OSError("no space left on device")
+        written.append(path)
+    monkeypatch.setattr(video, "write_png", write_png)
+    sim = tcloth.Simulator(small_scene(), dt=1e-3)
+    with pytest.raises(OSError, match="no space left"):
+        tcloth.record(sim, str(tmp_path / "frames"), frames=40, steps_per_frame=1, width=32,
+                      height=24, progress=False)
+    assert len(written) == 2 and sim.num_steps < 39
+    assert os.listdir(tmp_path) == [] and not writer_threads()
+
+
+def test_ctrl_c_keeps_the_frames_made_so_far(f32, tmp_path, monkeypatch):
+    """Ctrl-C during the fifth frame's steps: the four frames before are written out
+    whole under the output's name, the interrupt raised again saying so."""
+    sim = tcloth.Simulator(small_scene(), dt=1e-3)
+    step = sim.step
+
+    def interrupted(n=1):
+        if sim.num_steps == 3:
+            raise KeyboardInterrupt
+        step(n)
+    monkeypatch.setattr(sim, "step", interrupted)
+    with pytest.raises(KeyboardInterrupt, match="Kept 4 good frames"):
+        tcloth.record(sim, str(tmp_path / "frames"), frames=10, steps_per_frame=1, width=32,
+                      height=24, progress=False)
+    assert sorted(os.listdir(tmp_path / "frames")) == [f"frame_0000{k}.png" for k in range(4)]
+    assert os.listdir(tmp_path) == ["frames"] and not writer_threads()
+
+
+def small_scene():
+    scene = tcloth.Scene()
+    scene.add_cloth(resolution=(4, 4))
+    return scene
 
 
 def test_record_png_folder_and_odd_size_refused_for_mp4(f32, tmp_path):

@@ -1,0 +1,294 @@
+"""The off-screen renderer's depth targets and how primitives are drawn into them.
+
+A ``View`` maps the world onto a target's samples: the camera's (perspective) or the
+light's (orthographic); a ``Target`` is a depth buffer of samples through a view.
+
+Depth is the view's z, a point's distance along the view's forward direction: a ray's
+parameter at the point where its direction is forward + sx right + sy up (perspective:
+not a unit vector) or forward (orthographic), so that hits on one ray compare by depth.
+
+  - Triangles are rasterised: each is projected and the samples of its bounding box are
+    tested against its three edge functions in the target's (column, row) plane, edges
+    included, each edge evaluated from the same one of its ends in both triangles that
+    share it (no sample falls between them). The depth there is interpolated, of 1/z in
+    perspective (linear on the screen). So a triangle costs what it covers.
+  - Spheres and colliders are ray-cast at the samples of the projected box of a bounding
+    sphere (``Target.sphere``); colliders that never move, and the ground, once at every
+    sample (``cast``).
+
+A sample's hit is kept with ``atomic_min``: in the camera's target the key of
+``raycast.key`` (depth bits over the primitive's id: the nearest wins, ties go to the
+smaller id, whatever the order of the threads); in the shadow map the depth alone. What
+the geometry that never moves leaves in a target is drawn once (``keep``) and is where
+every frame starts (``restore``).
+"""
+import numpy as np
+import taichi as ti
+
+from ..geometry import raycast
+from ..geometry.shapes import SHAPES
+
+SKY_ID = 2147483647
+SKY_KEY = (2147483647 << 32) | SKY_ID
+GROUND_ID = 2147483646
+COLLIDER_ID = 1 << 30      # collider row k has id COLLIDER_ID + k
+FAR = 1e30                 # the depth of a shadow-map texel that sees nothing
+NEAR = 1e-3                # m: a triangle with a corner nearer the camera is not drawn
+SLACK = 2.0                # pixels added round a projected bounding sphere
+
+
+@ti.data_oriented
+class View:
+    """A projection of the world onto the samples of a target, its numbers compiled in.
+
+    The sample at (row, col) of an h x w target is at sx = (2 (col + 1/2) / w - 1) scale_x,
+    sy = (1 - 2 (row + 1/2) / h) scale_y: its ray runs from ``origin`` along forward +
+    sx right + sy up (perspective) or from origin + sx right + sy up along ``forward``.
+
+    Args:
+        origin, forward, right, up: (3,) m and unit vectors, right and up across forward.
+        scale_x, scale_y: half the view's width and height at depth 1 (perspective) or in
+            metres (orthographic). perspective: bool.
+    """
+
+    def __init__(self, origin, forward, right, up, scale_x, scale_y, perspective):
+        def f32(v):
+            return tuple(float(c) for c in np.asarray(v, dtype=np.float32).ravel())
+        self.origin, self.forward, self.right, self.up = (f32(v) for v in (origin, forward,
+                                                                          right, up))
+        self.scale_x, self.scale_y = f32(scale_x)[0], f32(scale_y)[0]
+        self.perspective = bool(perspective)
+
+    @ti.func
+    def vec(self, v: ti.template()):
+        """One of the view's vectors (origin, forward, right, up) as a float32 vector."""
+        return ti.Vector([ti.static(v[0]), ti.static(v[1]), ti.static(v[2])], ti.f32)
+
+    @ti.func
+    def ray(self, row, col, h, w):
+        """(origin, direction) of the ray of sample (row, col) of an h x w target."""
+        sx = (2.0 * (col + 0.5) / w - 1.0) * ti.static(self.scale_x)
+        sy = (1.0 - 2.0 * (row + 0.5) / h) * ti.static(self.scale_y)
+        across = sx * self.vec(self.right) + sy * self.vec(self.up)
+        o, d = self.vec(self.origin), self.vec(self.forward)
+        if ti.static(self.perspective):
+            d += across
+        else:
+            o += across
+        return o, d
+
+    @ti.func
+    def project(self, p, h, w):
+        """(col, row, depth) of point p on an h x w target (sample (r, c) at (c, r))."""
+        q = ti.cast(p, ti.f32) - self.vec(self.origin)
+        z = q.dot(self.vec(self.forward))
+        scale = 1.0
+        if ti.static(self.perspective):
+            scale = z
+        return ti.Vector([(q.dot(self.vec(self.right)) / (scale * ti.static(self.scale_x))
+                           + 1.0) * 0.5 * w - 0.5,
+                          (1.0 - q.dot(self.vec(self.up)) / (scale * ti.static(self.scale_y)))
+                          * 0.5 * h - 0.5, z])
+
+    @ti.func
+    def reach(self, p, q, radius, h):
+        """Pixels from q, the projection of p, within which every point of the sphere of
+        ``radius`` about p projects (plus SLACK); 1e9 where the camera is within it."""
+        out = radius / ti.static(self.scale_y) * 0.5 * h + SLACK
+        if ti.static(self.perspective):
+            # |d(x/z)| <= radius |p - origin| / (z (z - radius)) for points within radius
+            out = 1e9
+            if q[2] > radius + NEAR:
+                out = (radius * (ti.cast(p, ti.f32) - self.vec(self.origin)).norm()
+                       / (q[2] * (q[2] - radius)) / ti.static(self.scale_y) * 0.5 * h + SLACK)
+        return out
+
+
+@ti.func
+def bead(x, ends, share, k):
+    """The centre of sphere k of a list: (1 - share[k]) x[ends[k][0]] + share[k] x[ends[k][1]]
+    (a particle where both ends are it, or a bead along a spring), float32."""
+    e, s = ends[k], share[k]
+    return ti.cast((1.0 - s) * x[e[0]] + s * x[e[1]], ti.f32)
+
+
+@ti.func
+def _edge(p, q):
+    """The edge from p to q as (start x, start y, dx, dy, sign): started at the smaller of
+    its ends (x, then y), so that both triangles that share it evaluate it alike."""
+    swap = p[0] > q[0] or (p[0] == q[0] and p[1] > q[1])
+    lo, hi, sign = p, q, 1.0
+    if swap:
+        lo, hi, sign = q, p, -1.0
+    return ti.Vector([lo[0], lo[1], hi[0] - lo[0], hi[1] - lo[1], sign])
+
+
+@ti.func
+def _side(e, col, row):
+    """Twice the signed area of (p, q, (col, row)) for the edge e from p to q."""
+    return e[4] * ((row - e[1]) * e[2] - (col - e[0]) * e[3])
+
+
+@ti.data_oriented
+class Target:
+    """A height x width buffer of the nearest hit at each sample through ``view``: keys
+    (``ids``: the camera) or depths (the shadow map); ``static``: what ``keep`` stored.
+    ``ground``: the height (m) of a ground plane to cast, or False."""
+
+    def __init__(self, view, height, width, ids, ground=False):
+        self.view, self.height, self.width, self.ids = view, int(height), int(width), ids
+        self.ground, self.has_ground = ground, ground is not False
+        dtype = ti.i64 if ids else ti.f32
+        self.depth = ti.field(dtype, shape=(self.height, self.width))
+        self.static = ti.field(dtype, shape=(self.height, self.width))
+
+    @ti.kernel
+    def clear(self):
+        for r, c in self.depth:
+            if ti.static(self.ids):
+                self.depth[r, c] = ti.i64(SKY_KEY)
+            else:
+                self.depth[r, c] = FAR
+
+    def keep(self):
+        self.static.copy_from(self.depth)
+
+    def restore(self):
+        self.depth.copy_from(self.static)
+
+    @ti.func
+    def ray(self, row, col):
+        return self.view.ray(row, col, ti.static(self.height), ti.static(self.width))
+
+    @ti.func
+    def project(self, p):
+        return self.view.project(p, ti.static(self.height), ti.static(self.width))
+
+    @ti.func
+    def put(self, row, col, z, prim):
+        """A hit at depth z > 0 of primitive ``prim``."""
+        if ti.static(self.ids):
+            ti.atomic_min(self.depth[row, col], raycast.key(z, prim))
+        else:
+            ti.atomic_min(self.depth[row, col], ti.cast(z, ti.f32))
+
+    @ti.func
+    def triangle(self, a, b, c, prim):
+        """Rasterise triangle (a, b, c) (module docstring)."""
+        pa, pb, pc = self.project(a), self.project(b), self.project(c)
+        if not ti.static(self.view.perspective) or (pa[2] > NEAR and pb[2] > NEAR
+                                                    and pc[2] > NEAR):
+            e_bc, e_ca, e_ab = _edge(pb, pc), _edge(pc, pa), _edge(pa, pb)
+            area = _side(e_ab, pc[0], pc[1])
+            if abs(area) > 1e-9:
+                lo, hi = ti.min(pa, pb, pc), ti.max(pa, pb, pc)
+                inv = 1.0 / area
+                depth = ti.Vector([pa[2], pb[2], pc[2]])
+                if ti.static(self.view.perspective):
+                    depth = 1.0 / depth
+                for r in range(ti.max(ti.cast(ti.floor(lo[1]), ti.i32), 0),
+                               ti.min(ti.cast(ti.ceil(hi[1]), ti.i32),
+                                      ti.static(self.height) - 1) + 1):
+                    for col in range(ti.max(ti.cast(ti.floor(lo[0]), ti.i32), 0),
+                                     ti.min(ti.cast(ti.ceil(hi[0]), ti.i32),
+                                            ti.static(self.width) - 1) + 1):
+                        w = ti.Vector([_side(e_bc, col, r), _side(e_ca, col, r),
+                                       _side(e_ab, col, r)]) * inv
+                        if w.min() >= 0.0:
+                            z = w.dot(depth)
+                            if ti.static(self.view.perspective):
+                                z = 1.0 / z
+                            self.put(r, col, z, prim)
+
+    @ti.kernel
+    def triangles(self, x: ti.template(), tris: ti.template(), begin: ti.i32, end: ti.i32,
+                  first_id: ti.i32):
+        """Triangles begin .. end - 1 of ``tris`` (corner indices into ``x``), ids from
+        ``first_id`` + begin."""
+        for k in range(begin, end):
+            i = tris[k]
+            self.triangle(x[i[0]], x[i[1]], x[i[2]], first_id + k)
+
+    @ti.func
+    def sphere(self, centre, radius, prim):
+        """Ray-cast a sphere at the samples its projection can cover."""
+        q = self.project(centre)
+        reach = self.view.reach(centre, q, radius, ti.static(self.height))
+        if not ti.static(self.view.perspective) or q[2] > radius + NEAR:
+            for r in range(ti.max(ti.cast(ti.floor(q[1] - reach), ti.i32), 0),
+                           ti.min(ti.cast(ti.ceil(q[1] + reach), ti.i32),
+                                  ti.static(self.height) - 1) + 1):
+                for col in range(ti.max(ti.cast(ti.floor(q[0] - reach), ti.i32), 0),
+                                 ti.min(ti.cast(ti.ceil(q[0] + reach), ti.i32),
+                                        ti.static(self.width) - 1) + 1):
+                    o, d = self.ray(r, col)
+                    length = d.norm()
+                    t = raycast.hit_sphere(o, d / length, centre, radius)
+                    if t > 0.0:
+                        self.put(r, col, t / length, prim)
+
+    @ti.kernel
+    def spheres(self, x: ti.template(), ends: ti.template(), share: ti.template(),
+                count: ti.i32, radius: ti.f32, first_id: ti.i32):
+        """Spheres of ``radius`` at (1 - share[k]) x[ends[k][0]] + share[k] x[ends[k][1]],
+        ids from ``first_id``."""
+        for k in range(count):
+            self.sphere(bead(x, ends, share, k), radius, first_id + k)
+
+    @ti.func
+    def _drawn(self, shape: ti.template()):
+        """Whether colliders of this shape are cast here: not meshes (rasterised), nor
+        checkered ones (planes) in the shadow map (they receive shadows, cast none)."""
+        return ti.static(not SHAPES[shape].meshed and (self.ids or not SHAPES[shape].checkered))
+
+    @ti.kernel
+    def cast(self, colliders: ti.template(), moving: ti.template(), time: ti.f32):
+        """At every sample: the ground and the colliders that do not move (moving[k] == 0),
+        row k's id COLLIDER_ID + k."""
+        for r, c in self.depth:
+            o, d = self.ray(r, c)
+            length = d.norm()
+            u = d / length
+            best, best_id = FAR, SKY_ID
+            if ti.static(self.has_ground):
+                if u[1] < -1e-6:
+                    t = (ti.static(float(self.ground)) - o[1]) / u[1]
+                    if t > 0.0:
+                        best, best_id = t, GROUND_ID
+            for g in ti.static(colliders.groups):
+                if self._drawn(g.shape):
+                    for k in range(g.first, g.first + g.count):
+                        if moving[k] == 0:
+                            t = ti.cast(colliders.ray_hit(g.shape, colliders.data[k], o, u,
+                                                          time), ti.f32)
+                            if 0.0 < t < best:
+                                best, best_id = t, COLLIDER_ID + k
+            if best_id != SKY_ID:
+                self.put(r, c, best / length, best_id)
+
+    @ti.kernel
+    def cast_moving(self, colliders: ti.template(), rows: ti.template(),
+                    radii: ti.template(), count: ti.i32, time: ti.f32):
+        """The colliders of rows[0 .. count - 1], each at the samples its bounding sphere
+        (radius radii[j] about its centre, which moves with its velocity) can cover."""
+        for j, r in ti.ndrange(count, ti.static(self.height)):
+            k = rows[j]
+            for g in ti.static(colliders.groups):
+                if self._drawn(g.shape):
+                    if g.first <= k < g.first + g.count:
+                        col = colliders.data[k]
+                        centre = ti.cast(col.center + time * col.velocity, ti.f32)
+                        q = self.project(centre)
+                        reach = self.view.reach(centre, q, radii[j], ti.static(self.height))
+                        c0 = ti.max(ti.cast(ti.floor(q[0] - reach), ti.i32), 0)
+                        c1 = ti.min(ti.cast(ti.ceil(q[0] + reach), ti.i32),
+                                    ti.static(self.width) - 1)
+                        if r < q[1] - reach or r > q[1] + reach:
+                            c1 = -1
+                        for c in range(c0, c1 + 1):
+                            o, d = self.ray(r, c)
+                            length = d.norm()
+                            t = ti.cast(colliders.ray_hit(g.shape, col, o, d / length, time),
+                                        ti.f32)
+                            if t > 0.0:
+                                self.put(r, c, t / length, COLLIDER_ID + k)

@@ -1,0 +1,306 @@
+"""The off-screen renderer's shading pass: the colour of each pixel from what its samples
+see (``Shading``, a part of ``render.Renderer``, whose targets and buffers it reads).
+
+Lambert + hemisphere ambient + a little specular, shadows from the shadow map; cloth front
+and back in two colours, checkered ground and planes. A pixel whose samples all see one
+surface (one primitive, or triangles of one cloth or mesh that share a corner, lie within
+14 degrees of each other's plane and, for cloth, show the camera the same side) gets that
+surface's colour averaged over its samples (the checkers' squares), lit once at their
+mean point with the normal there (the mean of the triangles' at their samples); any other
+pixel is the mean of its samples each shaded and lit. The shadow map is read at every
+sample, so that shadows' edges keep their anti-aliasing; the rest of the light varies
+smoothly across a surface, so the two differ by little (``docs/rendering.md``), and it
+is found about once a pixel.
+"""
+import taichi as ti
+
+from ..geometry import raycast
+from ..geometry.shapes import SHAPES
+from .drawables import COLLIDER_COLOUR, PARTICLE_COLOUR
+from .raster import COLLIDER_ID, GROUND_ID, SKY_ID, bead
+
+MESH_ID = COLLIDER_ID + (1 << 29)    # mesh colliders' triangle j has id MESH_ID + j
+SHADOW_MAP = 1024
+SMOOTH = 0.97      # triangles whose unit normals' product is above this are one surface
+
+
+@ti.func
+def _sky(d):
+    s = 0.5 + 0.5 * d[1]
+    return (1.0 - s) * ti.math.vec3(0.93, 0.95, 0.98) + s * ti.math.vec3(0.55, 0.70, 0.92)
+
+
+@ti.func
+def _facing(n, d):
+    """n turned to face a ray along d."""
+    return -n if n.dot(d) > 0.0 else n
+
+
+@ti.func
+def _joined(i, j):
+    """Whether triangles of corner indices i and j share a corner."""
+    joined = False
+    for a, b in ti.static(ti.ndrange(3, 3)):
+        if i[a] == j[b]:
+            joined = True
+    return joined
+
+
+@ti.data_oriented
+class Shading:
+    """The Renderer's shading pass (module docstring): ``_shade`` writes ``image``."""
+
+    @ti.kernel
+    def _shade(self, x: ti.template(), time: ti.f32):
+        """Each pixel's colour (module docstring), gamma 2 (square root) to bytes."""
+        ss = ti.static(self.ss)
+        for r, c in self.image:
+            colour = ti.math.vec3(0.0)
+            seen = self._one_surface(r, c)
+            if seen:
+                colour = self._pixel(x, r, c, time, seen == 2)
+            else:
+                for s in range(ss * ss):
+                    colour += self._sample(x, r * ss + s // ss, c * ss + s % ss, time)
+                colour /= ss * ss
+            v = ti.sqrt(ti.math.clamp(colour, 0.0, 1.0))
+            self.image[r, c] = ti.cast(v * 255.0 + 0.5, ti.u8)
+
+    @ti.func
+    def _front(self, k, ray):
+        """Whether cloth triangle k shows its front to a ray along ``ray``."""
+        return self.faces[k].dot(ray) < 0.0
+
+    @ti.func
+    def _one_surface(self, r, c):
+        """What the samples of pixel (r, c) see: 1 one primitive, 2 triangles of one
+        smooth surface (``_smooth``), 0 anything else."""
+        ss = ti.static(self.ss)
+        k0 = raycast.key_id(self.screen.depth[r * ss, c * ss])
+        _, ray0 = self.screen.ray(r * ss, c * ss)
+        seen = 1
+        for s in range(1, ss * ss):
+            row, col = r * ss + s // ss, c * ss + s % ss
+            k = raycast.key_id(self.screen.depth[row, col])
+            if k != k0 and seen:
+                _, ray = self.screen.ray(row, col)
+                seen = 2 if self._smooth(k, k0, ray, ray0) else 0
+        return seen
+
+    @ti.func
+    def _smooth(self, k, k0, ray, ray0):
+        """Whether primitives k and k0, seen along ray and ray0, are one smooth surface:
+        triangles of one cloth (showing the ray the same side) or of the mesh colliders
+        that share a corner, their planes within SMOOTH of each other."""
+        smooth = False
+        if k < self.tri_count and k0 < self.tri_count:
+            smooth = (self.tri_cloth[k] == self.tri_cloth[k0]
+                      and _joined(self.tris[k], self.tris[k0])
+                      and self.faces[k].dot(self.faces[k0]) > SMOOTH
+                      and self._front(k, ray) == self._front(k0, ray0))
+        elif self._meshed(k) and self._meshed(k0):
+            j, j0 = k - MESH_ID, k0 - MESH_ID
+            smooth = (_joined(self.mesh_tris[j], self.mesh_tris[j0])
+                      and self.mesh_faces[j].dot(self.mesh_faces[j0]) > SMOOTH)
+        return smooth
+
+    @ti.func
+    def _pixel(self, x, r, c, time, several):
+        """The colour of a pixel whose samples see one surface (``several`` triangles of
+        it: its normal the mean of theirs at the samples)."""
+        ss = ti.static(self.ss)
+        k = raycast.key_id(self.screen.depth[r * ss, c * ss])
+        middle = 0.5 * (ss - 1)
+        o, ray = self.screen.ray(r * ss + middle, c * ss + middle)
+        d = ray.normalized()
+        colour = _sky(d)
+        if k != SKY_ID:
+            p = ti.math.vec3(0.0)
+            for s in range(ss * ss):
+                p += self._point(r * ss + s // ss, c * ss + s % ss)
+            p /= ss * ss
+            base, n = self._surface(x, k, o, d, p, time)
+            if several:
+                n = ti.math.vec3(0.0)
+                for s in range(ss * ss):
+                    n += self._triangle_normal(r * ss + s // ss, c * ss + s % ss)
+                n = n.normalized()
+            if self._squared(k):
+                base = ti.math.vec3(0.0)
+                for s in range(ss * ss):
+                    base += self._square(self._point(r * ss + s // ss, c * ss + s % ss), n)
+                base = self._fade(base / (ss * ss), (p - o).norm())
+            n = _facing(n, d)
+            lit = ti.max(n.dot(self._light()), 0.0)
+            if ti.static(self.shadows):
+                if lit > 0.0:
+                    through = 0.0
+                    for s in range(ss * ss):
+                        through += self._unshadowed(
+                            self._point(r * ss + s // ss, c * ss + s % ss), lit)
+                    lit *= through / (ss * ss)
+            colour = self._shine(n, d, base, lit)
+        return colour
+
+    @ti.func
+    def _triangle_normal(self, row, col):
+        """The shading normal, facing the ray, where sample (row, col) hits a cloth or
+        mesh triangle."""
+        o, ray = self.screen.ray(row, col)
+        k = raycast.key_id(self.screen.depth[row, col])
+        n = ti.math.vec3(0.0)
+        if k < self.tri_count:
+            n = self._facet(self.cloth.x, self.normals, self.tris[k], o, ray)
+        else:
+            n = self._facet(self.mesh_x, self.mesh_n, self.mesh_tris[k - MESH_ID], o, ray)
+        return _facing(n, ray)
+
+    @ti.func
+    def _point(self, row, col):
+        """Where sample (row, col) hits (not the sky)."""
+        o, ray = self.screen.ray(row, col)
+        return o + raycast.key_t(self.screen.depth[row, col]) * ray
+
+    @ti.func
+    def _sample(self, x, row, col, time):
+        """The colour of one sample."""
+        o, ray = self.screen.ray(row, col)
+        d = ray.normalized()
+        key = self.screen.depth[row, col]
+        k = raycast.key_id(key)
+        colour = _sky(d)
+        if k != SKY_ID:
+            p = o + raycast.key_t(key) * ray
+            base, n = self._surface(x, k, o, d, p, time)
+            if self._squared(k):
+                base = self._fade(self._square(p, n), (p - o).norm())
+            n = _facing(n, d)
+            colour = self._shine(n, d, base, self._lit(p, n))
+        return colour
+
+    @ti.func
+    def _meshed(self, k):
+        """Whether id k is a mesh collider's triangle."""
+        return MESH_ID <= k < MESH_ID + ti.static(self.mesh_count)
+
+    @ti.func
+    def _squared(self, k):
+        """Whether id k is drawn with the ground's squares: the ground, a plane."""
+        return k == GROUND_ID or (COLLIDER_ID <= k < MESH_ID and self._checkered(k - COLLIDER_ID))
+
+    @ti.func
+    def _surface(self, x, k, o, d, p, time):
+        """(colour, unit normal) of surface id k (not the sky) at p, seen along the unit
+        ray o + t d; the squared ones' colour is the caller's."""
+        base = ti.math.vec3(COLLIDER_COLOUR)
+        n = ti.math.vec3(0.0, 1.0, 0.0)
+        if k < self.tri_count:
+            n = self._facet(self.cloth.x, self.normals, self.tris[k], o, d)
+            base = self.palette[self.tri_cloth[k], 0 if self._front(k, d) else 1]
+        elif k < COLLIDER_ID:
+            n = (p - bead(x, self.sphere_ends, self.sphere_t, k - self.tri_count)).normalized()
+            base = ti.math.vec3(PARTICLE_COLOUR)
+        elif self._meshed(k):
+            n = self._facet(self.mesh_x, self.mesh_n, self.mesh_tris[k - MESH_ID], o, d)
+        elif k != GROUND_ID:
+            n = self._collider_normal(k - COLLIDER_ID, p, time)
+        return base, n
+
+    @ti.func
+    def _facet(self, x, normals, i, o, d):
+        """The shading normal of triangle i (corner indices into x and normals) where the
+        ray o + t d meets its plane: the normals interpolated there (the triangle's own
+        where they cancel)."""
+        a, b, c = x[i[0]], x[i[1]], x[i[2]]
+        hit = raycast.plane_hit(o, d, a, b, c)
+        u, v = hit[1], hit[2]
+        ns = (1.0 - u - v) * normals[i[0]] + u * normals[i[1]] + v * normals[i[2]]
+        return ns.normalized() if ns.norm() > 1e-20 else (b - a).cross(c - a).normalized()
+
+    @ti.func
+    def _shine(self, n, d, base, lit):
+        """Colour ``base`` seen along d, its normal n facing the ray: hemisphere ambient,
+        ``lit`` (the direct light reaching it: ``_lit``) and a little specular."""
+        half = (self._light() - d).normalized()
+        spec = ti.max(half.dot(n), 0.0)
+        for _ in ti.static(range(5)):
+            spec = spec * spec
+        hemi = 0.5 + 0.5 * n[1]
+        return base * (0.22 + 0.18 * hemi + 0.65 * lit) + 0.12 * spec * ti.min(lit, 1.0)
+
+    @ti.func
+    def _light(self):
+        return -self.light.vec(self.light.forward)
+
+    @ti.func
+    def _lit(self, p, n):
+        """Direct light reaching point p with normal n: Lambert times the part of it that
+        the shadow map lets through (``_unshadowed``)."""
+        cos_l = n.dot(self._light())
+        lit = ti.max(cos_l, 0.0)
+        if ti.static(self.shadows):
+            if lit > 0.0:
+                lit *= self._unshadowed(p, cos_l)
+        return lit
+
+    @ti.func
+    def _unshadowed(self, p, cos_l):
+        """The fraction of the shadow map's 2 x 2 texels around p that do not block the
+        light, weighted bilinearly by p's position between their centres (a
+        percentage-closer filter whose shadow edges are smooth ramps rather than
+        texel-sized steps), with a bias that grows at grazing light (cos_l: no
+        self-shadowing acne)."""
+        s = self.shadow.project(p)
+        texel = 2.0 * ti.static(self.half) / SHADOW_MAP
+        bias = texel * (1.5 + 2.0 * ti.sqrt(1.0 - cos_l * cos_l) / ti.max(cos_l, 0.2))
+        # texel centres are at integer + 0.5
+        fy, fx = s[1] - 0.5 - ti.floor(s[1] - 0.5), s[0] - 0.5 - ti.floor(s[0] - 0.5)
+        r0 = ti.cast(ti.floor(s[1] - 0.5), ti.i32)
+        c0 = ti.cast(ti.floor(s[0] - 0.5), ti.i32)
+        visible = 0.0
+        for dr, dc in ti.static(ti.ndrange(2, 2)):
+            r, c = r0 + dr, c0 + dc
+            blocked = False
+            if 0 <= r < SHADOW_MAP and 0 <= c < SHADOW_MAP:
+                blocked = self.shadow.depth[r, c] < s[2] - bias
+            if not blocked:
+                visible += (fy if dr else 1.0 - fy) * (fx if dc else 1.0 - fx)
+        return visible
+
+    @ti.func
+    def _square(self, p, n):
+        """The colour of the ground's square at p (normal n): squares on the two axes
+        least aligned with the normal."""
+        an = ti.abs(n)
+        skip = 0 if an[0] >= an[1] and an[0] >= an[2] else (1 if an[1] >= an[2] else 2)
+        cell = 0
+        for a in ti.static(range(3)):
+            if a != skip:
+                cell += ti.cast(ti.floor(p[a] / ti.static(self.checker)), ti.i32)
+        return ti.math.vec3(0.80) if cell % 2 == 0 else ti.math.vec3(0.62)
+
+    @ti.func
+    def _fade(self, base, t):
+        """Squares' colour ``base`` at distance t, faded to their mean before they alias."""
+        fade = 1.0 / (1.0 + 0.02 * t / ti.static(self.checker))
+        return fade * base + (1.0 - fade) * ti.math.vec3(0.71)
+
+    @ti.func
+    def _checkered(self, k):
+        """True when collider k is drawn with the ground's squares."""
+        checkered = False
+        for g in ti.static(self.colliders.groups):
+            if ti.static(SHAPES[g.shape].checkered):
+                if g.first <= k < g.first + g.count:
+                    checkered = True
+        return checkered
+
+    @ti.func
+    def _collider_normal(self, k, p, time):
+        """The shading normal of (analytic) collider k at surface point p."""
+        n = ti.Vector([0.0, 1.0, 0.0], ti.f32)
+        for g in ti.static(self.colliders.groups):
+            if ti.static(not SHAPES[g.shape].meshed):
+                if g.first <= k < g.first + g.count:
+                    n = self.colliders.normal(g.shape, self.colliders.data[k], p, time)
+        return n
