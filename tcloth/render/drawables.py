@@ -103,6 +103,7 @@ class DrawnCloth:
         self.x = ti.Vector.field(3, ti.f32, shape=max(particle_count, 1))   # drawn, m
         # per particle: the largest move asked of it, float bits over the collider's index
         self.lift = ti.field(ti.i64, shape=max(particle_count, 1))
+        self.moved = ti.field(ti.i32, shape=max(particle_count, 1))   # by the last pass
         # per particle and collider: its distance and normal at the update's positions
         shape = (max(particle_count, 1), max(colliders.count, 1))
         self.rest = ti.field(ti.f32, shape=shape)
@@ -126,6 +127,7 @@ class DrawnCloth:
     def _copy(self, x: ti.template()):
         for p in self.x:
             self.x[p] = ti.cast(x[p], ti.f32)
+            self.moved[p] = 1
 
     @ti.kernel
     def _rests(self, x: ti.template(), time: ti.f32):
@@ -147,52 +149,60 @@ class DrawnCloth:
             self.lift[p] = 0
         for k in range(self.count):
             i = self.tris[k]
-            a, b, c = self.x[i[0]], self.x[i[1]], self.x[i[2]]
-            longest = ti.max((b - a).norm(), (c - b).norm(), (a - c).norm())
-            for g in ti.static(self.colliders.groups):
-                for m in range(g.first, g.first + g.count):
-                    col = self.colliders.data[m]
-                    rest, nearest = self.rest[i[0], m], i[0]
-                    normals = ti.Matrix.rows([self.rest_n[i[0], m], self.rest_n[i[1], m],
-                                              self.rest_n[i[2], m]])
-                    for j in ti.static(range(1, 3)):
-                        if self.rest[i[j], m] < rest:
-                            rest, nearest = self.rest[i[j], m], i[j]
-                    thickness = ti.cast(col.thickness, ti.f32)
-                    if col.stiffness > 0.0 and rest < CONTACT_REACH * thickness:
-                        target = ti.max(rest, thickness) - (1.0 - CLEARANCE) * thickness
-                        cap = 0.5 * longest + thickness
-                        # a test point is no deeper than rest less its distance from the
-                        # nearest particle (at most its farthest corner's): searched to a
-                        # thickness past that and past where it would ask
-                        q = ti.cast(x[nearest], ti.f32)
-                        apart = ti.max((a - q).norm(), (b - q).norm(), (c - q).norm())
-                        beyond = ti.max(target + 0.6 * longest / SAMPLES, apart - rest, 0.0)
-                        near, nu, nv = 1e30, 0.0, 0.0
-                        for s in range(SAMPLES + 1):
-                            for t in range(SAMPLES + 1 - s):
-                                u, v = s / SAMPLES, t / SAMPLES
-                                phi = _distance(self.colliders, g.shape, col, a, b, c, u,
-                                                v, time, beyond)
-                                if phi < near:
-                                    near, nu, nv = phi, u, v
-                                self._ask(i, u, v, target - phi, normals, cap, m)
-                        # every point is within 0.6 longest / SAMPLES of a test point
-                        # (the distance changes no faster than the point moves)
-                        if near - 0.6 * longest / SAMPLES < target:
-                            step = 0.5 / SAMPLES
-                            for level in range(REFINE):
-                                bu, bv = nu, nv
-                                for nb in range(6):
-                                    du, dv = _neighbour(nb)
-                                    u, v = bu + du * step, bv + dv * step
-                                    if u >= 0.0 and v >= 0.0 and u + v <= 1.0:
-                                        phi = _distance(self.colliders, g.shape, col, a, b,
-                                                        c, u, v, time, beyond)
-                                        if phi < near:
-                                            near, nu, nv = phi, u, v
-                                step *= 0.5
-                            self._ask(i, nu, nv, target - near, normals, cap, m)
+            # a triangle none of whose corners the last pass moved asks what it asked
+            # then: nothing (it would have moved them)
+            if self.moved[i[0]] + self.moved[i[1]] + self.moved[i[2]] > 0:
+                self._lift(x, i, time)
+
+    @ti.func
+    def _lift(self, x, i, time):
+        """A resting triangle i's asks (``_lifts``)."""
+        a, b, c = self.x[i[0]], self.x[i[1]], self.x[i[2]]
+        longest = ti.max((b - a).norm(), (c - b).norm(), (a - c).norm())
+        for g in ti.static(self.colliders.groups):
+            for m in range(g.first, g.first + g.count):
+                col = self.colliders.data[m]
+                rest, nearest = self.rest[i[0], m], i[0]
+                normals = ti.Matrix.rows([self.rest_n[i[0], m], self.rest_n[i[1], m],
+                                          self.rest_n[i[2], m]])
+                for j in ti.static(range(1, 3)):
+                    if self.rest[i[j], m] < rest:
+                        rest, nearest = self.rest[i[j], m], i[j]
+                thickness = ti.cast(col.thickness, ti.f32)
+                if col.stiffness > 0.0 and rest < CONTACT_REACH * thickness:
+                    target = ti.max(rest, thickness) - (1.0 - CLEARANCE) * thickness
+                    cap = 0.5 * longest + thickness
+                    # a test point is no deeper than rest less its distance from the
+                    # nearest particle (at most its farthest corner's): searched to a
+                    # thickness past that and past where it would ask
+                    q = ti.cast(x[nearest], ti.f32)
+                    apart = ti.max((a - q).norm(), (b - q).norm(), (c - q).norm())
+                    beyond = ti.max(target + 0.6 * longest / SAMPLES, apart - rest, 0.0)
+                    near, nu, nv = 1e30, 0.0, 0.0
+                    for s in range(SAMPLES + 1):
+                        for t in range(SAMPLES + 1 - s):
+                            u, v = s / SAMPLES, t / SAMPLES
+                            phi = _distance(self.colliders, g.shape, col, a, b, c, u,
+                                            v, time, beyond)
+                            if phi < near:
+                                near, nu, nv = phi, u, v
+                            self._ask(i, u, v, target - phi, normals, cap, m)
+                    # every point is within 0.6 longest / SAMPLES of a test point
+                    # (the distance changes no faster than the point moves)
+                    if near - 0.6 * longest / SAMPLES < target:
+                        step = 0.5 / SAMPLES
+                        for level in range(REFINE):
+                            bu, bv = nu, nv
+                            for nb in range(6):
+                                du, dv = _neighbour(nb)
+                                u, v = bu + du * step, bv + dv * step
+                                if u >= 0.0 and v >= 0.0 and u + v <= 1.0:
+                                    phi = _distance(self.colliders, g.shape, col, a, b,
+                                                    c, u, v, time, beyond)
+                                    if phi < near:
+                                        near, nu, nv = phi, u, v
+                            step *= 0.5
+                        self._ask(i, nu, nv, target - near, normals, cap, m)
 
     @ti.func
     def _ask(self, i, u, v, deficit, normals, cap, m):
@@ -217,6 +227,7 @@ class DrawnCloth:
         """Each particle asked to move: out along its collider's normal."""
         for p in self.x:
             key = self.lift[p]
+            self.moved[p] = ti.select(key > 0, 1, 0)
             if key > 0:
                 m = raycast.key_id(key)
                 for g in ti.static(self.colliders.groups):

@@ -129,6 +129,22 @@ def _side(e, col, row):
     return e[4] * ((row - e[1]) * e[2] - (col - e[0]) * e[3])
 
 
+@ti.func
+def _span(e, row, area, span):
+    """``span`` (first, last column) narrowed to where row ``row`` lies on the inner side
+    (that of a triangle of signed ``area``) of edge e: _side(e, col, row) = a - b col."""
+    g = 1.0 if area > 0.0 else -1.0
+    b = g * e[4] * e[3]
+    a = g * e[4] * ((row - e[1]) * e[2] + e[0] * e[3])
+    if b > 0.0:
+        span[1] = ti.min(span[1], a / b)
+    elif b < 0.0:
+        span[0] = ti.max(span[0], a / b)
+    elif a < 0.0:
+        span[1] = span[0] - 2.0
+    return span
+
+
 @ti.data_oriented
 class Target:
     """A height x width buffer of the nearest hit at each sample through ``view``: keys
@@ -186,12 +202,17 @@ class Target:
                 depth = ti.Vector([pa[2], pb[2], pc[2]])
                 if ti.static(self.view.perspective):
                     depth = 1.0 / depth
+                first = ti.max(ti.cast(ti.floor(lo[0]), ti.i32), 0)
+                last = ti.min(ti.cast(ti.ceil(hi[0]), ti.i32), ti.static(self.width) - 1)
                 for r in range(ti.max(ti.cast(ti.floor(lo[1]), ti.i32), 0),
                                ti.min(ti.cast(ti.ceil(hi[1]), ti.i32),
                                       ti.static(self.height) - 1) + 1):
-                    for col in range(ti.max(ti.cast(ti.floor(lo[0]), ti.i32), 0),
-                                     ti.min(ti.cast(ti.ceil(hi[0]), ti.i32),
-                                            ti.static(self.width) - 1) + 1):
+                    # the columns of row r inside all three edges, a column wider
+                    span = ti.Vector([lo[0], hi[0]])
+                    for e in ti.static((e_bc, e_ca, e_ab)):
+                        span = _span(e, r, area, span)
+                    for col in range(ti.max(ti.cast(ti.ceil(span[0]), ti.i32) - 1, first),
+                                     ti.min(ti.cast(ti.floor(span[1]), ti.i32) + 1, last) + 1):
                         w = ti.Vector([_side(e_bc, col, r), _side(e_ca, col, r),
                                        _side(e_ab, col, r)]) * inv
                         if w.min() >= 0.0:

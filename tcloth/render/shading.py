@@ -56,7 +56,7 @@ class Shading:
         ss = ti.static(self.ss)
         for r, c in self.image:
             colour = ti.math.vec3(0.0)
-            seen = self._one_surface(r, c)
+            seen = self._one_surface(r, c, time)
             if seen:
                 colour = self._pixel(x, r, c, time, seen == 2)
             else:
@@ -72,19 +72,27 @@ class Shading:
         return self.faces[k].dot(ray) < 0.0
 
     @ti.func
-    def _one_surface(self, r, c):
-        """What the samples of pixel (r, c) see: 1 one primitive, 2 triangles of one
-        smooth surface (``_smooth``), 0 anything else."""
+    def _one_surface(self, r, c, time):
+        """What the samples of pixel (r, c) see: 1 one primitive (a collider's normals
+        within SMOOTH of each other: not across a box's edge), 2 triangles of one smooth
+        surface (``_smooth``), 0 anything else."""
         ss = ti.static(self.ss)
         k0 = raycast.key_id(self.screen.depth[r * ss, c * ss])
         _, ray0 = self.screen.ray(r * ss, c * ss)
+        collider = COLLIDER_ID <= k0 < MESH_ID and not self._squared(k0)
+        n0 = ti.math.vec3(0.0)
+        if collider:
+            n0 = self._collider_normal(k0 - COLLIDER_ID, self._point(r * ss, c * ss), time)
         seen = 1
         for s in range(1, ss * ss):
             row, col = r * ss + s // ss, c * ss + s % ss
             k = raycast.key_id(self.screen.depth[row, col])
-            if k != k0 and seen:
+            if seen and k != k0:
                 _, ray = self.screen.ray(row, col)
                 seen = 2 if self._smooth(k, k0, ray, ray0) else 0
+            elif seen and collider:
+                n = self._collider_normal(k0 - COLLIDER_ID, self._point(row, col), time)
+                seen = 1 if n.dot(n0) > SMOOTH else 0
         return seen
 
     @ti.func
@@ -125,20 +133,25 @@ class Shading:
                 for s in range(ss * ss):
                     n += self._triangle_normal(r * ss + s // ss, c * ss + s % ss)
                 n = n.normalized()
-            if self._squared(k):
-                base = ti.math.vec3(0.0)
-                for s in range(ss * ss):
-                    base += self._square(self._point(r * ss + s // ss, c * ss + s % ss), n)
-                base = self._fade(base / (ss * ss), (p - o).norm())
             n = _facing(n, d)
             lit = ti.max(n.dot(self._light()), 0.0)
+            squared, shadowed = self._squared(k), False
             if ti.static(self.shadows):
-                if lit > 0.0:
-                    through = 0.0
-                    for s in range(ss * ss):
-                        through += self._unshadowed(
-                            self._point(r * ss + s // ss, c * ss + s % ss), lit)
-                    lit *= through / (ss * ss)
+                shadowed = lit > 0.0
+            bias = self._bias(lit)
+            squares, through = ti.math.vec3(0.0), 0.0
+            if squared or shadowed:
+                for s in range(ss * ss):
+                    q = self._point(r * ss + s // ss, c * ss + s % ss)
+                    if squared:
+                        squares += self._square(q, n)
+                    if ti.static(self.shadows):
+                        if shadowed:
+                            through += self._unshadowed(q, bias)
+            if squared:
+                base = self._fade(squares / (ss * ss), (p - o).norm())
+            if shadowed:
+                lit *= through / (ss * ss)
             colour = self._shine(n, d, base, lit)
         return colour
 
@@ -236,36 +249,44 @@ class Shading:
     def _lit(self, p, n):
         """Direct light reaching point p with normal n: Lambert times the part of it that
         the shadow map lets through (``_unshadowed``)."""
-        cos_l = n.dot(self._light())
-        lit = ti.max(cos_l, 0.0)
+        lit = ti.max(n.dot(self._light()), 0.0)
         if ti.static(self.shadows):
             if lit > 0.0:
-                lit *= self._unshadowed(p, cos_l)
+                lit *= self._unshadowed(p, self._bias(lit))
         return lit
 
     @ti.func
-    def _unshadowed(self, p, cos_l):
-        """The fraction of the shadow map's 2 x 2 texels around p that do not block the
-        light, weighted bilinearly by p's position between their centres (a
-        percentage-closer filter whose shadow edges are smooth ramps rather than
-        texel-sized steps), with a bias that grows at grazing light (cos_l: no
-        self-shadowing acne)."""
-        s = self.shadow.project(p)
+    def _bias(self, cos_l):
+        """How much nearer the light a blocker must be than a point that faces it at
+        cos_l: more at grazing light (no self-shadowing acne)."""
         texel = 2.0 * ti.static(self.half) / SHADOW_MAP
-        bias = texel * (1.5 + 2.0 * ti.sqrt(1.0 - cos_l * cos_l) / ti.max(cos_l, 0.2))
-        # texel centres are at integer + 0.5
-        fy, fx = s[1] - 0.5 - ti.floor(s[1] - 0.5), s[0] - 0.5 - ti.floor(s[0] - 0.5)
-        r0 = ti.cast(ti.floor(s[1] - 0.5), ti.i32)
-        c0 = ti.cast(ti.floor(s[0] - 0.5), ti.i32)
-        visible = 0.0
-        for dr, dc in ti.static(ti.ndrange(2, 2)):
-            r, c = r0 + dr, c0 + dc
-            blocked = False
-            if 0 <= r < SHADOW_MAP and 0 <= c < SHADOW_MAP:
-                blocked = self.shadow.depth[r, c] < s[2] - bias
-            if not blocked:
-                visible += (fy if dr else 1.0 - fy) * (fx if dc else 1.0 - fx)
-        return visible
+        return texel * (1.5 + 2.0 * ti.sqrt(1.0 - cos_l * cos_l) / ti.max(cos_l, 0.2))
+
+    @ti.func
+    def _unshadowed(self, p, bias):
+        """The fraction of the shadow map's 2 x 2 texels around p that do not block the
+        light (``_open``), weighted bilinearly by p's position between their centres (a
+        percentage-closer filter whose shadow edges are smooth ramps rather than
+        texel-sized steps)."""
+        s = self.shadow.project(p)
+        gy, gx = s[1] - 0.5, s[0] - 0.5          # texel centres are at integer + 0.5
+        ry, rx = ti.floor(gy), ti.floor(gx)
+        fy, fx = gy - ry, gx - rx
+        r0, c0 = ti.cast(ry, ti.i32), ti.cast(rx, ti.i32)
+        depth = s[2] - bias
+        return ((1.0 - fy) * ((1.0 - fx) * self._open(r0, c0, depth)
+                              + fx * self._open(r0, c0 + 1, depth))
+                + fy * ((1.0 - fx) * self._open(r0 + 1, c0, depth)
+                        + fx * self._open(r0 + 1, c0 + 1, depth)))
+
+    @ti.func
+    def _open(self, r, c, depth):
+        """1 where shadow-map texel (r, c) lets light through to ``depth`` (off the map:
+        nothing blocks), else 0."""
+        out = 1.0
+        if 0 <= r < SHADOW_MAP and 0 <= c < SHADOW_MAP:
+            out = ti.select(self.shadow.depth[r, c] < depth, 0.0, 1.0)
+        return out
 
     @ti.func
     def _square(self, p, n):
