@@ -35,29 +35,38 @@ COLLIDER_ID = 1 << 30      # collider row k has id COLLIDER_ID + k
 FAR = 1e30                 # the depth of a shadow-map texel that sees nothing
 NEAR = 1e-3                # m: a triangle with a corner nearer the camera is not drawn
 SLACK = 2.0                # pixels added round a projected bounding sphere
+TILE = 16                  # samples a side of a depth-only target's tiles (``summarise``)
 
 
 @ti.data_oriented
 class View:
-    """A projection of the world onto the samples of a target, its numbers compiled in.
+    """A projection of the world onto a height x width target's samples, its numbers
+    compiled in.
 
-    The sample at (row, col) of an h x w target is at sx = (2 (col + 1/2) / w - 1) scale_x,
-    sy = (1 - 2 (row + 1/2) / h) scale_y: its ray runs from ``origin`` along forward +
-    sx right + sy up (perspective) or from origin + sx right + sy up along ``forward``.
+    The sample at (row, col) is at sx = (2 (col + 1/2) / width - 1) scale_x,
+    sy = (1 - 2 (row + 1/2) / height) scale_y: its ray runs from ``origin`` along
+    forward + sx right + sy up (perspective) or from origin + sx right + sy up along
+    ``forward``.
 
     Args:
         origin, forward, right, up: (3,) m and unit vectors, right and up across forward.
         scale_x, scale_y: half the view's width and height at depth 1 (perspective) or in
-            metres (orthographic). perspective: bool.
+            metres (orthographic). perspective: bool. height, width: samples.
     """
 
-    def __init__(self, origin, forward, right, up, scale_x, scale_y, perspective):
+    def __init__(self, origin, forward, right, up, scale_x, scale_y, perspective, height,
+                 width):
         def f32(v):
             return tuple(float(c) for c in np.asarray(v, dtype=np.float32).ravel())
         self.origin, self.forward, self.right, self.up = (f32(v) for v in (origin, forward,
                                                                           right, up))
-        self.scale_x, self.scale_y = f32(scale_x)[0], f32(scale_y)[0]
         self.perspective = bool(perspective)
+        self.height, self.width = int(height), int(width)
+        # sx = col kx + bx, sy = row ky + by; and back: col = sx ax + cx, row = sy ay + cy
+        self.kx, self.bx, self.ky, self.by, self.ax, self.cx, self.ay, self.cy = f32([
+            2 * scale_x / width, scale_x / width - scale_x, -2 * scale_y / height,
+            scale_y - scale_y / height, width / (2 * scale_x), width / 2 - 0.5,
+            -height / (2 * scale_y), height / 2 - 0.5])
 
     @ti.func
     def vec(self, v: ti.template()):
@@ -65,11 +74,10 @@ class View:
         return ti.Vector([ti.static(v[0]), ti.static(v[1]), ti.static(v[2])], ti.f32)
 
     @ti.func
-    def ray(self, row, col, h, w):
-        """(origin, direction) of the ray of sample (row, col) of an h x w target."""
-        sx = (2.0 * (col + 0.5) / w - 1.0) * ti.static(self.scale_x)
-        sy = (1.0 - 2.0 * (row + 0.5) / h) * ti.static(self.scale_y)
-        across = sx * self.vec(self.right) + sy * self.vec(self.up)
+    def ray(self, row, col):
+        """(origin, direction) of the ray of sample (row, col)."""
+        across = ((col * ti.static(self.kx) + ti.static(self.bx)) * self.vec(self.right)
+                  + (row * ti.static(self.ky) + ti.static(self.by)) * self.vec(self.up))
         o, d = self.vec(self.origin), self.vec(self.forward)
         if ti.static(self.perspective):
             d += across
@@ -78,29 +86,28 @@ class View:
         return o, d
 
     @ti.func
-    def project(self, p, h, w):
-        """(col, row, depth) of point p on an h x w target (sample (r, c) at (c, r))."""
+    def project(self, p):
+        """(col, row, depth) of point p (sample (r, c) is at (c, r))."""
         q = ti.cast(p, ti.f32) - self.vec(self.origin)
         z = q.dot(self.vec(self.forward))
-        scale = 1.0
+        u, v = q.dot(self.vec(self.right)), q.dot(self.vec(self.up))
         if ti.static(self.perspective):
-            scale = z
-        return ti.Vector([(q.dot(self.vec(self.right)) / (scale * ti.static(self.scale_x))
-                           + 1.0) * 0.5 * w - 0.5,
-                          (1.0 - q.dot(self.vec(self.up)) / (scale * ti.static(self.scale_y)))
-                          * 0.5 * h - 0.5, z])
+            inv = 1.0 / z
+            u, v = u * inv, v * inv
+        return ti.Vector([u * ti.static(self.ax) + ti.static(self.cx),
+                          v * ti.static(self.ay) + ti.static(self.cy), z])
 
     @ti.func
-    def reach(self, p, q, radius, h):
+    def reach(self, p, q, radius):
         """Pixels from q, the projection of p, within which every point of the sphere of
         ``radius`` about p projects (plus SLACK); 1e9 where the camera is within it."""
-        out = radius / ti.static(self.scale_y) * 0.5 * h + SLACK
+        out = radius * ti.static(abs(self.ay)) + SLACK
         if ti.static(self.perspective):
             # |d(x/z)| <= radius |p - origin| / (z (z - radius)) for points within radius
             out = 1e9
             if q[2] > radius + NEAR:
                 out = (radius * (ti.cast(p, ti.f32) - self.vec(self.origin)).norm()
-                       / (q[2] * (q[2] - radius)) / ti.static(self.scale_y) * 0.5 * h + SLACK)
+                       / (q[2] * (q[2] - radius)) * ti.static(abs(self.ay)) + SLACK)
         return out
 
 
@@ -147,16 +154,20 @@ def _span(e, row, area, span):
 
 @ti.data_oriented
 class Target:
-    """A height x width buffer of the nearest hit at each sample through ``view``: keys
+    """A buffer of the nearest hit at each sample of ``view``: keys
     (``ids``: the camera) or depths (the shadow map); ``static``: what ``keep`` stored.
-    ``ground``: the height (m) of a ground plane to cast, or False."""
+    ``ground``: the height (m) of a ground plane to cast, or False. A depth-only target
+    also keeps ``nearest``: per tile of TILE x TILE samples, the least depth in it and in
+    the row and column after it (``summarise``), so that a 2 x 2 block of samples that
+    starts in a tile is no nearer than that."""
 
-    def __init__(self, view, height, width, ids, ground=False):
-        self.view, self.height, self.width, self.ids = view, int(height), int(width), ids
+    def __init__(self, view, ids, ground=False):
+        self.view, self.height, self.width, self.ids = view, view.height, view.width, ids
         self.ground, self.has_ground = ground, ground is not False
         dtype = ti.i64 if ids else ti.f32
         self.depth = ti.field(dtype, shape=(self.height, self.width))
         self.static = ti.field(dtype, shape=(self.height, self.width))
+        self.nearest = ti.field(ti.f32, shape=(-(-self.height // TILE), -(-self.width // TILE)))
 
     @ti.kernel
     def clear(self):
@@ -172,13 +183,23 @@ class Target:
     def restore(self):
         self.depth.copy_from(self.static)
 
+    @ti.kernel
+    def summarise(self):
+        """Each tile's ``nearest`` depth (class docstring)."""
+        for tr, tc in self.nearest:
+            least = FAR
+            for r in range(tr * TILE, ti.min(tr * TILE + TILE + 1, ti.static(self.height))):
+                for c in range(tc * TILE, ti.min(tc * TILE + TILE + 1, ti.static(self.width))):
+                    least = ti.min(least, self.depth[r, c])
+            self.nearest[tr, tc] = least
+
     @ti.func
     def ray(self, row, col):
-        return self.view.ray(row, col, ti.static(self.height), ti.static(self.width))
+        return self.view.ray(row, col)
 
     @ti.func
     def project(self, p):
-        return self.view.project(p, ti.static(self.height), ti.static(self.width))
+        return self.view.project(p)
 
     @ti.func
     def put(self, row, col, z, prim):
@@ -234,7 +255,7 @@ class Target:
     def sphere(self, centre, radius, prim):
         """Ray-cast a sphere at the samples its projection can cover."""
         q = self.project(centre)
-        reach = self.view.reach(centre, q, radius, ti.static(self.height))
+        reach = self.view.reach(centre, q, radius)
         if not ti.static(self.view.perspective) or q[2] > radius + NEAR:
             for r in range(ti.max(ti.cast(ti.floor(q[1] - reach), ti.i32), 0),
                            ti.min(ti.cast(ti.ceil(q[1] + reach), ti.i32),
@@ -300,7 +321,7 @@ class Target:
                         col = colliders.data[k]
                         centre = ti.cast(col.center + time * col.velocity, ti.f32)
                         q = self.project(centre)
-                        reach = self.view.reach(centre, q, radii[j], ti.static(self.height))
+                        reach = self.view.reach(centre, q, radii[j])
                         c0 = ti.max(ti.cast(ti.floor(q[0] - reach), ti.i32), 0)
                         c1 = ti.min(ti.cast(ti.ceil(q[0] + reach), ti.i32),
                                     ti.static(self.width) - 1)

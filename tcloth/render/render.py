@@ -90,7 +90,7 @@ class Renderer(Shading):
         c = self.camera
         tan_half = math.tan(math.radians(c.fov) / 2)
         self.screen = Target(View(c.eye, c.forward, c.right, c.up, tan_half * width / height,
-                                  tan_half, True), self.height * self.ss, self.width * self.ss,
+                                  tan_half, True, self.height * self.ss, self.width * self.ss),
                              ids=True, ground=self.ground)
         # the light's orthographic frame: from far along the light, across the scene
         light = np.asarray(LIGHT_DIR) / np.linalg.norm(LIGHT_DIR)
@@ -98,9 +98,8 @@ class Renderer(Shading):
         lu /= np.linalg.norm(lu)
         self.half = float(np.float32(1.5 * extent))
         self.light = View(0.5 * (lo + hi) + 4 * extent * light, -light, lu, np.cross(light, lu),
-                          self.half, self.half, False)
-        self.shadow = Target(self.light, SHADOW_MAP, SHADOW_MAP, ids=False) \
-            if self.shadows else None
+                          self.half, self.half, False, SHADOW_MAP, SHADOW_MAP)
+        self.shadow = Target(self.light, ids=False) if self.shadows else None
         self.image = ti.Vector.field(3, ti.u8, shape=(self.height, self.width))
         self.normals = ti.Vector.field(3, ti.f32, shape=scene.num_particles)
         # the cloth's triangles and where they are drawn (out of the colliders they rest on)
@@ -207,6 +206,9 @@ class Renderer(Shading):
                 with self._timed(name + ".spheres"):
                     target.spheres(x, self.sphere_ends, self.sphere_t, self.sphere_count,
                                    self.radius, self.tri_count)
+        if self.shadows:
+            with self._timed("shadow.summary"):
+                self.shadow.summarise()
         with self._timed("shade"):
             self._shade(x, time)
         with self._timed("to_numpy"):

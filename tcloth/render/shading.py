@@ -17,7 +17,7 @@ import taichi as ti
 from ..geometry import raycast
 from ..geometry.shapes import SHAPES
 from .drawables import COLLIDER_COLOUR, PARTICLE_COLOUR
-from .raster import COLLIDER_ID, GROUND_ID, SKY_ID, bead
+from .raster import COLLIDER_ID, GROUND_ID, SKY_ID, TILE, bead
 
 MESH_ID = COLLIDER_ID + (1 << 29)    # mesh colliders' triangle j has id MESH_ID + j
 SHADOW_MAP = 1024
@@ -62,7 +62,7 @@ class Shading:
             else:
                 for s in range(ss * ss):
                     colour += self._sample(x, r * ss + s // ss, c * ss + s % ss, time)
-                colour /= ss * ss
+                colour *= ti.static(1.0 / (ss * ss))
             v = ti.sqrt(ti.math.clamp(colour, 0.0, 1.0))
             self.image[r, c] = ti.cast(v * 255.0 + 0.5, ti.u8)
 
@@ -126,7 +126,7 @@ class Shading:
             p = ti.math.vec3(0.0)
             for s in range(ss * ss):
                 p += self._point(r * ss + s // ss, c * ss + s % ss)
-            p /= ss * ss
+            p *= ti.static(1.0 / (ss * ss))
             base, n = self._surface(x, k, o, d, p, time)
             if several:
                 n = ti.math.vec3(0.0)
@@ -149,9 +149,9 @@ class Shading:
                         if shadowed:
                             through += self._unshadowed(q, bias)
             if squared:
-                base = self._fade(squares / (ss * ss), (p - o).norm())
+                base = self._fade(squares * ti.static(1.0 / (ss * ss)), (p - o).norm())
             if shadowed:
-                lit *= through / (ss * ss)
+                lit *= through * ti.static(1.0 / (ss * ss))
             colour = self._shine(n, d, base, lit)
         return colour
 
@@ -274,10 +274,17 @@ class Shading:
         fy, fx = gy - ry, gx - rx
         r0, c0 = ti.cast(ry, ti.i32), ti.cast(rx, ti.i32)
         depth = s[2] - bias
-        return ((1.0 - fy) * ((1.0 - fx) * self._open(r0, c0, depth)
-                              + fx * self._open(r0, c0 + 1, depth))
-                + fy * ((1.0 - fx) * self._open(r0 + 1, c0, depth)
-                        + fx * self._open(r0 + 1, c0 + 1, depth)))
+        visible = 1.0
+        # none blocks where all four are off the map, or on it and no nearer than the
+        # nearest of their tile
+        if (-1 <= r0 < SHADOW_MAP and -1 <= c0 < SHADOW_MAP
+                and not (r0 >= 0 and c0 >= 0
+                         and self.shadow.nearest[r0 // TILE, c0 // TILE] >= depth)):
+            visible = ((1.0 - fy) * ((1.0 - fx) * self._open(r0, c0, depth)
+                                     + fx * self._open(r0, c0 + 1, depth))
+                       + fy * ((1.0 - fx) * self._open(r0 + 1, c0, depth)
+                               + fx * self._open(r0 + 1, c0 + 1, depth)))
+        return visible
 
     @ti.func
     def _open(self, r, c, depth):
@@ -297,13 +304,13 @@ class Shading:
         cell = 0
         for a in ti.static(range(3)):
             if a != skip:
-                cell += ti.cast(ti.floor(p[a] / ti.static(self.checker)), ti.i32)
+                cell += ti.cast(ti.floor(p[a] * ti.static(1.0 / self.checker)), ti.i32)
         return ti.math.vec3(0.80) if cell % 2 == 0 else ti.math.vec3(0.62)
 
     @ti.func
     def _fade(self, base, t):
         """Squares' colour ``base`` at distance t, faded to their mean before they alias."""
-        fade = 1.0 / (1.0 + 0.02 * t / ti.static(self.checker))
+        fade = 1.0 / (1.0 + t * ti.static(0.02 / self.checker))
         return fade * base + (1.0 - fade) * ti.math.vec3(0.71)
 
     @ti.func
