@@ -64,6 +64,38 @@ def test_depth_test_shows_the_nearer_triangle_and_is_bit_identical(f32):
         assert np.array_equal(img, again)
 
 
+def test_triangles_that_share_edges_leave_no_sample_between_them(f32):
+    """A flat square cloth whose inner particles are jittered within its plane, seen at a
+    slant: its triangles tile the square exactly, so every sample whose ray meets the
+    plane inside the square (an independent ray-plane test, half a sample's width in
+    from its edges) sees a triangle of it, and none outside it does."""
+    scene = tcloth.Scene(gravity=(0, 0, 0))
+    cloth = scene.add_cloth(resolution=(24, 24), size=(1, 1), center=(0, 0, 0), plane="xz",
+                            structural=None, shear=None, flexion=None, pinned=[])
+    x = scene.positions.copy()
+    inner = cloth.particles[1:-1, 1:-1].ravel()
+    x[inner, ::2] += np.random.default_rng(3).uniform(-0.012, 0.012, (len(inner), 2))
+    sim = tcloth.Simulator(scene)
+    sim.set_state(positions=x)
+    cam = Camera((0.7, 0.9, 1.3), (0.05, 0.0, 0.0), fov=50.0)
+    width, height = 160, 120
+    r = tcloth.Renderer(sim, width, height, camera=cam, supersample=1, ground=False,
+                        shadows=False)
+    r.render()
+    cloth_seen = r.ids() < r.tri_count
+    col, row = np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5)
+    t = np.tan(np.radians(cam.fov) / 2)
+    d = (cam.forward + ((2 * col / width - 1) * t * width / height)[..., None] * cam.right
+         + ((1 - 2 * row / height) * t)[..., None] * cam.up)
+    hit = cam.eye + (-cam.eye[1] / np.minimum(d[..., 1], -1e-9))[..., None] * d
+    # half the distance to the next samples' hits
+    margin = 0.5 * np.linalg.norm(np.gradient(hit, axis=(0, 1)), axis=(0, -1))
+    edge = np.abs(hit[..., [0, 2]]).max(-1)
+    inside, outside = edge < 0.5 - margin, edge > 0.5 + margin
+    assert cloth_seen[inside].all() and not cloth_seen[outside].any()
+    assert inside.sum() > 0.1 * width * height
+
+
 @pytest.mark.parametrize("from_above", [True, False])
 def test_cloth_covers_its_projected_box_and_shows_the_side_facing_the_camera(f32, from_above):
     scene = tcloth.Scene()

@@ -7,20 +7,21 @@ Depth is the view's z, a point's distance along the view's forward direction: a 
 parameter at the point where its direction is forward + sx right + sy up (perspective:
 not a unit vector) or forward (orthographic), so that hits on one ray compare by depth.
 
-  - Triangles are rasterised: each is projected and the samples of its bounding box are
-    tested against its three edge functions in the target's (column, row) plane, edges
-    included, each edge evaluated from the same one of its ends in both triangles that
-    share it (no sample falls between them). The depth there is interpolated, of 1/z in
-    perspective (linear on the screen). So a triangle costs what it covers.
+  - Triangles are rasterised: each is projected and the samples of each of its rows
+    between its edges (and one more each side) are tested against its three edge
+    functions in the target's (column, row) plane, edges included, each edge evaluated
+    from the same one of its ends in both triangles that share it (no sample falls
+    between them). The depth there is interpolated, of 1/z in perspective (linear on the
+    screen). So a triangle costs what it covers.
   - Spheres and colliders are ray-cast at the samples of the projected box of a bounding
     sphere (``Target.sphere``); colliders that never move, and the ground, once at every
     sample (``cast``).
 
 A sample's hit is kept with ``atomic_min``: in the camera's target the key of
 ``raycast.key`` (depth bits over the primitive's id: the nearest wins, ties go to the
-smaller id, whatever the order of the threads); in the shadow map the depth alone. What
-the geometry that never moves leaves in a target is drawn once (``keep``) and is where
-every frame starts (``restore``).
+smaller id, whatever the order of the threads); in the shadow map the depth alone, with
+the least of each tile's (``summarise``). What the geometry that never moves leaves in a
+target is drawn once (``keep``) and is where every frame starts (``restore``).
 """
 import numpy as np
 import taichi as ti
