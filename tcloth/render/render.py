@@ -24,7 +24,8 @@ import taichi as ti
 
 from .. import runtime
 from .camera import Camera
-from .drawables import DrawnCloth, cloth_palette, collider_moves, particle_spheres
+from .drawables import (COLLIDER_COLOUR, DrawnCloth, cloth_palette, collider_moves,
+                        particle_spheres)
 from ..errors import SceneError
 from .framing import ground_and_checker
 from .raster import Target, View
@@ -101,29 +102,26 @@ class Renderer(Shading):
                           self.half, self.half, False, SHADOW_MAP, SHADOW_MAP)
         self.shadow = Target(self.light, ids=False) if self.shadows else None
         self.image = ti.Vector.field(3, ti.u8, shape=(self.height, self.width))
-        self.normals = ti.Vector.field(3, ti.f32, shape=scene.num_particles)
         # the cloth's triangles and where they are drawn (out of the colliders they rest on)
-        self.cloth = DrawnCloth(self.colliders, np.concatenate(tris) if self.tri_count
-                                else np.zeros((0, 3), np.int32), scene.num_particles)
-        self.tris = self.cloth.tris
-        self.faces = ti.Vector.field(3, ti.f32, shape=max(self.tri_count, 1))   # unit normals
-        self.tri_cloth = ti.field(ti.i32, shape=max(self.tri_count, 1))
-        self.palette = ti.Vector.field(3, ti.f32, shape=(max(len(tris), 1), 2))
-        if self.tri_count:
-            self.tri_cloth.from_numpy(np.concatenate(
-                [np.full(len(t), k, dtype=np.int32) for k, t in enumerate(tris)]))
-            self.palette.from_numpy(palette.astype(np.float32))
+        cloth_tris = np.concatenate(tris) if self.tri_count else np.zeros((0, 3), np.int32)
+        self.cloth = DrawnCloth(self.colliders, cloth_tris, scene.num_particles)
+        self.particles = scene.num_particles
+        mesh_tris, mesh_rows, mesh_moving = self._colliders(
+            [scene.colliders[i] for i in self.colliders.rows])
+        self._triangles(cloth_tris, [np.full(len(t), k) for k, t in enumerate(tris)],
+                        np.concatenate([palette, [(COLLIDER_COLOUR, COLLIDER_COLOUR)]]),
+                        mesh_tris, mesh_rows, mesh_moving)
         self.sphere_ends = ti.Vector.field(2, ti.i32, shape=max(self.sphere_count, 1))
         self.sphere_t = ti.field(ti.f32, shape=max(self.sphere_count, 1))
         if self.sphere_count:
             self.sphere_ends.from_numpy(spheres[:, :2].astype(np.int32))
             self.sphere_t.from_numpy(spheres[:, 2].astype(np.float32))
-        self._colliders([scene.colliders[i] for i in self.colliders.rows])
         self._static_ready = False
 
     def _colliders(self, rows):
-        """Which of the collider table's ``rows`` (scene dicts) move, and the mesh
-        colliders' triangles in the world: the static ones' first."""
+        """Which of the collider table's ``rows`` (scene dicts) move; (the mesh colliders'
+        triangles (corners: the mesh store's vertices), the static ones' first; the row of
+        each store vertex, whether it moves)."""
         moving = [collider_moves(c) for c in rows]
         self.row_moving = ti.field(ti.i32, shape=max(len(rows), 1))
         if rows:
@@ -145,19 +143,36 @@ class Renderer(Shading):
             lists[moving[k]].append(r["tris"] + r["vert_first"])
             vertex_row.append(np.full(len(r["v"]), k))
             vertex_moving.append(np.full(len(r["v"]), moving[k]))
-        self.mesh_vertices = sum(len(v) for v in vertex_row)
         self.mesh_static = sum(len(t) for t in lists[0])
-        self.mesh_count = self.mesh_static + sum(len(t) for t in lists[1])
-        self.mesh_x = ti.Vector.field(3, ti.f32, shape=max(self.mesh_vertices, 1))
-        self.mesh_n = ti.Vector.field(3, ti.f32, shape=max(self.mesh_vertices, 1))
+        return ([np.zeros((0, 3), np.int64)] + lists[0] + lists[1],
+                [np.zeros(0, np.int64)] + vertex_row, [np.zeros(0, np.int64)] + vertex_moving)
+
+    def _triangles(self, cloth_tris, cloth_of, palette, mesh_tris, mesh_rows, mesh_moving):
+        """Every triangle drawn, in one list: the cloth's (``tri_count``; corners: the
+        particles), then the mesh colliders' (``mesh_count``; corners: the mesh store's
+        vertices, after the particles); where they are drawn (``vertices``, ``normals``),
+        their unit normals (``faces``) and colours (``palette`` rows, ``surface``: the
+        cloth's, or the colliders' last)."""
+        mesh_tris = np.concatenate(mesh_tris) + self.particles
+        self.mesh_count = len(mesh_tris)
+        self.mesh_vertices = sum(len(v) for v in mesh_rows)
+        count = self.tri_count + self.mesh_count
+        self.corners = ti.Vector.field(3, ti.i32, shape=max(count, 1))
+        self.faces = ti.Vector.field(3, ti.f32, shape=max(count, 1))
+        self.surface = ti.field(ti.i32, shape=max(count, 1))
+        self.vertices = ti.Vector.field(3, ti.f32, shape=self.particles + self.mesh_vertices)
+        self.normals = ti.Vector.field(3, ti.f32, shape=self.particles + self.mesh_vertices)
         self.mesh_row = ti.field(ti.i32, shape=max(self.mesh_vertices, 1))
         self.mesh_moving = ti.field(ti.i32, shape=max(self.mesh_vertices, 1))
-        self.mesh_tris = ti.Vector.field(3, ti.i32, shape=max(self.mesh_count, 1))
-        self.mesh_faces = ti.Vector.field(3, ti.f32, shape=max(self.mesh_count, 1))
-        if records:
-            self.mesh_row.from_numpy(np.concatenate(vertex_row).astype(np.int32))
-            self.mesh_moving.from_numpy(np.concatenate(vertex_moving).astype(np.int32))
-            self.mesh_tris.from_numpy(np.concatenate(lists[0] + lists[1]).astype(np.int32))
+        self.palette = ti.Vector.field(3, ti.f32, shape=(len(palette), 2))
+        self.palette.from_numpy(palette.astype(np.float32))
+        if count:
+            self.corners.from_numpy(np.concatenate([cloth_tris, mesh_tris]).astype(np.int32))
+            self.surface.from_numpy(np.concatenate(
+                cloth_of + [np.full(self.mesh_count, len(palette) - 1)]).astype(np.int32))
+        if self.mesh_vertices:
+            self.mesh_row.from_numpy(np.concatenate(mesh_rows).astype(np.int32))
+            self.mesh_moving.from_numpy(np.concatenate(mesh_moving).astype(np.int32))
 
     # -- per frame ---------------------------------------------------------------------------
     @contextlib.contextmanager
@@ -187,7 +202,7 @@ class Renderer(Shading):
             with self._timed("cloth.drawn"):
                 self.cloth.update(x, time)
             with self._timed("cloth.normals"):
-                self._vertex_normals(self.cloth.x)
+                self._cloth_surface()
         for name, target in targets:
             with self._timed(name + ".static"):
                 target.restore()
@@ -195,13 +210,14 @@ class Renderer(Shading):
                 with self._timed(name + ".colliders"):
                     target.cast_moving(self.colliders, self.flying_rows, self.flying_radii,
                                        self.flying, time)
+            first = self.tri_count + self.mesh_static
             if self.mesh_count > self.mesh_static:
                 with self._timed(name + ".meshes"):
-                    target.triangles(self.mesh_x, self.mesh_tris, self.mesh_static,
-                                     self.mesh_count, MESH_ID)
+                    target.triangles(self.vertices, self.corners, first,
+                                     self.tri_count + self.mesh_count, MESH_ID - self.tri_count)
             if self.tri_count:
                 with self._timed(name + ".cloth"):
-                    target.triangles(self.cloth.x, self.tris, 0, self.tri_count, 0)
+                    target.triangles(self.vertices, self.corners, 0, self.tri_count, 0)
             if self.sphere_count:
                 with self._timed(name + ".spheres"):
                     target.spheres(x, self.sphere_ends, self.sphere_t, self.sphere_count,
@@ -224,7 +240,8 @@ class Renderer(Shading):
             if self.colliders.count or target.ground is not False:
                 target.cast(self.colliders, self.row_moving, time)
             if self.mesh_static:
-                target.triangles(self.mesh_x, self.mesh_tris, 0, self.mesh_static, MESH_ID)
+                target.triangles(self.vertices, self.corners, self.tri_count,
+                                 self.tri_count + self.mesh_static, MESH_ID - self.tri_count)
             target.keep()
         self._static_ready = True
 
@@ -243,26 +260,31 @@ class Renderer(Shading):
             if moving == 0 or self.mesh_moving[v] != 0:
                 p, n = self.colliders.meshes.world_vertex(
                     self.colliders.data[self.mesh_row[v]], v, time)
-                self.mesh_x[v] = ti.cast(p, ti.f32)
-                self.mesh_n[v] = ti.cast(n, ti.f32)
-        for j in range(self.mesh_static if moving else 0, self.mesh_count):
-            i = self.mesh_tris[j]
-            a = self.mesh_x[i[0]]
-            self.mesh_faces[j] = (self.mesh_x[i[1]] - a).cross(self.mesh_x[i[2]] - a).normalized()
+                self.vertices[self.particles + v] = ti.cast(p, ti.f32)
+                self.normals[self.particles + v] = ti.cast(n, ti.f32)
+        for k in range(self.tri_count + self.mesh_static * moving,
+                       self.tri_count + self.mesh_count):
+            self.faces[k] = self._face(k).normalized()
 
     @ti.kernel
-    def _vertex_normals(self, x: ti.template()):
-        """The cloth triangles' unit normals and the vertex normals: the sums of their
-        normals of length twice their area about each vertex."""
-        for p in self.normals:
+    def _cloth_surface(self):
+        """The cloth where it is drawn, its triangles' unit normals and its vertex
+        normals: the sums of their normals of length twice their area about each vertex."""
+        for p in range(self.particles):
+            self.vertices[p] = self.cloth.x[p]
             self.normals[p] = ti.Vector.zero(ti.f32, 3)
         for k in range(self.tri_count):
-            a, b, c = self.tris[k][0], self.tris[k][1], self.tris[k][2]
-            n = ti.cast((x[b] - x[a]).cross(x[c] - x[a]), ti.f32)
+            n = self._face(k)
             self.faces[k] = n.normalized()
-            self.normals[a] += n
-            self.normals[b] += n
-            self.normals[c] += n
+            for j in ti.static(range(3)):
+                self.normals[self.corners[k][j]] += n
+
+    @ti.func
+    def _face(self, k):
+        """Triangle k's normal, of length twice its area."""
+        i = self.corners[k]
+        a = self.vertices[i[0]]
+        return (self.vertices[i[1]] - a).cross(self.vertices[i[2]] - a)
 
 
 # each simulator's last Renderer and the arguments it was made for (``renderer_for``)

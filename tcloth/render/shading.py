@@ -55,21 +55,31 @@ class Shading:
         """Each pixel's colour (module docstring), gamma 2 (square root) to bytes."""
         ss = ti.static(self.ss)
         for r, c in self.image:
-            colour = ti.math.vec3(0.0)
             seen = self._one_surface(r, c, time)
+            runs = ss * ss            # a shading of each sample, or one of them all
             if seen:
-                colour = self._pixel(x, r, c, time, seen == 2)
-            else:
-                for s in range(ss * ss):
-                    colour += self._sample(x, r * ss + s // ss, c * ss + s % ss, time)
-                colour *= ti.static(1.0 / (ss * ss))
+                runs = 1
+            colour = ti.math.vec3(0.0)
+            for run in range(runs):
+                colour += self._shaded(x, r, c, run, ss * ss // runs, seen == 2, time)
+            colour *= ti.select(seen, 1.0, ti.static(1.0 / (ss * ss)))
             v = ti.sqrt(ti.math.clamp(colour, 0.0, 1.0))
             self.image[r, c] = ti.cast(v * 255.0 + 0.5, ti.u8)
 
     @ti.func
-    def _front(self, k, ray):
-        """Whether cloth triangle k shows its front to a ray along ``ray``."""
-        return self.faces[k].dot(ray) < 0.0
+    def _triangle(self, k):
+        """The index in the renderer's list of triangles of the one of id k, or -1."""
+        j = -1
+        if k < self.tri_count:
+            j = k
+        elif MESH_ID <= k < MESH_ID + ti.static(self.mesh_count):
+            j = k - MESH_ID + self.tri_count
+        return j
+
+    @ti.func
+    def _front(self, j, ray):
+        """Whether triangle j shows its front to a ray along ``ray``."""
+        return self.faces[j].dot(ray) < 0.0
 
     @ti.func
     def _one_surface(self, r, c, time):
@@ -81,10 +91,8 @@ class Shading:
         _, ray0 = self.screen.ray(r * ss, c * ss)
         collider = COLLIDER_ID <= k0 < MESH_ID and not self._squared(k0)
         n0 = ti.math.vec3(0.0)
-        if collider:
-            n0 = self._collider_normal(k0 - COLLIDER_ID, self._point(r * ss, c * ss), time)
         seen = 1
-        for s in range(1, ss * ss):
+        for s in range(ss * ss):
             row, col = r * ss + s // ss, c * ss + s % ss
             k = raycast.key_id(self.screen.depth[row, col])
             if seen and k != k0:
@@ -92,41 +100,45 @@ class Shading:
                 seen = 2 if self._smooth(k, k0, ray, ray0) else 0
             elif seen and collider:
                 n = self._collider_normal(k0 - COLLIDER_ID, self._point(row, col), time)
-                seen = 1 if n.dot(n0) > SMOOTH else 0
+                if s == 0:
+                    n0 = n
+                elif n.dot(n0) <= SMOOTH:
+                    seen = 0
         return seen
 
     @ti.func
     def _smooth(self, k, k0, ray, ray0):
         """Whether primitives k and k0, seen along ray and ray0, are one smooth surface:
-        triangles of one cloth (showing the ray the same side) or of the mesh colliders
-        that share a corner, their planes within SMOOTH of each other."""
+        triangles of one cloth or mesh that share a corner, show the rays the same side
+        and lie within SMOOTH of each other's plane."""
         smooth = False
-        if k < self.tri_count and k0 < self.tri_count:
-            smooth = (self.tri_cloth[k] == self.tri_cloth[k0]
-                      and _joined(self.tris[k], self.tris[k0])
-                      and self.faces[k].dot(self.faces[k0]) > SMOOTH
-                      and self._front(k, ray) == self._front(k0, ray0))
-        elif self._meshed(k) and self._meshed(k0):
-            j, j0 = k - MESH_ID, k0 - MESH_ID
-            smooth = (_joined(self.mesh_tris[j], self.mesh_tris[j0])
-                      and self.mesh_faces[j].dot(self.mesh_faces[j0]) > SMOOTH)
+        j, j0 = self._triangle(k), self._triangle(k0)
+        if j >= 0 and j0 >= 0:
+            smooth = (self.surface[j] == self.surface[j0]
+                      and _joined(self.corners[j], self.corners[j0])
+                      and self.faces[j].dot(self.faces[j0]) > SMOOTH
+                      and self._front(j, ray) == self._front(j0, ray0))
         return smooth
 
     @ti.func
-    def _pixel(self, x, r, c, time, several):
-        """The colour of a pixel whose samples see one surface (``several`` triangles of
-        it: its normal the mean of theirs at the samples)."""
+    def _shaded(self, x, r, c, run, count, several, time):
+        """The colour of ``count`` samples of pixel (r, c) from sample run * count on (one,
+        or all of them seeing one surface): the colour of what they see at their mean
+        point (the squares' averaged over them) seen along their middle ray, lit there
+        with the shadow map read at each of them (``several`` triangles: the normal the
+        mean of theirs at the samples)."""
         ss = ti.static(self.ss)
-        k = raycast.key_id(self.screen.depth[r * ss, c * ss])
-        middle = 0.5 * (ss - 1)
-        o, ray = self.screen.ray(r * ss + middle, c * ss + middle)
+        first = run * count
+        k = raycast.key_id(self.screen.depth[r * ss + first // ss, c * ss + first % ss])
+        middle = ti.select(count > 1, 0.5 * (ss - 1), 0.0)
+        o, ray = self.screen.ray(r * ss + first // ss + middle, c * ss + first % ss + middle)
         d = ray.normalized()
         colour = _sky(d)
         if k != SKY_ID:
             p = ti.math.vec3(0.0)
-            for s in range(ss * ss):
+            for s in range(first, first + count):
                 p += self._point(r * ss + s // ss, c * ss + s % ss)
-            p *= ti.static(1.0 / (ss * ss))
+            p *= 1.0 / count
             base, n = self._surface(x, k, o, d, p, time)
             if several:
                 n = ti.math.vec3(0.0)
@@ -141,7 +153,7 @@ class Shading:
             bias = self._bias(lit)
             squares, through = ti.math.vec3(0.0), 0.0
             if squared or shadowed:
-                for s in range(ss * ss):
+                for s in range(first, first + count):
                     q = self._point(r * ss + s // ss, c * ss + s % ss)
                     if squared:
                         squares += self._square(q, n)
@@ -149,52 +161,24 @@ class Shading:
                         if shadowed:
                             through += self._unshadowed(q, bias)
             if squared:
-                base = self._fade(squares * ti.static(1.0 / (ss * ss)), (p - o).norm())
+                base = self._fade(squares * (1.0 / count), (p - o).norm())
             if shadowed:
-                lit *= through * ti.static(1.0 / (ss * ss))
+                lit *= through * (1.0 / count)
             colour = self._shine(n, d, base, lit)
         return colour
 
     @ti.func
     def _triangle_normal(self, row, col):
-        """The shading normal, facing the ray, where sample (row, col) hits a cloth or
-        mesh triangle."""
+        """The shading normal, facing the ray, where sample (row, col) hits a triangle."""
         o, ray = self.screen.ray(row, col)
-        k = raycast.key_id(self.screen.depth[row, col])
-        n = ti.math.vec3(0.0)
-        if k < self.tri_count:
-            n = self._facet(self.cloth.x, self.normals, self.tris[k], o, ray)
-        else:
-            n = self._facet(self.mesh_x, self.mesh_n, self.mesh_tris[k - MESH_ID], o, ray)
-        return _facing(n, ray)
+        j = self._triangle(raycast.key_id(self.screen.depth[row, col]))
+        return _facing(self._facet(j, o, ray), ray)
 
     @ti.func
     def _point(self, row, col):
         """Where sample (row, col) hits (not the sky)."""
         o, ray = self.screen.ray(row, col)
         return o + raycast.key_t(self.screen.depth[row, col]) * ray
-
-    @ti.func
-    def _sample(self, x, row, col, time):
-        """The colour of one sample."""
-        o, ray = self.screen.ray(row, col)
-        d = ray.normalized()
-        key = self.screen.depth[row, col]
-        k = raycast.key_id(key)
-        colour = _sky(d)
-        if k != SKY_ID:
-            p = o + raycast.key_t(key) * ray
-            base, n = self._surface(x, k, o, d, p, time)
-            if self._squared(k):
-                base = self._fade(self._square(p, n), (p - o).norm())
-            n = _facing(n, d)
-            colour = self._shine(n, d, base, self._lit(p, n))
-        return colour
-
-    @ti.func
-    def _meshed(self, k):
-        """Whether id k is a mesh collider's triangle."""
-        return MESH_ID <= k < MESH_ID + ti.static(self.mesh_count)
 
     @ti.func
     def _squared(self, k):
@@ -207,33 +191,34 @@ class Shading:
         ray o + t d; the squared ones' colour is the caller's."""
         base = ti.math.vec3(COLLIDER_COLOUR)
         n = ti.math.vec3(0.0, 1.0, 0.0)
-        if k < self.tri_count:
-            n = self._facet(self.cloth.x, self.normals, self.tris[k], o, d)
-            base = self.palette[self.tri_cloth[k], 0 if self._front(k, d) else 1]
+        j = self._triangle(k)
+        if j >= 0:
+            n = self._facet(j, o, d)
+            base = self.palette[self.surface[j], 0 if self._front(j, d) else 1]
         elif k < COLLIDER_ID:
             n = (p - bead(x, self.sphere_ends, self.sphere_t, k - self.tri_count)).normalized()
             base = ti.math.vec3(PARTICLE_COLOUR)
-        elif self._meshed(k):
-            n = self._facet(self.mesh_x, self.mesh_n, self.mesh_tris[k - MESH_ID], o, d)
         elif k != GROUND_ID:
             n = self._collider_normal(k - COLLIDER_ID, p, time)
         return base, n
 
     @ti.func
-    def _facet(self, x, normals, i, o, d):
-        """The shading normal of triangle i (corner indices into x and normals) where the
-        ray o + t d meets its plane: the normals interpolated there (the triangle's own
-        where they cancel)."""
-        a, b, c = x[i[0]], x[i[1]], x[i[2]]
+    def _facet(self, j, o, d):
+        """The shading normal of triangle j where the ray o + t d meets its plane: its
+        corners' normals interpolated there (the triangle's own where they cancel)."""
+        i = self.corners[j]
+        a, b, c = self.vertices[i[0]], self.vertices[i[1]], self.vertices[i[2]]
         hit = raycast.plane_hit(o, d, a, b, c)
         u, v = hit[1], hit[2]
-        ns = (1.0 - u - v) * normals[i[0]] + u * normals[i[1]] + v * normals[i[2]]
+        ns = ((1.0 - u - v) * self.normals[i[0]] + u * self.normals[i[1]]
+              + v * self.normals[i[2]])
         return ns.normalized() if ns.norm() > 1e-20 else (b - a).cross(c - a).normalized()
 
     @ti.func
     def _shine(self, n, d, base, lit):
         """Colour ``base`` seen along d, its normal n facing the ray: hemisphere ambient,
-        ``lit`` (the direct light reaching it: ``_lit``) and a little specular."""
+        ``lit`` (the direct light reaching it: Lambert times the part the shadow map lets
+        through) and a little specular."""
         half = (self._light() - d).normalized()
         spec = ti.max(half.dot(n), 0.0)
         for _ in ti.static(range(5)):
@@ -244,16 +229,6 @@ class Shading:
     @ti.func
     def _light(self):
         return -self.light.vec(self.light.forward)
-
-    @ti.func
-    def _lit(self, p, n):
-        """Direct light reaching point p with normal n: Lambert times the part of it that
-        the shadow map lets through (``_unshadowed``)."""
-        lit = ti.max(n.dot(self._light()), 0.0)
-        if ti.static(self.shadows):
-            if lit > 0.0:
-                lit *= self._unshadowed(p, self._bias(lit))
-        return lit
 
     @ti.func
     def _bias(self, cos_l):
@@ -280,10 +255,11 @@ class Shading:
         if (-1 <= r0 < SHADOW_MAP and -1 <= c0 < SHADOW_MAP
                 and not (r0 >= 0 and c0 >= 0
                          and self.shadow.nearest[r0 // TILE, c0 // TILE] >= depth)):
-            visible = ((1.0 - fy) * ((1.0 - fx) * self._open(r0, c0, depth)
-                                     + fx * self._open(r0, c0 + 1, depth))
-                       + fy * ((1.0 - fx) * self._open(r0 + 1, c0, depth)
-                               + fx * self._open(r0 + 1, c0 + 1, depth)))
+            visible = 0.0
+            for j in range(4):
+                dr, dc = j // 2, j % 2
+                visible += (ti.select(dr, fy, 1.0 - fy) * ti.select(dc, fx, 1.0 - fx)
+                            * self._open(r0 + dr, c0 + dc, depth))
         return visible
 
     @ti.func

@@ -274,8 +274,8 @@ def record(sim, path, frames=240, steps_per_frame=10, fps=30, width=640, height=
     stats = _stats(frames, path, steps_per_frame, times, images)
     if progress:
         done = [f"simulation {stats['median_sim_ms']:.1f} ms/frame ({steps_per_frame} "
-                f"step{'s' if steps_per_frame > 1 else ''}, "
-                f"{stats['sim_ms_per_step']:.3f} ms/step)"]
+                f"step{'s' if steps_per_frame > 1 else ''} of "
+                f"{stats['median_sim_ms'] / steps_per_frame:.3f} ms)"]
         if images:
             done += [f"render {stats['median_render_ms']:.1f} ms/frame",
                      f"encode {stats['median_encode_ms']:.1f} ms/frame"]
