@@ -2,7 +2,8 @@
 encoders and the rate end to end.
 
 For each shipped scene (or --scenes a,b): build it with its default parameters, simulate
---settle frames with its CONFIG (integrator, dt, steps a frame), then
+--settle frames with its CONFIG (integrator, dt, steps a frame; ms a frame, wall and CPU
+time on all threads), then
   - render that state --frames times (--width x --height, --supersample): ms a frame in
     all and by pass (``Renderer.timings``; a renderer without them gives its total), and
     the CPU time a frame takes on all threads together (on a shared machine the wall
@@ -30,7 +31,8 @@ import time
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 SCENES = os.path.join(HERE, "..", "scenes")
-SHOWN = ("sim_ms", "render_ms", "render_cpu_ms", "png_ms", "h264_ms", "fps_end_to_end")
+SHOWN = ("sim_ms", "sim_cpu_ms", "render_ms", "render_cpu_ms", "png_ms", "h264_ms",
+         "fps_end_to_end")
 
 
 def scene_names():
@@ -51,11 +53,12 @@ def measure(name, args):
     dt, steps = timing(cfg, scene)
     sim = tcloth.Simulator(scene, cfg["integrator"], dt=dt, **cfg["options"])
     out = {"steps": steps}
-    sim_s = []
+    sim_s, sim_cpu = [], []
     for _ in range(args.settle):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         sim.step(steps)
         sim_s.append(time.perf_counter() - t0)
+        sim_cpu.append(time.process_time() - c0)
     options = dict(width=args.width, height=args.height, camera=cfg["camera"],
                    supersample=args.supersample, **cfg["render"])
     renderer = renderer_for(sim, **options)
@@ -68,6 +71,7 @@ def measure(name, args):
         totals.append(time.perf_counter() - t0)
         cpu.append(time.process_time() - c0)
     out["sim_ms"] = 1e3 * statistics.median(sim_s[1:] or sim_s)
+    out["sim_cpu_ms"] = 1e3 * statistics.median(sim_cpu[1:] or sim_cpu)
     out["render_ms"] = 1e3 * statistics.median(totals)
     out["render_cpu_ms"] = 1e3 * statistics.median(cpu)
     for key, seconds in renderer.timings.items():
