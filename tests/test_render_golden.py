@@ -10,7 +10,6 @@ import sys
 import numpy as np
 import pytest
 
-import tcloth
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "tools"))
