@@ -3,6 +3,7 @@ import glob
 import os
 import subprocess
 import sys
+import threading
 
 import imageio_ffmpeg
 import numpy as np
@@ -11,7 +12,8 @@ import pytest
 import tcloth
 from tcloth import Camera
 from tcloth.render.framing import ground_and_checker
-from tcloth.render.render import COLLIDER_ID, LIGHT_DIR
+from tcloth.render.raster import COLLIDER_ID
+from tcloth.render.render import LIGHT_DIR
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 RED, GREEN, BLUE = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)
@@ -62,6 +64,38 @@ def test_depth_test_shows_the_nearer_triangle_and_is_bit_identical(f32):
         assert np.array_equal(img, again)
 
 
+def test_triangles_that_share_edges_leave_no_sample_between_them(f32):
+    """A flat square cloth whose inner particles are jittered within its plane, seen at a
+    slant: its triangles tile the square exactly, so every sample whose ray meets the
+    plane inside the square (an independent ray-plane test, half a sample's width in
+    from its edges) sees a triangle of it, and none outside it does."""
+    scene = tcloth.Scene(gravity=(0, 0, 0))
+    cloth = scene.add_cloth(resolution=(24, 24), size=(1, 1), center=(0, 0, 0), plane="xz",
+                            structural=None, shear=None, flexion=None, pinned=[])
+    x = scene.positions.copy()
+    inner = cloth.particles[1:-1, 1:-1].ravel()
+    x[inner, ::2] += np.random.default_rng(3).uniform(-0.012, 0.012, (len(inner), 2))
+    sim = tcloth.Simulator(scene)
+    sim.set_state(positions=x)
+    cam = Camera((0.7, 0.9, 1.3), (0.05, 0.0, 0.0), fov=50.0)
+    width, height = 160, 120
+    r = tcloth.Renderer(sim, width, height, camera=cam, supersample=1, ground=False,
+                        shadows=False)
+    r.render()
+    cloth_seen = r.ids() < r.tri_count
+    col, row = np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5)
+    t = np.tan(np.radians(cam.fov) / 2)
+    d = (cam.forward + ((2 * col / width - 1) * t * width / height)[..., None] * cam.right
+         + ((1 - 2 * row / height) * t)[..., None] * cam.up)
+    hit = cam.eye + (-cam.eye[1] / np.minimum(d[..., 1], -1e-9))[..., None] * d
+    # half the distance to the next samples' hits
+    margin = 0.5 * np.linalg.norm(np.gradient(hit, axis=(0, 1)), axis=(0, -1))
+    edge = np.abs(hit[..., [0, 2]]).max(-1)
+    inside, outside = edge < 0.5 - margin, edge > 0.5 + margin
+    assert cloth_seen[inside].all() and not cloth_seen[outside].any()
+    assert inside.sum() > 0.1 * width * height
+
+
 @pytest.mark.parametrize("from_above", [True, False])
 def test_cloth_covers_its_projected_box_and_shows_the_side_facing_the_camera(f32, from_above):
     scene = tcloth.Scene()
@@ -99,6 +133,61 @@ def test_record_writes_mp4_with_requested_frames_and_size(f32, tmp_path):
     assert meta["size"] == (96, 64) and len(frames) == 7
     assert all(len(f) == 96 * 64 * 3 for f in frames)
     assert not glob.glob(str(tmp_path / "*partial*"))
+
+
+def writer_threads():
+    return [t for t in threading.enumerate() if t.name == "tcloth frame writer"]
+
+
+def test_an_encoder_error_ends_the_run_and_leaves_nothing_partial(f32, tmp_path, monkeypatch):
+    """Frames are encoded on a thread of their own: its error (a full disk at the third
+    frame) comes back to the caller, the run stops, the thread ends and no partial
+    output is left."""
+    from tcloth.render import video
+    written = []
+
+    def write_png(path, image):
+        if len(written) == 2:
+            raise OSError("no space left on device")
+        written.append(path)
+    monkeypatch.setattr(video, "write_png", write_png)
+    sim = tcloth.Simulator(small_scene(), dt=1e-3)
+    with pytest.raises(OSError, match="no space left"):
+        tcloth.record(sim, str(tmp_path / "frames"), frames=40, steps_per_frame=1, width=32,
+                      height=24, progress=False)
+    assert len(written) == 2 and sim.num_steps < 39
+    assert os.listdir(tmp_path) == [] and not writer_threads()
+
+
+def test_ctrl_c_keeps_the_frames_made_so_far(f32, tmp_path, monkeypatch):
+    """Ctrl-C during the fifth frame's steps: the four frames before are written out
+    whole under the output's name, the interrupt raised again saying so."""
+    sim = tcloth.Simulator(small_scene(), dt=1e-3)
+    step = sim.step
+
+    def interrupted(n=1):
+        if sim.num_steps == 3:
+            raise KeyboardInterrupt
+        step(n)
+    monkeypatch.setattr(sim, "step", interrupted)
+    with pytest.raises(KeyboardInterrupt, match="Kept 4 good frames"):
+        tcloth.record(sim, str(tmp_path / "frames"), frames=10, steps_per_frame=1, width=32,
+                      height=24, progress=False)
+    assert sorted(os.listdir(tmp_path / "frames")) == [f"frame_0000{k}.png" for k in range(4)]
+    assert os.listdir(tmp_path) == ["frames"] and not writer_threads()
+
+
+def test_the_command_line_says_what_ctrl_c_kept(capsys):
+    def interrupted():
+        raise KeyboardInterrupt("Interrupted. Kept 4 good frames in out/x.mp4.")
+    assert tcloth.app.cli._guarded(interrupted, verbose=False) == 130
+    assert capsys.readouterr().err == "tcloth: Interrupted. Kept 4 good frames in out/x.mp4.\n"
+
+
+def small_scene():
+    scene = tcloth.Scene()
+    scene.add_cloth(resolution=(4, 4))
+    return scene
 
 
 def test_record_png_folder_and_odd_size_refused_for_mp4(f32, tmp_path):
@@ -456,9 +545,9 @@ def test_shadow_edges_ramp_smoothly(f32):
     def lit_line(r: ti.template(), x0: float, x1: float, out: ti.types.ndarray()):
         for i in range(samples):
             p = ti.Vector([x0 + (x1 - x0) * i / (samples - 1), 0.0, 0.0])
-            out[i] = r._lit(p, ti.Vector([0.0, 1.0, 0.0]))
+            out[i] = r._unshadowed(p, r._bias(light[1]))
     out = np.zeros(samples, dtype=np.float32)
     lit_line(r, edge - 0.05, edge + 0.05, out)
-    assert out[0] < 0.01 and out[-1] > 0.9 * light[1]
+    assert out[0] < 0.01 and out[-1] > 0.99
     assert np.all(np.diff(out) >= -1e-6)                  # a ramp from shadow to light
     assert len(np.unique(np.round(out, 4))) > 10          # 2 x 2 nearest texels: 5 levels

@@ -206,6 +206,9 @@ def _guarded(fn, verbose):
         kind = "unstable" if isinstance(e, InstabilityError) else "error"
         print(f"tcloth: {kind}: {e}", file=sys.stderr)
         return 3 if isinstance(e, InstabilityError) else 2
+    except KeyboardInterrupt as e:      # Ctrl-C: what was kept (``record``), no traceback
+        print(f"tcloth: {e or 'interrupted'}", file=sys.stderr)
+        return 130
     return 0
 
 

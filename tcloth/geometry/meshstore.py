@@ -334,6 +334,14 @@ class MeshStore:
                     top += 2
         return best
 
+    @ti.func
+    def world_vertex(self, col, i, t):
+        """(position, unit vertex normal) in the world at time t of vertex i (a store
+        index) of collider row col's mesh: the triangles ``ray_hit`` meets and the
+        normals ``normal`` interpolates."""
+        r, c = self._frame(col, t)
+        return r @ self._vertex(i, self._share(col.mesh, t)) + c, r @ self.vertex_n[i].normalized()
+
     def crossed(self, m):
         """Whether mesh m crosses itself: one of its edges passes through one of its
         triangles that shares no vertex with it (each edge cast as a segment from its

@@ -8,20 +8,29 @@ import taichi as ti
 
 
 @ti.func
-def hit_triangle(o, d, a, b, c):
-    """Moller-Trumbore: (t, u, v) with t < 0 when the ray misses."""
+def plane_hit(o, d, a, b, c):
+    """Moller-Trumbore without the inside test: (t, u, v) of the point a + u (b - a) +
+    v (c - a) where the ray o + t d meets the triangle's plane; (-1, -1, -1) where the ray
+    runs along it."""
     e1, e2 = b - a, c - a
     pv = d.cross(e2)
     det = e1.dot(pv)
-    result = ti.Vector([-1.0, 0.0, 0.0], ti.f32)
+    result = ti.Vector([-1.0, -1.0, -1.0])
     if abs(det) > 1e-12:
         inv = 1.0 / det
         tv = o - a
-        u = tv.dot(pv) * inv
         qv = tv.cross(e1)
-        v = d.dot(qv) * inv
-        if u >= 0.0 and v >= 0.0 and u + v <= 1.0:
-            result = ti.Vector([e2.dot(qv) * inv, u, v], ti.f32)
+        result = ti.Vector([e2.dot(qv) * inv, tv.dot(pv) * inv, d.dot(qv) * inv])
+    return result
+
+
+@ti.func
+def hit_triangle(o, d, a, b, c):
+    """Moller-Trumbore: (t, u, v) with t < 0 when the ray misses."""
+    h = plane_hit(o, d, a, b, c)
+    result = ti.Vector([-1.0, 0.0, 0.0], ti.f32)
+    if h[1] >= 0.0 and h[2] >= 0.0 and h[1] + h[2] <= 1.0:
+        result = ti.cast(h, ti.f32)
     return result
 
 

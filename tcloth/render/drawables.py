@@ -8,6 +8,7 @@ import taichi as ti
 
 from ..geometry import raycast
 from ..errors import SceneError
+from ..scene.meshcollider import moves
 
 CONTACT_REACH = 3.0   # a particle within this many thicknesses of a collider rests on it
 SAMPLES = 4           # a triangle's test points: a barycentric grid, this many steps a side
@@ -17,6 +18,8 @@ CLEARANCE = 0.25      # drawn cloth keeps at least this many thicknesses off a c
 
 FRONT_COLOUR = (0.85, 0.28, 0.18)
 BACK_COLOUR = (0.20, 0.42, 0.80)
+PARTICLE_COLOUR = (0.95, 0.78, 0.25)
+COLLIDER_COLOUR = (0.50, 0.58, 0.66)
 
 
 def cloth_palette(cloth_colours, cloths):
@@ -30,6 +33,12 @@ def cloth_palette(cloth_colours, cloths):
         raise SceneError(f"cloth_colours must hold one (front, back) pair of RGB values in "
                          f"[0, 1] per cloth ({cloths} cloths; got {cloth_colours!r})")
     return palette
+
+
+def collider_moves(collider):
+    """Whether a scene collider moves (its drawn mesh changes with time)."""
+    return moves(collider) if collider["kind"] == "mesh" else bool(
+        np.any(np.asarray(collider["velocity"]) != 0))
 
 
 def particle_spheres(scene, particle_radius, extent):
@@ -78,6 +87,11 @@ class DrawnCloth:
     on a flat face is not moved, the colliders are drawn where they are, and cloth layers
     keep their order (a cloth resting farther out is kept farther out).
 
+    Each particle's distance from each collider is found once an update; a test point's
+    is searched (a mesh's hierarchy) only as far as can change what is asked: below
+    where it asks a move or a search, and down to the deepest it can lie inside (the
+    distance changes no faster than the point moves, from the nearest particle's).
+
     Args:
         colliders: the model's ``ColliderTable``. triangles: (T, 3) particle indices.
         particle_count: particles in the model.
@@ -89,6 +103,11 @@ class DrawnCloth:
         self.x = ti.Vector.field(3, ti.f32, shape=max(particle_count, 1))   # drawn, m
         # per particle: the largest move asked of it, float bits over the collider's index
         self.lift = ti.field(ti.i64, shape=max(particle_count, 1))
+        self.moved = ti.field(ti.i32, shape=max(particle_count, 1))   # by the last pass
+        # per particle and collider: its distance and normal at the update's positions
+        shape = (max(particle_count, 1), max(colliders.count, 1))
+        self.rest = ti.field(ti.f32, shape=shape)
+        self.rest_n = ti.Vector.field(3, ti.f32, shape=shape)
         self.tris = ti.Vector.field(3, ti.i32, shape=max(self.count, 1))
         if self.count:
             self.tris.from_numpy(np.asarray(triangles, dtype=np.int32))
@@ -98,6 +117,7 @@ class DrawnCloth:
         Taichi field) at time ``time`` (s)."""
         self._copy(x)
         if self.colliders.count and self.count:
+            self._rests(x, time)
             for _ in range(LIFT_PASSES):
                 self._lifts(x, time)
                 self._move(time)
@@ -107,6 +127,17 @@ class DrawnCloth:
     def _copy(self, x: ti.template()):
         for p in self.x:
             self.x[p] = ti.cast(x[p], ti.f32)
+            self.moved[p] = 1
+
+    @ti.kernel
+    def _rests(self, x: ti.template(), time: ti.f32):
+        """Each particle's distance and normal from each collider."""
+        for p in range(self.rest.shape[0]):
+            for g in ti.static(self.colliders.groups):
+                for m in range(g.first, g.first + g.count):
+                    phi, n = self.colliders.distance(g.shape, self.colliders.data[m], x[p], time)
+                    self.rest[p, m] = ti.cast(phi, ti.f32)
+                    self.rest_n[p, m] = ti.cast(n, ti.f32)
 
     @ti.kernel
     def _lifts(self, x: ti.template(), time: ti.f32):
@@ -118,49 +149,60 @@ class DrawnCloth:
             self.lift[p] = 0
         for k in range(self.count):
             i = self.tris[k]
-            a, b, c = self.x[i[0]], self.x[i[1]], self.x[i[2]]
-            longest = ti.max((b - a).norm(), (c - b).norm(), (a - c).norm())
-            for g in ti.static(self.colliders.groups):
-                for m in range(g.first, g.first + g.count):
-                    col = self.colliders.data[m]
-                    # (one call of the contact law each loop: a mesh's query is long, and
-                    # every call site compiles it again)
-                    rest = ti.f32(1e30)
-                    normals = ti.Matrix.zero(ti.f32, 3, 3)
-                    for j in range(3):
-                        phi, n = self.colliders.distance(g.shape, col, x[_corner(i, j)], time)
-                        rest = ti.min(rest, ti.cast(phi, ti.f32))
-                        for d in ti.static(range(3)):
-                            normals[j, d] = ti.cast(n[d], ti.f32)
-                    thickness = ti.cast(col.thickness, ti.f32)
-                    if col.stiffness > 0.0 and rest < CONTACT_REACH * thickness:
-                        target = ti.max(rest, thickness) - (1.0 - CLEARANCE) * thickness
-                        cap = 0.5 * longest + thickness
-                        near, nu, nv = 1e30, 0.0, 0.0
-                        for s in range(SAMPLES + 1):
-                            for t in range(SAMPLES + 1 - s):
-                                u, v = s / SAMPLES, t / SAMPLES
-                                phi = _distance(self.colliders, g.shape, col, a, b, c, u,
-                                                v, time)
-                                if phi < near:
-                                    near, nu, nv = phi, u, v
-                                self._ask(i, u, v, target - phi, normals, cap, m)
-                        # every point is within 0.6 longest / SAMPLES of a test point
-                        # (the distance changes no faster than the point moves)
-                        if near - 0.6 * longest / SAMPLES < target:
-                            step = 0.5 / SAMPLES
-                            for level in range(REFINE):
-                                bu, bv = nu, nv
-                                for nb in range(6):
-                                    du, dv = _neighbour(nb)
-                                    u, v = bu + du * step, bv + dv * step
-                                    if u >= 0.0 and v >= 0.0 and u + v <= 1.0:
-                                        phi = _distance(self.colliders, g.shape, col, a, b,
-                                                        c, u, v, time)
-                                        if phi < near:
-                                            near, nu, nv = phi, u, v
-                                step *= 0.5
-                            self._ask(i, nu, nv, target - near, normals, cap, m)
+            # a triangle none of whose corners the last pass moved asks what it asked
+            # then: nothing (it would have moved them)
+            if self.moved[i[0]] + self.moved[i[1]] + self.moved[i[2]] > 0:
+                self._lift(x, i, time)
+
+    @ti.func
+    def _lift(self, x, i, time):
+        """A resting triangle i's asks (``_lifts``)."""
+        a, b, c = self.x[i[0]], self.x[i[1]], self.x[i[2]]
+        longest = ti.max((b - a).norm(), (c - b).norm(), (a - c).norm())
+        for g in ti.static(self.colliders.groups):
+            for m in range(g.first, g.first + g.count):
+                col = self.colliders.data[m]
+                rest, nearest = self.rest[i[0], m], i[0]
+                normals = ti.Matrix.rows([self.rest_n[i[0], m], self.rest_n[i[1], m],
+                                          self.rest_n[i[2], m]])
+                for j in ti.static(range(1, 3)):
+                    if self.rest[i[j], m] < rest:
+                        rest, nearest = self.rest[i[j], m], i[j]
+                thickness = ti.cast(col.thickness, ti.f32)
+                if col.stiffness > 0.0 and rest < CONTACT_REACH * thickness:
+                    target = ti.max(rest, thickness) - (1.0 - CLEARANCE) * thickness
+                    cap = 0.5 * longest + thickness
+                    # a test point is no deeper than rest less its distance from the
+                    # nearest particle (at most its farthest corner's): searched to a
+                    # thickness past that and past where it would ask
+                    q = ti.cast(x[nearest], ti.f32)
+                    apart = ti.max((a - q).norm(), (b - q).norm(), (c - q).norm())
+                    beyond = ti.max(target + 0.6 * longest / SAMPLES, apart - rest, 0.0)
+                    near, nu, nv = 1e30, 0.0, 0.0
+                    for s in range(SAMPLES + 1):
+                        for t in range(SAMPLES + 1 - s):
+                            u, v = s / SAMPLES, t / SAMPLES
+                            phi = _distance(self.colliders, g.shape, col, a, b, c, u,
+                                            v, time, beyond)
+                            if phi < near:
+                                near, nu, nv = phi, u, v
+                            self._ask(i, u, v, target - phi, normals, cap, m)
+                    # every point is within 0.6 longest / SAMPLES of a test point
+                    # (the distance changes no faster than the point moves)
+                    if near - 0.6 * longest / SAMPLES < target:
+                        step = 0.5 / SAMPLES
+                        for level in range(REFINE):
+                            bu, bv = nu, nv
+                            for nb in range(6):
+                                du, dv = _neighbour(nb)
+                                u, v = bu + du * step, bv + dv * step
+                                if u >= 0.0 and v >= 0.0 and u + v <= 1.0:
+                                    phi = _distance(self.colliders, g.shape, col, a, b,
+                                                    c, u, v, time, beyond)
+                                    if phi < near:
+                                        near, nu, nv = phi, u, v
+                            step *= 0.5
+                        self._ask(i, nu, nv, target - near, normals, cap, m)
 
     @ti.func
     def _ask(self, i, u, v, deficit, normals, cap, m):
@@ -185,6 +227,7 @@ class DrawnCloth:
         """Each particle asked to move: out along its collider's normal."""
         for p in self.x:
             key = self.lift[p]
+            self.moved[p] = ti.select(key > 0, 1, 0)
             if key > 0:
                 m = raycast.key_id(key)
                 for g in ti.static(self.colliders.groups):
@@ -192,17 +235,6 @@ class DrawnCloth:
                         _, n = self.colliders.distance(g.shape, self.colliders.data[m],
                                                        self.x[p], time)
                         self.x[p] += raycast.key_t(key) * ti.cast(n, ti.f32)
-
-
-@ti.func
-def _corner(i, j):
-    """Corner j of triangle i (indices), j a loop variable."""
-    out = i[0]
-    if j == 1:
-        out = i[1]
-    elif j == 2:
-        out = i[2]
-    return out
 
 
 @ti.func
@@ -223,8 +255,9 @@ def _neighbour(k):
 
 
 @ti.func
-def _distance(table: ti.template(), shape: ti.template(), col, a, b, c, u, v, time):
+def _distance(table: ti.template(), shape: ti.template(), col, a, b, c, u, v, time, beyond):
     """Signed distance (float32) from collider ``col`` of the point of weights
-    (1 - u - v, u, v) of triangle (a, b, c)."""
-    phi, _ = table.distance(shape, col, (1.0 - u - v) * a + u * b + v * c, time)
+    (1 - u - v, u, v) of triangle (a, b, c), searched no farther than ``beyond`` past its
+    thickness (``ColliderTable.contact``)."""
+    phi, _, _ = table.contact(shape, col, (1.0 - u - v) * a + u * b + v * c, time, beyond)
     return ti.cast(phi, ti.f32)

@@ -38,9 +38,8 @@ from ..scene.meshcollider import moves, world_vertices
 from ..scene.usdfile import USD_EXTENSIONS, pxr_modules, pxr_reason
 from ..validate import as_scalar
 from ..version import __version__
-from .drawables import cloth_palette, particle_spheres
+from .drawables import COLLIDER_COLOUR, PARTICLE_COLOUR, cloth_palette, particle_spheres
 from .framing import ground_and_checker
-from .render import COLLIDER_COLOUR, PARTICLE_COLOUR
 from .video import check_writable, record
 
 PLANE_HALF = 3.0    # a plane collider is a square of side 2 PLANE_HALF times the extent

@@ -2,11 +2,15 @@
 
 Nothing partial is left looking complete: a video is written to ``NAME.partial.mp4`` and
 a PNG folder to ``NAME.partial/``, renamed to the final name only once every frame is in.
+Frames are encoded on a thread of their own (``_Writer``), beside the simulation and the
+rendering of the next ones.
 """
 import os
+import queue
 import shutil
 import struct
 import sys
+import threading
 import time
 import zlib
 
@@ -126,29 +130,87 @@ def check_writable(path):
         raise SceneError(f"output folder {folder!r} is not writable")
 
 
+class _Writer:
+    """A sink written on a thread of its own: ``put(image)`` hands a frame over (waiting
+    while ``depth`` frames wait already) and returns, the thread writes the frames in
+    order and times each (``times``, s). An error of the sink's stops its writing (the
+    thread takes and drops what follows, so that ``put`` never waits for ever) and is
+    raised again by the next ``put`` or by ``close``. ``close`` writes every frame
+    handed over, then closes the sink (aborts it after an error); ``abort`` drops those
+    not yet written and aborts it."""
+
+    def __init__(self, sink, depth=4):
+        self.sink, self.times, self.error = sink, [], None
+        self.frames = queue.Queue(maxsize=depth)
+        self.thread = threading.Thread(target=self._run, name="tcloth frame writer",
+                                       daemon=True)
+        self.thread.start()
+
+    def _run(self):
+        while (image := self.frames.get()) is not None:
+            if self.error is None:
+                t0 = time.perf_counter()
+                try:
+                    self.sink.write(image)
+                except BaseException as e:      # raised again on the caller's thread
+                    self.error = e
+                self.times.append(time.perf_counter() - t0)
+
+    def _check(self):
+        if self.error is not None:
+            raise self.error
+
+    def put(self, image):
+        self._check()
+        self.frames.put(image)
+
+    def _finish(self):
+        self.frames.put(None)
+        self.thread.join()
+
+    def close(self):
+        self._finish()
+        if self.error is not None:
+            self.sink.abort()
+            raise self.error
+        self.sink.close()
+
+    def abort(self):
+        try:
+            while True:
+                self.frames.get_nowait()
+        except queue.Empty:
+            pass
+        self._finish()
+        self.sink.abort()
+
+
 class _ImageSink:
     """Frames rendered and written to a video or a PNG folder (``write()`` renders the
-    simulator's current state), the render and encode times apart."""
+    simulator's current state and hands it to the writer's thread), the render and encode
+    times apart."""
 
     def __init__(self, sim, path, fps, quality, width, height, camera, supersample, options):
         self.renderer = renderer_for(sim, width, height, camera, supersample, **options)
-        self.sink = _Mp4Sink(path, width, height, fps, quality) \
-            if path.lower().endswith(".mp4") else _PngSink(path)
-        self.path, self.t_render, self.t_encode = path, [], []
+        self.writer = _Writer(_Mp4Sink(path, width, height, fps, quality)
+                              if path.lower().endswith(".mp4") else _PngSink(path))
+        self.path, self.t_render = path, []
+
+    @property
+    def t_encode(self):
+        return self.writer.times
 
     def write(self):
         t0 = time.perf_counter()
         image = self.renderer.render()
-        t1 = time.perf_counter()
-        self.sink.write(image)
-        self.t_render.append(t1 - t0)
-        self.t_encode.append(time.perf_counter() - t1)
+        self.t_render.append(time.perf_counter() - t0)
+        self.writer.put(image)
 
     def close(self):
-        self.sink.close()
+        self.writer.close()
 
     def abort(self):
-        self.sink.abort()
+        self.writer.abort()
 
 
 class _MeshSink:
@@ -191,7 +253,9 @@ def record(sim, path, frames=240, steps_per_frame=10, fps=30, width=640, height=
         median_render_ms, median_encode_ms, median_write_ms (per frame).
     On InstabilityError the frames up to the last good one are kept, completed under
     ``path`` and each writer's, and the error is raised again with the frame count added
-    to its message.
+    to its message; on KeyboardInterrupt (Ctrl-C) likewise the frames made so far.
+    While the simulation steps and the renderer draws, the frames before are encoded on
+    a thread of its own (the summary's medians: each step, render and encode alone).
     """
     for name, value in (("frames", frames), ("steps_per_frame", steps_per_frame)):
         if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
@@ -209,15 +273,16 @@ def record(sim, path, frames=240, steps_per_frame=10, fps=30, width=640, height=
                  Progress(frames, os.path.basename(str(outputs[0].path)), progress))
     stats = _stats(frames, path, steps_per_frame, times, images)
     if progress:
-        done = [f"simulation {stats['sim_ms_per_step']:.3f} ms/step ({steps_per_frame} "
-                f"steps/frame)"]
+        done = [f"simulation {stats['median_sim_ms']:.1f} ms/frame ({steps_per_frame} "
+                f"step{'s' if steps_per_frame > 1 else ''} of "
+                f"{stats['median_sim_ms'] / steps_per_frame:.3f} ms)"]
         if images:
-            done += [f"render {stats['render_ms_per_frame']:.1f} ms/frame",
-                     f"encode {stats['encode_ms_per_frame']:.1f} ms/frame"]
+            done += [f"render {stats['median_render_ms']:.1f} ms/frame",
+                     f"encode {stats['median_encode_ms']:.1f} ms/frame"]
         if len(outputs) > bool(images):
             done.append(f"{' and '.join(o.label for o in outputs if o is not images)} "
-                        f"{stats['write_ms_per_frame']:.1f} ms/frame")
-        sys.stderr.write(f"wrote {paths}: {frames} frames; {', '.join(done)}, "
+                        f"{stats['median_write_ms']:.1f} ms/frame")
+        sys.stderr.write(f"wrote {paths}: {frames} frames; {', '.join(done)} (medians), "
                          f"{stats['fps']:.1f} frames/s end to end\n")
     return stats
 
@@ -225,7 +290,7 @@ def record(sim, path, frames=240, steps_per_frame=10, fps=30, width=640, height=
 def _run(sim, outputs, images, frames, steps_per_frame, paths, bar):
     """Step and hand every frame to each output; (total s, per-frame step s, per-frame
     output s but the images' (``images``: their output or None)). The outputs are closed
-    (kept) on InstabilityError, aborted on any other."""
+    (kept) on InstabilityError and KeyboardInterrupt, aborted on any other error."""
     t_sim, t_write = [], []
     start = time.perf_counter()
     try:
@@ -242,19 +307,29 @@ def _run(sim, outputs, images, frames, steps_per_frame, paths, bar):
                     t_frame += time.perf_counter() - t0
             t_write.append(t_frame)
             bar.update(k + 1)
-    except InstabilityError as err:
-        for out in outputs:
-            out.close()
+    except (InstabilityError, KeyboardInterrupt) as err:
+        _close(outputs)
         kept = f"{len(t_write)} good frame{'' if len(t_write) == 1 else 's'}"
-        err.args = (f"{err.args[0]} Kept {kept} in {paths}.",)
+        err.args = (f"{err.args[0] if err.args else 'Interrupted.'} Kept {kept} in {paths}.",)
         raise
     except BaseException:
         for out in outputs:
             out.abort()
         raise
-    for out in outputs:
-        out.close()
+    _close(outputs)
     return time.perf_counter() - start, t_sim, t_write
+
+
+def _close(outputs):
+    """Close every output, whichever fails; the first error raised again."""
+    errors = []
+    for out in outputs:
+        try:
+            out.close()
+        except BaseException as e:
+            errors.append(e)
+    if errors:
+        raise errors[0]
 
 
 def _stats(frames, path, steps_per_frame, times, images):

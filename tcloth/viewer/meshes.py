@@ -5,7 +5,8 @@ import numpy as np
 
 from ..geometry.primitives import tiles, vertex_normals
 from ..geometry.shapes import shape_of
-from ..scene.meshcollider import moves, world_vertices
+from ..render.drawables import collider_moves
+from ..scene.meshcollider import world_vertices
 
 
 def collider_mesh(collider, t, half, tile):
@@ -17,12 +18,6 @@ def collider_mesh(collider, t, half, tile):
     centre = np.asarray(collider["center"]) + t * np.asarray(collider["velocity"])
     v, tris, colours = shape_of(collider).mesh(collider, half, tile)
     return centre + v, tris, colours
-
-
-def collider_moves(collider):
-    """Whether a scene collider moves (its drawn mesh changes with time)."""
-    return moves(collider) if collider["kind"] == "mesh" else bool(
-        np.any(np.asarray(collider["velocity"]) != 0))
 
 
 __all__ = ["vertex_normals", "collider_mesh", "collider_moves", "tiles"]

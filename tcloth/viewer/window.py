@@ -12,11 +12,11 @@ import time
 import numpy as np
 
 from ..render.camera import Camera
-from ..render.drawables import DrawnCloth, cloth_palette, particle_spheres
+from ..render.drawables import (COLLIDER_COLOUR, PARTICLE_COLOUR, DrawnCloth, cloth_palette,
+                                particle_spheres)
 from ..errors import SceneError
 from ..integrators import INTEGRATORS
 from ..render.framing import ground_and_checker
-from ..render.render import COLLIDER_COLOUR, PARTICLE_COLOUR
 from .camera import OrbitCamera
 from .controls import Controls, contact_lines, split_line
 from .display import DisplayError, check_display
