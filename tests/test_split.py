@@ -5,6 +5,7 @@ import pytest
 
 import tcloth
 from tcloth.sim.split import RELAX
+from test_frame_rate_honesty import landing
 
 
 def oscillator(k=400.0, m=0.01):
@@ -65,22 +66,12 @@ def test_past_the_finest_split_the_step_raises_and_keeps_its_start(f64):
         tcloth.Simulator(scene, split=0)
 
 
-def landing(res=12):
-    """A cloth of 0.6 m, 0.117 kg and 1,000 N/m springs dropped onto a sphere of 6 cm."""
-    scene = tcloth.Scene(gravity=(0.0, -9.81, 0.0))
-    scene.add_cloth(resolution=(res, res), size=(0.6, 0.6), center=(0.0, 0.45, 0.0),
-                    plane="xz", mass=0.117, structural=(1000.0, 0.05), shear=(50.0, 0.02),
-                    flexion=(5.0, 0.005), pinned=[])
-    scene.add_sphere((0.0, 0.3, 0.0), 0.06)
-    return scene
-
-
 def test_xpbd_at_one_substep_lands_a_cloth_by_splitting_the_landing(f64):
     """XPBD at one substep of ten iterations cannot stop a cloth landing at 1/60: its
     springs take more energy than the fall gave, and without splits the landing's step
     raises. With the split on (the default) the landing's steps split, the cloth lands
     within 50 % strain at every step (NumPy) and its free fall before took whole steps."""
-    scene = landing()
+    scene = landing(12)
     with pytest.raises(tcloth.InstabilityError):
         tcloth.Simulator(scene, "xpbd", dt=1 / 60, substeps=1, split=False).step(30)
     sim = tcloth.Simulator(scene, "xpbd", dt=1 / 60, substeps=1)
