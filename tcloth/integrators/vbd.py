@@ -14,7 +14,10 @@ they are updated together: the particle graph (an edge per spring, every family)
 coloured greedily once per model, and an iteration is one parallel pass per colour.
 Since E is backward Euler's own potential, VBD's iterates converge to backward Euler's
 step (tested), and damping, friction, colliders and the grab spring enter as they do
-there.
+there, but for friction's block: sliding, its potential is a cone with no curvature along
+the sliding, where a vertex's Newton step with the exact block overshoots the stop (the
+fold's landing row shot off at 15 m/s), so VBD takes its majorant's
+(``colliders.add_dissipation``).
 
 Hinge bending (``terms/bending.py``) and the triangle membrane (``terms/membrane.py``)
 are Gauss-Seidel like the springs: a vertex's gradient and block are summed over its
