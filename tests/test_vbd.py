@@ -62,8 +62,8 @@ def test_each_vertex_gradient_and_block_match_finite_differences(f64, friction):
     Euler's incremental potential E (springs with damping, gravity, drag, a sphere's
     penalty and friction), for vertices in the middle, at an edge and at a corner
     touching the sphere, of a swinging cloth. With friction, the gradient only: the
-    friction's block is backward Euler's approximation (a stiffness along the frozen
-    sliding direction), not its potential's exact Hessian."""
+    friction's block is its majorant's (``colliders.add_dissipation``), not its
+    potential's exact Hessian."""
     def scene():
         s = cloth(1e3, kd=0.5, n=6)
         s.air_drag = 0.02
@@ -286,6 +286,62 @@ def test_a_cloth_on_a_frictionless_floor_keeps_its_momentum(f32):
         assert abs(p[0] - mass * speed) < 1e-4 and abs(p[2]) < 2e-4, (n, p)
         drift = sim.velocities()[:, [0, 2]] - [speed, 0.0]
         assert np.abs(drift).max() < 0.01, (n, np.abs(drift).max())
+
+
+def on_floor(friction, height):
+    """A 4 x 4 cloth of 0.2 m and 0.02 kg lying flat at ``height`` above a floor (its
+    contact 5 mm thick, 1,000 N/m) of friction ``friction``."""
+    scene = tcloth.Scene(gravity=(0.0, -9.81, 0.0))
+    scene.add_cloth(resolution=(4, 4), size=(0.2, 0.2), center=(0.0, height, 0.0), mass=0.02,
+                    structural=(400.0, 0.05), shear=(80.0, 0.02), flexion=(10.0, 0.005),
+                    pinned=[])
+    scene.add_plane((0.0, 0.0, 0.0), (0.0, 1.0, 0.0), friction=friction)
+    return scene
+
+
+def test_friction_only_slows_a_cloth_pressed_into_a_floor(f32):
+    """Coulomb friction opposes sliding and at most stops it: a cloth sliding at 0.5 m/s
+    with its particles 4 mm inside the floor's contact (a normal force of 4 N each, over
+    300 times their weight, as where a falling cloth lands) keeps a velocity along its
+    sliding between 0 and 0.5 m/s and none across it, with VBD's defaults at one step
+    per frame. Friction's potential is a cone in the sliding velocity, flat along it:
+    a vertex's Newton step with the cone's own Hessian block, inertia alone against the
+    friction along the sliding, overshot the stop (particles at -0.18 and 0.70 m/s after
+    the first step; the fold's landing row shot off at up to 15 m/s)."""
+    scene = on_floor(0.6, 0.001)
+    sim = tcloth.Simulator(scene, "vbd", dt=1.0 / 60.0)
+    v = np.zeros((scene.num_particles, 3))
+    v[:, 0] = 0.5
+    sim.set_state(velocities=v)
+    for _ in range(3):
+        sim.step()
+        v = sim.velocities()
+        assert v[:, 0].min() > -1e-3 and v[:, 0].max() < 0.5 + 1e-3, v[:, 0]
+        assert np.abs(v[:, 2]).max() < 1e-3, v[:, 2]
+
+
+def test_a_step_in_substeps_is_the_substeps_as_steps(f64):
+    """A step of dt in two substeps is two steps of dt / 2: a cloth sliding at 0.5 m/s
+    onto a floor of friction 0.6 from 1 mm above its contact, with VBD's iterations and
+    Chebyshev's mix at their defaults and the inertial guess (the adaptive one reads the
+    force the simulator's steps leave). The second substep used to read its start from
+    the State it writes, which by then held the inertial prediction x0 + h v0: its
+    friction pressed with the normal force of that deeper point and its contact planes
+    were placed there (the ends 3.7 mm apart)."""
+    scene = on_floor(0.6, 0.006)
+    sim = tcloth.Simulator(scene, "vbd", dt=1.0 / 60.0, initial_guess="inertia", substeps=2)
+    v0 = np.zeros((scene.num_particles, 3))
+    v0[:, 0], v0[:, 1] = 0.5, -0.3
+    sim.set_state(velocities=v0)
+    sim.step()
+    x, v = sim.positions(), sim.velocities()
+    sim.set_dt(1.0 / 120.0)
+    sim.set_integrator_options(substeps=1)
+    sim.set_state(positions=scene.positions, velocities=v0)
+    sim.step(2)
+    assert sim.contact_stats()["guard_corrections"] == 0
+    assert np.abs(sim.positions() - x).max() < 1e-12, np.abs(sim.positions() - x).max()
+    assert np.abs(sim.velocities() - v).max() < 1e-9, np.abs(sim.velocities() - v).max()
 
 
 def test_vbd_reaches_the_hanging_chain_closed_form(f64):

@@ -370,7 +370,8 @@ class StepAdjoint:
         x1p, h, fall = ctx
         free = self.model.inv_mass[p] > 0.0
         _, g, _ = step_contact(col, self._gap(col, x, p, phi, n, x1p, h, fall), n, x1p,
-                               x[p], h, self.mass[p], lagged_normal_force(col, phi, free), n)
+                               x[p], h, self.mass[p], lagged_normal_force(col, phi, free), n,
+                               False)
         return g
 
     @ti.func
@@ -480,6 +481,7 @@ class StepAdjoint:
                     # force, normal and weights of the step's start (``SelfContact``)
                     fn0, n0, alpha0 = lagged(rows, c, self.x)
                     ids, alpha, _, grad = penalty_gradient(rows, c, self.x1)
-                    _, g_d, _ = dissipation(rows, ids, fn0, n0, alpha0, self.x1, self.x, h)
+                    _, g_d, _ = dissipation(rows, ids, fn0, n0, alpha0, self.x1, self.x, h,
+                                            False)
                     for j in ti.static(range(4)):
                         self.out[ids[j]] += alpha[j] * grad + alpha0[j] * g_d

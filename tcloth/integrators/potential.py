@@ -57,13 +57,15 @@ class IncrementalPotential:
 
     def begin(self, x, v, h, t0, x_start):
         """Start a step from positions x, velocities v at time t0: x0, x_hat, the lagged
-        quantities of every term, f_lag; the Newton iterate x_start = x_hat."""
+        quantities of every term, f_lag; the Newton iterate x_start = x_hat. The terms
+        read the step's start from the copy x0: x_start may be x itself (VBD's substeps
+        after the first start from the State they write), which then holds x_hat."""
         self._begin_particles(x, v, h, x_start)
         for term in self.terms:
-            term.begin_step(x, t0)
-            term.begin_solve(x, v, h, t0)
+            term.begin_step(self.x0, t0)
+            term.begin_solve(self.x0, v, h, t0)
         if self.has_lagged:
-            self.lagged.compute(x, v, t0, self.f_lag)
+            self.lagged.compute(self.x0, v, t0, self.f_lag)
 
     def evaluate(self, x, h, t, with_grad):
         """(E at x, a bound on the rounding error of comparing two such evaluations:

@@ -14,7 +14,10 @@ they are updated together: the particle graph (an edge per spring, every family)
 coloured greedily once per model, and an iteration is one parallel pass per colour.
 Since E is backward Euler's own potential, VBD's iterates converge to backward Euler's
 step (tested), and damping, friction, colliders and the grab spring enter as they do
-there.
+there, but for friction's block: sliding, its potential is a cone with no curvature along
+the sliding, where a vertex's Newton step with the exact block overshoots the stop (the
+fold's landing row shot off at 15 m/s), so VBD takes its majorant's
+(``colliders.add_dissipation``).
 
 Hinge bending (``terms/bending.py``) and the triangle membrane (``terms/membrane.py``)
 are Gauss-Seidel like the springs: a vertex's gradient and block are summed over its
@@ -126,7 +129,8 @@ class VBD(VertexLocal, ForceCache, Integrator):
         n, real = model.particle_count, model.mass.dtype
         self.model = model
         self._configure()
-        self.potential = IncrementalPotential(model, jacobi=True, per_vertex=True)
+        self.potential = IncrementalPotential(model, jacobi=True, per_vertex=True,
+                                              friction_majorant=True)
         self.springs = self.potential.springs
         self.has_springs = self.springs is not None
         self.adj_start, self.adj = (self.springs or Springs(model)).adjacency()
@@ -210,20 +214,22 @@ class VBD(VertexLocal, ForceCache, Integrator):
         self.stats["substeps"] = count
 
     def _substep(self, model, state_in, state_out, dt):
-        """One step of dt from state_in to state_out (which may be the same State)."""
+        """One step of dt from state_in to state_out (which may be the same State: the
+        step's start is then read from the potential's copy x0)."""
         copy_into(self.v_start, state_in.v)
         h, t1 = dt, state_in.t + dt
         opt = self.options
         x, e = state_out.x, self.potential
         e.begin(state_in.x, state_in.v, h, state_in.t, x)
+        x0 = e.x0
         guess = opt["initial_guess"]
         if guess == "adaptive" and self._cached is not state_in:
             guess = "gravity"
         self._guess(x, state_in.f, h, GUESSES.index(guess))
         if self.bounds is not None:
-            model.contact.detect_bounds(self.bounds, state_in.x)
+            model.contact.detect_bounds(self.bounds, x0)
             self._clamp(x)
-        planes = self.stage.begin_solve(state_in.x, x) if self.stage else None
+        planes = self.stage.begin_solve(x0, x) if self.stage else None
         pushed = False
         energies = [e.evaluate(x, h, t1, False)[0]] if self.track_potential else []
         rho = float(opt["rho"])
@@ -236,14 +242,13 @@ class VBD(VertexLocal, ForceCache, Integrator):
             if rho > 0.0 and it > 1 and not pushed:
                 self._accelerate(x, omegas[it])
             if planes is not None:
-                planes = self.stage.follow_solve(state_in.x, x)
+                planes = self.stage.follow_solve(x0, x)
                 pushed = keep_apart(*planes, x, self.potential.inv_mass, self.dx, self.hits) > 0
             if self.bounds is not None and self.bounds.any_clamped() and it < opt["iterations"]:
                 if model.contact.detect_bounds(self.bounds, x):
                     for term in self.pair_terms + self.vertex_terms:  # the rows changed
-                        term.begin_step(state_in.x, state_in.t)
-        if self.hold_stage is not None and self.hold_stage.begin_hold(state_in.x, x,
-                                                                     state_in.t, h):
+                        term.begin_step(x0, state_in.t)
+        if self.hold_stage is not None and self.hold_stage.begin_hold(x0, x, state_in.t, h):
             # the mesh colliders' planes the step ends below, as a penalty in E
             # (``contact/hold.py``): the sweeps again
             for _ in range(opt["iterations"]):

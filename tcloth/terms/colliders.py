@@ -20,7 +20,7 @@ collider is held by it through the solve, and a step cannot take it through a th
 Backward Euler takes the penalty as a potential k/2 depth^2 at the end of the step, and
 normal damping and friction with the normal force and normal of the step's start, as a
 convex dissipation potential whose gradient is exactly the explicit law at the end
-velocity; VBD likewise. Projective dynamics has the penalty and normal damping in its
+velocity; VBD likewise, with friction's block a majorant's (``add_dissipation``). Projective dynamics has the penalty and normal damping in its
 residual, the approach speed the damping sees capped at depth / h so that the force is
 continuous where contact begins (``plane_contact_force``), and their stiffness in its
 matrix along the normals (``plane_force``, ``plane_stiffness``), XPBD
@@ -55,11 +55,19 @@ def contact_force(depth, v_rel, n, k, cd, mu, eps):
 
 
 @ti.func
-def add_dissipation(e, g, block, v, n0, fn0, cd, mu, eps, h):
+def add_dissipation(e, g, block, v, n0, fn0, cd, mu, eps, h, majorant: ti.template()):
     """(e, g, block) plus backward Euler's normal damping and friction of a contact as convex
     potentials of the end velocity v, with the start of the step's normal n0 and normal
     force fn0 > 0 and the damping coefficient cd: energy, gradient with respect to the
-    position, and its Hessian block."""
+    position, and its Hessian block.
+
+    Sliding (|v_t| = s >= eps), friction's potential mu fn0 h (s - eps/2) is a cone: its
+    Hessian has no curvature along the sliding direction, where its gradient is mu fn0
+    whatever the speed. With ``majorant`` the block is instead the Hessian of the
+    quadratic in v_t that touches the cone at v_t and lies above it elsewhere,
+    mu fn0 / (s h) times the whole tangent projector (the same formula as sticking's with
+    s for eps, so continuous at s = eps): a Newton step on one vertex then stops short of
+    reversing its sliding (``vbd.py``)."""
     vn = v.dot(n0)
     nn = n0.outer_product(n0)
     if vn < 0.0:
@@ -77,8 +85,11 @@ def add_dissipation(e, g, block, v, n0, fn0, cd, mu, eps, h):
         s = ti.sqrt(s2)
         e += mu * fn0 * h * (s - 0.5 * eps)
         g += mu * fn0 / s * vt
-        that = vt / s
-        block += mu * fn0 / (s * h) * (tangent - that.outer_product(that))
+        if ti.static(majorant):
+            block += mu * fn0 / (s * h) * tangent
+        else:
+            that = vt / s
+            block += mu * fn0 / (s * h) * (tangent - that.outer_product(that))
     return e, g, block
 
 
@@ -107,13 +118,13 @@ def lagged_normal_force(col, phi, free):
 
 
 @ti.func
-def step_contact(col, gap, n, xp, x0p, h, m, fn0, n0):
+def step_contact(col, gap, n, xp, x0p, h, m, fn0, n0, majorant: ti.template()):
     """(energy, gradient, Hessian block) of one contact in backward Euler's incremental
     potential at xp (mass m; x0p the step's start): penalty k/2 depth^2 against the
     particle's plane of the step's start (depth = thickness - gap, gap its height above
     the plane of normal n), its block k n n^T, normal damping and friction with the
     start-of-step normal n0 and normal force fn0 as convex potentials of the end
-    velocity."""
+    velocity (friction's block its majorant's with ``majorant``: ``add_dissipation``)."""
     depth = col.thickness - gap
     e = 0.0
     g = ti.Vector.zero(float, 3)
@@ -127,7 +138,7 @@ def step_contact(col, gap, n, xp, x0p, h, m, fn0, n0):
         cd = 2.0 * col.damping * ti.sqrt(k * m)
         e, g, block = add_dissipation(e, g, block, (xp - x0p) / h - col.velocity,
                                       n0, fn0, cd, col.friction,
-                                      col.stick_velocity, h)
+                                      col.stick_velocity, h, majorant)
     return e, g, block
 
 
@@ -185,12 +196,16 @@ class Colliders(Term):
     projective = "contact"
     per_particle = True
     provides = frozenset({"contact_planes"})
+    # friction_majorant: built for VBD, whose Newton step on one vertex takes friction's
+    # block as its majorant's (``add_dissipation``)
+    options = {"friction_majorant": False}
 
     @staticmethod
     def present(model):
         return model.colliders.count > 0
 
-    def __init__(self, model):
+    def __init__(self, model, friction_majorant=False):
+        self.majorant = friction_majorant
         self.table = model.colliders
         self.mass, self.inv_mass, self.params = model.mass, model.inv_mass, model.params
         # a mesh collider's contact is a query of its hierarchy (``runtime.serial``)
@@ -282,7 +297,7 @@ class Colliders(Term):
         p)), with the normal force and normal of the step's start (``begin_step``)."""
         xp, x0p, h, p = ctx
         return step_contact(col, gap, n, xp, x0p, h, self.mass[p], self._lagged[0][p, c],
-                            self._lagged[1][p, c])
+                            self._lagged[1][p, c], self.majorant)
 
     @ti.func
     def _incremental_body(self, col, c, gap, n, ctx):

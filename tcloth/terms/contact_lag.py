@@ -54,12 +54,12 @@ def lag_rows(cl: ti.template(), lag: ti.template(), count: ti.i32, x0: ti.templa
 
 
 @ti.func
-def dissipation(cl, ids, fn0, n0, alpha0, x, x0, h):
+def dissipation(cl, ids, fn0, n0, alpha0, x, x0, h, majorant: ti.template()):
     """(energy, gradient, Hessian) in the relative motion sum_k alpha0_k x_k of a contact's
     normal damping and friction as convex potentials of the end velocity (the colliders'
     ``add_dissipation`` between two moving sides), with its lagged normal force fn0,
     normal n0 and weights alpha0 (``lagged``); no damping where every particle of the
-    contact is pinned."""
+    contact is pinned; friction's block its majorant's with ``majorant``."""
     prm = ti.static(cl.table.params)
     e = 0.0
     g = ti.Vector.zero(float, 3)
@@ -72,14 +72,15 @@ def dissipation(cl, ids, fn0, n0, alpha0, x, x0, h):
         cd = 0.0
         if w > 0.0:
             cd = 2.0 * prm[3] * ti.sqrt(prm[1] / w)
-        e, g, block = add_dissipation(e, g, block, v, n0, fn0, cd, prm[2], prm[4], h)
+        e, g, block = add_dissipation(e, g, block, v, n0, fn0, cd, prm[2], prm[4], h,
+                                      majorant)
     return e, g, block
 
 
 @ti.func
-def row_dissipation(cl, lag, c, x, x0, h):
+def row_dissipation(cl, lag, c, x, x0, h, majorant: ti.template()):
     """``dissipation`` of candidate c with its values lagged by ``lag_rows``."""
-    return dissipation(cl, cl.ids[c], lag.fn[c], lag.n[c], lag.alpha0[c], x, x0, h)
+    return dissipation(cl, cl.ids[c], lag.fn[c], lag.n[c], lag.alpha0[c], x, x0, h, majorant)
 
 
 @ti.func

@@ -173,7 +173,7 @@ def _incremental(cl: ti.template(), lag: ti.template(), count: ti.i32, x: ti.tem
             if ti.static(with_grad):
                 for j in ti.static(range(4)):
                     grad_out[ids[j]] += alpha[j] * grad
-        e_d, g_d, _ = row_dissipation(cl, lag, c, x, x0, h)
+        e_d, g_d, _ = row_dissipation(cl, lag, c, x, x0, h, False)
         if ti.static(with_grad):
             alpha0 = lag.alpha0[c]
             for j in ti.static(range(4)):
@@ -200,7 +200,7 @@ def _blocks(cl: ti.template(), lag: ti.template(), count: ti.i32, x: ti.template
         if cl.repels[c] and d < prm[0]:
             n = unit_normal(g, d)
             penalty = prm[1] * n.outer_product(n)
-        _, _, block = row_dissipation(cl, lag, c, x, x0, h)
+        _, _, block = row_dissipation(cl, lag, c, x, x0, h, False)
         alpha0 = lag.alpha0[c]
         lag.alpha[c] = alpha
         lag.penalty[c] = penalty

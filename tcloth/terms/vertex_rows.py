@@ -35,7 +35,8 @@ class VertexRows:
     def system(self, p, x, x0, h):
         """(gradient, Hessian block, clearance) at x of particle p's rows: the penalty's
         and the lagged dissipation's, with the exact blocks alpha_j^2 k n n^T and
-        alpha0_j^2 B (k the list's table's stiffness); the clearance is the least d - T of
+        alpha0_j^2 B (k the list's table's stiffness; friction's B its majorant's, as VBD
+        takes the colliders', ``colliders.add_dissipation``); the clearance is the least d - T of
         its repelling rows out of contact (1e30 without one): a row's distance moves at
         most as far as p, so a move of p shorter than that brings none into contact."""
         prm = ti.static(self.of.table.params)
@@ -52,7 +53,7 @@ class VertexRows:
                     block += alpha[j] * alpha[j] * prm[1] * n.outer_product(n)
                 else:
                     clearance = ti.min(clearance, -depth)
-            _e, g_d, block_d = row_dissipation(self.of, self.lag, c, x, x0, h)
+            _e, g_d, block_d = row_dissipation(self.of, self.lag, c, x, x0, h, True)
             a0 = self.lag.alpha0[c][j]
             g += a0 * g_d
             block += a0 * a0 * block_d
@@ -69,7 +70,7 @@ class VertexRows:
             _ids, _alpha, depth, _grad = penalty_gradient(self.of, c, x)
             if self.of.repels[c] and depth > 0.0:
                 e += 0.5 * prm[1] * depth * depth
-            e_d, _g_d, _block_d = row_dissipation(self.of, self.lag, c, x, x0, h)
+            e_d, _g_d, _block_d = row_dissipation(self.of, self.lag, c, x, x0, h, True)
             e += e_d
         return e
 
