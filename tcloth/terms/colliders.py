@@ -20,12 +20,13 @@ collider is held by it through the solve, and a step cannot take it through a th
 Backward Euler takes the penalty as a potential k/2 depth^2 at the end of the step, and
 normal damping and friction with the normal force and normal of the step's start, as a
 convex dissipation potential whose gradient is exactly the explicit law at the end
-velocity; VBD likewise, with friction's block a majorant's (``add_dissipation``). Projective dynamics has the penalty and normal damping in its
-residual, the approach speed the damping sees capped at depth / h so that the force is
-continuous where contact begins (``plane_contact_force``), and their stiffness in its
-matrix along the normals (``plane_force``, ``plane_stiffness``), XPBD
-pushes particles out (``push_out``), and both apply friction after the solve with the
-normal velocity change it gave (``plane_coulomb``).
+velocity; VBD likewise, with friction's block a majorant's (``add_dissipation``).
+Projective dynamics has the penalty and normal damping in its residual, the approach
+speed the damping sees capped at depth / h so that the force is continuous where contact
+begins (``plane_contact_force``), and their stiffness in its matrix along the normals
+(``plane_force``, ``plane_stiffness``), XPBD pushes particles out (``push_out``), and
+both apply friction after the solve with the normal velocity change it gave
+(``plane_coulomb``).
 
 The shapes (signed distance and normal) are in ``shapes.py``. All colliders of a scene
 are handled by one kernel launch; shapes the scene lacks are compiled out; a scene
