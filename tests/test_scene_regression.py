@@ -18,11 +18,10 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, "..", "tools"))
 from scene_snapshot import TOLERANCE, run_scene, scene_names  # noqa: E402
 
-# scenes whose structural springs carry load within the snapshot's 0.1 s (the others
-# are still falling freely, or have no springs); cloth_pile too (1.3e-5 m), but it is
-# the slowest scene to run twice
-LOADED = ("curtain", "flag", "hanging_cloth", "rope", "sphere_through_cloth",
-          "strain_limiting", "tablecloth")
+# scenes whose structural springs carry load within the snapshot's 0.1 s, where a
+# stiffer spring must move the particles (curtain, sphere_through_cloth, strain_limiting
+# and tablecloth load theirs too; these three are the cheapest to run twice)
+LOADED = ("flag", "hanging_cloth", "rope")
 
 
 pytestmark = pytest.mark.usefixtures("f64")
