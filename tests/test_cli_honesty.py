@@ -132,9 +132,11 @@ def test_list_shows_each_first_sentence_whole(tmp_path, capsys):
     (tmp_path / "bare.py").write_text("x = 1\n")
     assert cli.main(["list", str(tmp_path)]) == 0
     lines = capsys.readouterr().out.splitlines()
-    assert lines == ["bare.py     (no description)",
-                     "wrapped.py  A first sentence that wraps over two lines (see.py), e.g. "
-                     "this."]
+    # neither script builds a scene: its integrator, dt, steps and particles are unknown
+    assert lines == ["script      integrator  dt  steps a frame  particles",
+                     "bare.py     ?           ?   ?              ?          (no description)",
+                     "wrapped.py  ?           ?   ?              ?          A first sentence "
+                     "that wraps over two lines (see.py), e.g. this."]
     drape = describe(os.path.join(ROOT, "scenes", "drape.py"))
     assert drape.startswith("Cusick's drape test") and drape.endswith("hangs into folds.")
     for name in os.listdir(os.path.join(ROOT, "scenes")):

@@ -11,6 +11,7 @@ import pytest
 
 import tcloth
 from tcloth import Camera
+from tcloth.app.script import load_script
 from tcloth.render.framing import ground_and_checker
 from tcloth.render.raster import COLLIDER_ID
 from tcloth.render.render import LIGHT_DIR
@@ -227,8 +228,12 @@ def test_every_scene_script_renders_headless(script, tmp_path):
 def test_cli_list_describes_scenes():
     res = run_cli("list")
     assert res.returncode == 0
-    assert len(res.stdout.strip().splitlines()) == len(SCENES)
-    assert "hanging_cloth.py" in res.stdout
+    header, *rows = res.stdout.strip().splitlines()
+    assert header.split()[:3] == ["script", "integrator", "dt"] and len(rows) == len(SCENES)
+    # each scene's integrator, dt and particles as its script builds them
+    table = [row for row in rows if row.startswith("table.py")][0].split()
+    assert table[1:5] == ["projective", "1/60", "1", str(load_script(
+        os.path.join(ROOT, "scenes", "table.py"))[0].build().num_particles)]
 
 
 def test_cli_errors_are_clear_with_exit_code_2(tmp_path):

@@ -218,7 +218,9 @@ def main(argv=None):
     p_render = sub.add_parser("render", help="render a scene script to a video or PNG frames")
     p_render.add_argument("script", help="path of a scene script, e.g. scenes/hanging_cloth.py")
     _render_parser(p_render)
-    p_list = sub.add_parser("list", help="list scene scripts with a one-line description")
+    p_list = sub.add_parser("list", help="list scene scripts: the integrator, dt, steps a "
+                                         "frame and particles each runs with, and a "
+                                         "one-line description")
     p_list.add_argument("folder", nargs="?", default="scenes")
     p_sweep = sub.add_parser("sweep", help="run a parameter sweep (a TOML spec) on a process "
                                            "pool or a Dask cluster")
@@ -261,11 +263,28 @@ def main(argv=None):
         if not scripts:
             print(f"tcloth: error: no scene scripts in {args.folder!r}", file=sys.stderr)
             return 2
-        width = max(len(os.path.basename(s)) for s in scripts)
-        for s in scripts:
-            print(f"{os.path.basename(s):<{width}}  {describe(s)}")
+        rows = [(os.path.basename(s), *defaults(s), describe(s)) for s in scripts]
+        header = ("script", "integrator", "dt", "steps a frame", "particles", "")
+        widths = [max(len(str(r[i])) for r in rows + [header]) for i in range(5)]
+        for row in [header] + rows:
+            print(("  ".join(f"{str(c):<{w}}" for c, w in zip(row, widths)) + "  " + row[5])
+                  .rstrip())
         return 0
     return _guarded(lambda: render_script(args.script, args), args.verbose)
+
+
+def defaults(path):
+    """(integrator, dt, steps a frame, particles) a scene script runs with as it ships:
+    its CONFIG, and the rule of ``script.timing`` where it gives no dt. Question marks
+    where the script does not load or build."""
+    try:
+        module, cfg = load_script(path)
+        scene = build_scene(module, path)
+        dt, steps = timing(cfg, scene)
+    except (ScriptError, SceneError):
+        return "?", "?", "?", "?"
+    shown = f"1/{round(1.0 / dt)}" if abs(1.0 / dt - round(1.0 / dt)) < 1e-6 else f"{dt:.3g}"
+    return cfg["integrator"], shown, steps, scene.num_particles
 
 
 def run_script(path, argv=None):
