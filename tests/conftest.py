@@ -9,6 +9,13 @@ from tcloth.app.script import load_script
 
 SCENES = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "scenes")
 
+# Taichi keeps compiled kernels on disk (its offline cache) and, past 100 MB, drops the
+# least recently used quarter. The suite compiles far more than that, so by default the
+# cache thrashes: a scene that a later module, a scene script run by the command line or
+# the long set compiles again finds its kernels gone (hanging_cloth's first step: 22 s
+# compiling, 8 s from the cache). The tests, and the processes they start, keep 4 GB.
+os.environ.setdefault("TI_OFFLINE_CACHE_MAX_SIZE_OF_FILES", str(4 << 30))
+
 
 # The long set: stress, convergence and every-scene tests that take from 8 to 45 s each on
 # two cores, mostly compiling kernels for scenes of their own. Marked ``slow``: the README's
