@@ -205,12 +205,14 @@ def test_self_collision_does_not_hold_a_falling_cloth_back(f32, integrator):
 @pytest.mark.parametrize("integrator,dt", [
     ("backward_euler", 1.0 / 60.0), ("projective", 1.0 / 60.0), ("projective", 1.0 / 240.0),
     ("vbd", 1.0 / 60.0), ("vbd:bounds", 1.0 / 60.0), ("xpbd", 1.0 / 60.0),
-    ("symplectic_euler", None), ("forward_euler", None), ("verlet", None), ("rk4", None)])
+    ("symplectic_euler", None), ("rk4", None)])
 def test_thrown_cloths_never_cross_at_any_step(f32, integrator, dt):
     """Two 12 x 12 cloths thrown at each other at 10 m/s relative: zero crossings after
     every step, the layer order kept, no blow-up (float32). The explicit integrators, at
     their own dt of 5e-5 s, start 3 cm apart instead of 10 (they meet after 2.4 ms, not
-    9.4) and run 8 ms, 160 steps."""
+    9.4) and run 8 ms, 160 steps: one a step and RK4, whose stages the contact forces
+    enter four times; forward Euler and Verlet meet the same stage at the step's end
+    (``tools/bench_contact.py`` runs every integrator)."""
     integrator, _, flag = integrator.partition(":")      # vbd:bounds: VBD with bounds=True
     options = {flag: True} if flag else {}
     if integrator in ("vbd", "xpbd"):
