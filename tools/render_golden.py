@@ -12,7 +12,8 @@ Made with the renderer the others are compared against (the one before issue 82'
     PYTHONPATH=<a checkout of that renderer> python tools/render_golden.py
 
 Usage: python tools/render_golden.py [--scenes a,b] [--out tests/data/render_golden.npz]
-[--png DIR] (--png also writes each picture as DIR/<scene>_<k>.png, to look at).
+[--png DIR] (--png also writes each picture as DIR/<scene>_<k>.png, to look at). The
+scenes named are drawn again (a new scene added); the others' pictures in --out are kept.
 """
 import argparse
 import glob
@@ -84,6 +85,9 @@ def main(argv=None):
     ap.add_argument("--png", help="also write each picture here as a PNG")
     args = ap.parse_args(argv)
     data = {}
+    if os.path.exists(args.out):        # the other scenes' pictures are kept
+        with np.load(args.out) as stored:
+            data = {key: stored[key] for key in stored.files}
     for name in args.scenes.split(","):
         data.update(frames(name))
         print(f"render_golden.{name}.steps: {data[name + '.steps'].tolist()}")

@@ -16,7 +16,8 @@ SECONDS is short enough that the folding and piling scenes have not yet turned c
 Usage: python tools/scene_snapshot.py [--seconds 0.1] [--out tests/data/scene_positions.npz]
 (--compare FILE prints the largest difference against a stored snapshot instead;
 --integrator NAME --dt DT run every scene with another integrator; --stiffness-scale S
-multiplies the structural springs' constant by S).
+multiplies the structural springs' constant by S; --scenes a,b runs only those, and
+without --compare adds them to --out, keeping the other scenes' positions).
 """
 import argparse
 import glob
@@ -63,10 +64,10 @@ def run_scene(name, seconds=SECONDS, integrator=None, dt=None, stiffness_scale=1
     return sim.positions()
 
 
-def snapshot(seconds=SECONDS, integrator=None, dt=None, stiffness_scale=1.0):
-    """dict scene name -> ``run_scene``'s positions."""
+def snapshot(seconds=SECONDS, integrator=None, dt=None, stiffness_scale=1.0, names=None):
+    """dict scene name -> ``run_scene``'s positions (of every scene, or of ``names``)."""
     return {name: run_scene(name, seconds, integrator, dt, stiffness_scale)
-            for name in scene_names()}
+            for name in names or scene_names()}
 
 
 def main(argv=None):
@@ -78,9 +79,15 @@ def main(argv=None):
     ap.add_argument("--integrator", default=None)
     ap.add_argument("--dt", type=float, default=None)
     ap.add_argument("--stiffness-scale", type=float, default=1.0)
+    ap.add_argument("--scenes", help="only these (a,b): a new scene added to --out, the "
+                                     "others' positions kept")
     args = ap.parse_args(argv)
     tcloth.init(arch="cpu", precision="f64")
-    positions = snapshot(args.seconds, args.integrator, args.dt, args.stiffness_scale)
+    names = args.scenes.split(",") if args.scenes else None
+    positions = snapshot(args.seconds, args.integrator, args.dt, args.stiffness_scale, names)
+    if names and not args.compare and os.path.exists(args.out):
+        with np.load(args.out) as stored:
+            positions = {**{key: stored[key] for key in stored.files}, **positions}
     if args.compare:
         stored = np.load(args.compare)
         for name, x in positions.items():
