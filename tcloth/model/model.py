@@ -90,7 +90,10 @@ class Model:
                 entries;
             self_collision: ``contact.topology.SelfCollisionTable``;
             strain_limit: ``features.strain_limit.StrainLimitData``: count, index,
-                max_stretch, iterations.
+                max_stretch, iterations;
+            tearing: ``features.tearing.TearingData``: count, rows, max_strain, alive,
+                broken, torn (a scene with tearing has no grid stencil: its springs are
+                listed, each with its own stiffness, which a break sets to 0).
         contact: ``contact.stage.ContactStage`` (self-collision's candidates and the guard
             of every step) or None in a scene with neither self-collision nor colliders.
         grab: the grab spring (``terms.grab.GrabSpring``, the mouse spring of the viewer)
@@ -120,7 +123,7 @@ class Model:
         springs = scene.springs
         in_grid = np.zeros(scene.num_springs, dtype=bool)
         self.grids = []
-        if grid_stencil:
+        if grid_stencil and scene.tearing is None:     # tearing: a stiffness per spring
             for cloth in (c for c in scene.cloths if c.is_grid and c.stencil):
                 for sids in cloth.springs.values():
                     in_grid[sids] = True

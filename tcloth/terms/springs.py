@@ -190,11 +190,12 @@ def grid_springs(grids, k, families: ti.template(), first: ti.template(), x, v, 
 # -- diagnostics ------------------------------------------------------------------------------
 @ti.kernel
 def spring_sums(x: ti.template(), pairs: ti.template(), ks: ti.template(),
-                rest: ti.template(), count: ti.i32, load: float,
-                out: ti.template()) -> ti.types.vector(3, ti.f64):
+                rest: ti.template(), count: ti.i32, load: float, torn: ti.template(),
+                alive: ti.template(), out: ti.template()) -> ti.types.vector(3, ti.f64):
     """[spring potential sum k_s/2 (|x_ij| - l0)^2, max strain (|x_ij| - l0)/l0, max
     strain of the springs whose tension k_s (|x_ij| - l0) exceeds ``load`` (N)],
-    accumulated in ``out``'s type."""
+    accumulated in ``out``'s type. torn: whether ``alive`` holds the tearing's per-row
+    flags (a broken spring's strain is not counted; without tearing any field)."""
     out[0] = 0
     out[1] = -1e30
     out[2] = -1e30
@@ -205,9 +206,13 @@ def spring_sums(x: ti.template(), pairs: ti.template(), ks: ti.template(),
         stretch = length - rest[s]
         out[0] += ti.cast(0.5 * ks[s] * stretch * stretch, out.dtype)
         strain = ti.cast(stretch / rest[s], out.dtype)
-        ti.atomic_max(out[1], strain)
-        if ks[s] * stretch > load:
-            ti.atomic_max(out[2], strain)
+        counted = True
+        if ti.static(torn):
+            counted = alive[s] != 0
+        if counted:
+            ti.atomic_max(out[1], strain)
+            if ks[s] * stretch > load:
+                ti.atomic_max(out[2], strain)
     return ti.Vector([ti.cast(out[0], ti.f64), ti.cast(out[1], ti.f64),
                       ti.cast(out[2], ti.f64)])
 
@@ -285,6 +290,9 @@ class Springs(Term, ColouredConstraints):
         self.count, self.list_count = model.spring_count, model.list_spring_count
         self.pairs, self.rest = model.spring_pairs, model.spring_rest
         self.ks, self.kd = model.spring_ks, model.spring_kd
+        # (torn, a torn scene's per-row flags): ``spring_sums``' last arguments but one
+        self.alive = ((True, model.tearing.alive) if model.tearing is not None else
+                      (False, model.spring_ks))
         self.grids, self.grid_table = model.grids, model.grid_table
         self.spring_grids = [k for k, g in enumerate(self.grids) if any(g.families)]
         first = self.grids[self.spring_grids[0]] if self.spring_grids else None
@@ -351,7 +359,8 @@ class Springs(Term, ColouredConstraints):
 
     def sums(self, x, out):
         """(spring energy, max strain) over all springs."""
-        values = spring_sums(x, self.pairs, self.ks, self.rest, self.count, 0.0, out)
+        values = spring_sums(x, self.pairs, self.ks, self.rest, self.count, 0.0, *self.alive,
+                             out)
         return float(values[0]), float(values[1])
 
     def energy(self, x, t, out):
@@ -361,7 +370,8 @@ class Springs(Term, ColouredConstraints):
         """(spring energy, the largest strain of a spring that pulls harder than
         ``load``): the strain bound's part of the instability test (``sim/instability.py``
         says why a spring holding no more than the scene's weight may stretch further)."""
-        values = spring_sums(x, self.pairs, self.ks, self.rest, self.count, self.load, out)
+        values = spring_sums(x, self.pairs, self.ks, self.rest, self.count, self.load,
+                             *self.alive, out)
         return float(values[0]), float(values[2])
 
     def adjacency(self):

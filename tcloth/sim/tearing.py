@@ -1,0 +1,113 @@
+"""Springs that break (``Scene.set_tearing``): the check at the end of every step, what
+broke, and the cloth surface that follows it (``docs/tearing.md``).
+
+After a step is accepted (the instability test passed, so a split step's pieces each
+count as a step), one kernel walks the tearable springs: a spring that still holds and
+whose strain (|x_ij| - l0) / l0 is above ``max_strain`` breaks: its k_s and k_d become 0
+in the model's fields (force, energy, Hessian blocks and XPBD's constraint vanish in every
+solver, nothing compiles again) and its row is appended to the model's ``broken`` list.
+The kernel's count is read back once a step; only where it grew does Python do anything:
+the integrator drops what it built from the spring values (projective's constant matrix),
+the energy budget takes a new baseline (a break removes the spring's elastic energy and
+adds none), and the surface's version moves on.
+"""
+import numpy as np
+import taichi as ti
+
+from ..runtime import serial
+
+
+@ti.kernel
+def _tear(data: ti.template(), x: ti.template(), pairs: ti.template(), rest: ti.template(),
+          max_strain: float) -> ti.i32:
+    """Break the tearable springs that hold and are strained past ``max_strain``; returns
+    how many springs have broken in all."""
+    ti.loop_config(serialize=ti.static(serial(data.rows)))
+    for k in range(data.count):
+        s = data.rows[k]
+        if data.alive[s] != 0:
+            i, j = pairs[s][0], pairs[s][1]
+            if (x[i] - x[j]).norm() > (1.0 + max_strain) * rest[s]:
+                data.alive[s] = 0
+                data.ks[s] = 0.0
+                data.kd[s] = 0.0
+                data.broken[ti.atomic_add(data.torn[None], 1)] = s
+    return data.torn[None]
+
+
+class Tearing:
+    """A simulator's tearing: the check after each step (``after_step``), what broke
+    (``torn``) and the cloth triangles that still hold (``surface``)."""
+
+    def __init__(self, model):
+        self.model = model
+        self.data = model.tearing
+        self.version = 0             # moves on with every step that breaks a spring
+        self._surface = None
+
+    def after_step(self, x):
+        """Break the springs strained past the threshold at positions ``x`` (the accepted
+        state); whether any broke."""
+        data = self.data
+        if not data.count:
+            return False
+        count = _tear(data, x, self.model.spring_pairs, self.model.spring_rest,
+                      data.max_strain)
+        if count == len(data.rows_broken):
+            return False
+        data.rows_broken = data.broken.to_numpy()[:count].astype(np.int64)
+        self.version += 1
+        self._surface = None
+        return True
+
+    def mend(self):
+        """Every spring holds again (``Simulator.reset``)."""
+        self.data.mend()
+        self.version += 1
+        self._surface = None
+
+    def torn(self):
+        """(B,) int64: the scene spring ids that broke, in the order they did."""
+        return self.model.spring_order[self.data.rows_broken].astype(np.int64)
+
+    def restore(self, spring_ids):
+        """Break the scene springs ``spring_ids`` (in that order), as a checkpoint holds
+        them: the same fields as if they had broken in this run."""
+        data = self.data
+        position = np.empty(len(self.model.spring_order), dtype=np.int64)
+        position[self.model.spring_order] = np.arange(len(self.model.spring_order))
+        rows = position[np.asarray(spring_ids, dtype=np.int64)]
+        alive = data.alive.to_numpy()
+        alive[rows] = 0
+        data.alive.from_numpy(alive)
+        broken = data.broken.to_numpy()
+        broken[:len(rows)] = rows
+        data.broken.from_numpy(broken)
+        data.torn[None] = len(rows)
+        data.rows_broken = rows
+        data.zero_broken()
+        self.version += 1
+        self._surface = None
+
+    def surface(self):
+        """(T,) bool over ``scene.triangles``: the triangles that hold, those with no
+        broken spring along an edge (kept until the next break)."""
+        if self._surface is None:
+            self._surface = holding_triangles(self.model.scene, self.torn())
+        return self._surface
+
+
+def holding_triangles(scene, torn):
+    """(T,) bool over ``scene.triangles``: True where no spring of ``torn`` (scene spring
+    ids) joins two corners of the triangle."""
+    triangles = scene.triangles
+    if not len(torn):
+        return np.ones(len(triangles), dtype=bool)
+    n = scene.num_particles
+    pairs = np.sort(scene.springs["pairs"][np.asarray(torn)], axis=1)
+    cut = pairs[:, 0] * n + pairs[:, 1]
+    held = np.ones(len(triangles), dtype=bool)
+    for a, b in ((0, 1), (1, 2), (2, 0)):
+        edge = np.sort(triangles[:, [a, b]], axis=1)
+        held &= ~np.isin(edge[:, 0] * n + edge[:, 1], cut)
+    return held
