@@ -278,3 +278,56 @@ def test_features_that_a_tear_does_not_cut_are_refused(f64):
     scene.set_bending(1e-5)
     with pytest.raises(tcloth.SceneError, match="tearing does not cut bending hinges"):
         tcloth.Simulator(scene)
+
+
+def run_until_torn(sim, chunk=100, most=30):
+    """Step ``sim`` in chunks until a cloth triangle is torn (at most ``most`` chunks)."""
+    for _ in range(most):
+        sim.step(chunk)
+        if not sim.surface().all():
+            return
+    raise AssertionError("nothing tore")
+
+
+def test_the_renderer_draws_only_the_triangles_that_hold(f32):
+    from tcloth.render.render import renderer_for
+    sim = grid_pulled_apart(6, dt=2e-4)
+    camera = {"eye": (0.0, 1.5, 0.01), "target": (0.0, 0.0, 0.0)}
+    renderer = renderer_for(sim, 96, 72, camera=camera, shadows=False)
+    renderer.render()
+    assert len(np.unique(renderer.ids()[renderer.ids() < renderer.tri_count])) > 40
+    run_until_torn(sim)
+    sim.step(300)
+    image = renderer.render()
+    assert np.isfinite(image).all()
+    ids = renderer.ids()
+    drawn = np.unique(ids[ids < renderer.tri_count])
+    kept = {tuple(sorted(t)) for t in sim.scene.triangles[sim.surface()]}
+    corners = renderer.corners.to_numpy()[drawn]
+    assert len(drawn) and all(tuple(sorted(c)) in kept for c in corners)
+
+
+def test_usd_export_follows_the_tear_frame_by_frame(f32, tmp_path):
+    pytest.importorskip("pxr", reason="usd-core (pxr) is not installed")
+    from pxr import Usd, UsdGeom, UsdValidation
+    sim = grid_pulled_apart(6, dt=2e-4)
+    path = str(tmp_path / "torn.usda")
+    writer = tcloth.UsdWriter(sim, path, fps=24)
+    held = []
+    for frame in range(8):
+        if frame:
+            sim.step(200)
+        writer.write()
+        held.append(sim.surface().copy())
+    writer.close()
+    assert held[0].all() and not held[-1].all()
+    stage = Usd.Stage.Open(path)
+    mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/World/Cloths/cloth_0"))
+    local = sim.scene.cloths[0].triangles - sim.scene.cloths[0].offset
+    for frame, keep in enumerate(held):
+        indices = np.array(mesh.GetFaceVertexIndicesAttr().Get(frame)).reshape(-1, 3)
+        np.testing.assert_array_equal(indices, local[keep])
+        assert list(mesh.GetFaceVertexCountsAttr().Get(frame)) == [3] * int(keep.sum())
+    validators = UsdValidation.ValidationRegistry().GetOrLoadAllValidators()
+    errors = UsdValidation.ValidationContext(validators).Validate(stage)
+    assert not [(e.GetName(), e.GetMessage()) for e in errors]
