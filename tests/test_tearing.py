@@ -331,3 +331,33 @@ def test_usd_export_follows_the_tear_frame_by_frame(f32, tmp_path):
     validators = UsdValidation.ValidationRegistry().GetOrLoadAllValidators()
     errors = UsdValidation.ValidationContext(validators).Validate(stage)
     assert not [(e.GetName(), e.GetMessage()) for e in errors]
+
+
+@pytest.mark.parametrize("pull, tears", [(0.03, False), (0.8, True)])
+def test_dragging_a_cloth_hard_in_the_viewer_tears_it(f32, pull, tears):
+    """The sandbox's drag (``viewer.controls``, no window needed): the particle under the
+    cursor pulled ``pull`` m down by the grab spring; hard, the cloth tears around it,
+    gently, nothing breaks."""
+    from tcloth.render.camera import Camera
+    from tcloth.viewer.camera import OrbitCamera
+    from tcloth.viewer.controls import Controls
+    scene = tcloth.Scene(gravity=(0.0, -9.81, 0.0), air_damping=1.0)
+    scene.add_cloth(resolution=(10, 10), size=(0.5, 0.5), center=(0.0, 1.0, 0.0),
+                    plane="xy", mass=0.05, structural=(200.0, 0.05), shear=(40.0, 0.02),
+                    flexion=None, pinned=[(i, 0) for i in range(10)])
+    scene.set_tearing(max_strain=0.5)
+    sim = tcloth.Simulator(scene, dt=2.5e-4, grab=True)
+    sim.step(400)
+    controls = Controls(sim, substeps=100)
+    camera = OrbitCamera(Camera((0.0, 1.0, 2.0), (0.0, 1.0, 0.0), fov=40.0))
+    particle = controls.start_drag(camera, 0.5, 0.5, 1.0)
+    assert particle is not None
+    depth = float((sim.positions()[particle] - camera.eye) @ camera.basis[0])
+    below = 0.5 - pull / (2 * depth * np.tan(np.radians(20.0)))
+    for _ in range(20):
+        controls.drag(camera, 0.5, below, 1.0)
+        controls.advance()
+    assert not controls.message
+    assert (len(sim.torn()) > 0) == tears
+    if tears:          # the springs at the dragged particle broke first
+        assert particle in scene.springs["pairs"][sim.torn()[:4]]
