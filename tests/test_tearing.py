@@ -361,3 +361,32 @@ def test_dragging_a_cloth_hard_in_the_viewer_tears_it(f32, pull, tears):
     assert (len(sim.torn()) > 0) == tears
     if tears:          # the springs at the dragged particle broke first
         assert particle in scene.springs["pairs"][sim.torn()[:4]]
+
+
+def numpy_forces(scene, x, v, intact):
+    """Gravity, air damping and the forces of the springs ``intact`` (NumPy)."""
+    sp = scene.springs
+    f = scene.masses[:, None] * np.asarray(scene.gravity)[None, :] \
+        - scene.drag_coefficients()[:, None] * v
+    pairs = sp["pairs"][intact]
+    d = x[pairs[:, 0]] - x[pairs[:, 1]]
+    length = np.linalg.norm(d, axis=1)
+    rate = ((v[pairs[:, 0]] - v[pairs[:, 1]]) * d).sum(1) / length
+    fi = -((sp["stiffness"][intact] * (length - sp["rest_length"][intact])
+            + sp["damping"][intact] * rate) / length)[:, None] * d
+    np.add.at(f, pairs[:, 0], fi)
+    np.add.at(f, pairs[:, 1], -fi)
+    return f
+
+
+@pytest.mark.parametrize("grid_stencil", [True, False])
+def test_a_torn_cloths_forces_are_its_intact_springs(f64, grid_stencil):
+    """The stencil (a flag per slot) and the spring list (k_s = k_d = 0) both leave the
+    broken springs out: the forces are NumPy's over the springs that hold."""
+    sim = grid_pulled_apart(8, dt=2e-4, grid_stencil=grid_stencil)
+    assert bool(sim.model.grids) == grid_stencil
+    run_until_torn(sim)
+    intact = np.setdiff1d(np.arange(sim.scene.num_springs), sim.torn())
+    expected = numpy_forces(sim.scene, sim.positions(), sim.velocities(), intact)
+    free = ~sim.scene.pinned
+    np.testing.assert_allclose(sim.forces()[free], expected[free], rtol=1e-9, atol=1e-9)

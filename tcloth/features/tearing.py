@@ -5,7 +5,8 @@ A spring breaks when its strain (|x_ij| - l0) / l0 passes ``max_strain`` at a st
 A broken spring's stiffness and damping are 0 in the model's fields from then on, so its
 force, energy, Hessian blocks and constraint are nothing in every solver without a kernel
 compiled again, and its ``alive`` flag is 0 (the strain diagnostics and the strain
-limiter skip it).
+limiter skip it); a cloth grid's stencil, which reads the grid's one stiffness, reads
+a flag per stencil slot too (``grid_alive``).
 """
 import numpy as np
 import taichi as ti
@@ -36,6 +37,11 @@ class TearingData:
         rows_broken: the host's copy of broken[:torn] (NumPy int64), the rows whose k_s
             and k_d stay 0 when the model's spring values are uploaded again.
         ks, kd: the model's spring stiffness and damping fields (a break zeroes a row's).
+        gridded: whether the model has cloth grids, whose springs the stencil evaluates
+            with the grid's one stiffness: then grid_alive, (particle_count, 6) i32, is 1
+            at the stencil slots (``GridBlock.owned_slots``) of the springs that hold, and
+            grid_slot, (max(spring_count, 1),) i32, each row's slot (-1: a listed spring).
+            Without grids both are (1,)-sized and unused.
     """
 
     def __init__(self, model, rows, max_strain):
@@ -50,12 +56,44 @@ class TearingData:
         self.torn = ti.field(ti.i32, shape=())
         self.rows_broken = np.zeros(0, dtype=np.int64)
         self.ks, self.kd = model.spring_ks, model.spring_kd
+        self.gridded = bool(model.grids)
+        n = model.particle_count if self.gridded else 1
+        self.grid_alive = ti.field(ti.i32, shape=(n, 6))
+        self.grid_alive.fill(1)
+        self.grid_slot = ti.field(ti.i32, shape=max(model.spring_count, 1) if self.gridded
+                                  else 1)
+        if self.gridded:
+            springs = model.scene.springs
+            pairs = springs["pairs"][model.spring_order]
+            kinds = springs["kind"][model.spring_order]
+            slots = np.full(len(pairs), -1, dtype=np.int64)
+            for grid in model.grids:
+                slots = np.maximum(slots, grid.owned_slots(pairs, kinds))
+            self.grid_slot.from_numpy(slots.astype(np.int32))
 
     def mend(self):
         """Every spring holds again (the spring values are then uploaded anew)."""
         self.alive.fill(1)
+        self.grid_alive.fill(1)
         self.torn[None] = 0
         self.rows_broken = np.zeros(0, dtype=np.int64)
+
+    def break_rows(self, rows):
+        """Break model rows ``rows`` (as the tearing kernel would, all at once)."""
+        alive = self.alive.to_numpy()
+        alive[rows] = 0
+        self.alive.from_numpy(alive)
+        if self.gridded:
+            slots = self.grid_slot.to_numpy()[rows]
+            grid_alive = self.grid_alive.to_numpy()
+            grid_alive[np.divmod(slots[slots >= 0], 6)] = 0
+            self.grid_alive.from_numpy(grid_alive)
+        broken = self.broken.to_numpy()
+        broken[:len(rows)] = rows
+        self.broken.from_numpy(broken)
+        self.torn[None] = len(rows)
+        self.rows_broken = np.asarray(rows, dtype=np.int64)
+        self.zero_broken()
 
     def zero_broken(self):
         """k_s = k_d = 0 on the broken rows (after the spring values were uploaded)."""

@@ -92,8 +92,7 @@ class Model:
             strain_limit: ``features.strain_limit.StrainLimitData``: count, index,
                 max_stretch, iterations;
             tearing: ``features.tearing.TearingData``: count, rows, max_strain, alive,
-                broken, torn (a scene with tearing has no grid stencil: its springs are
-                listed, each with its own stiffness, which a break sets to 0).
+                broken, torn, rows_broken, gridded, grid_alive, grid_slot.
         contact: ``contact.stage.ContactStage`` (self-collision's candidates and the guard
             of every step) or None in a scene with neither self-collision nor colliders.
         grab: the grab spring (``terms.grab.GrabSpring``, the mouse spring of the viewer)
@@ -123,7 +122,7 @@ class Model:
         springs = scene.springs
         in_grid = np.zeros(scene.num_springs, dtype=bool)
         self.grids = []
-        if grid_stencil and scene.tearing is None:     # tearing: a stiffness per spring
+        if grid_stencil:
             for cloth in (c for c in scene.cloths if c.is_grid and c.stencil):
                 for sids in cloth.springs.values():
                     in_grid[sids] = True

@@ -31,6 +31,10 @@ def _tear(data: ti.template(), x: ti.template(), pairs: ti.template(), rest: ti.
                 data.alive[s] = 0
                 data.ks[s] = 0.0
                 data.kd[s] = 0.0
+                if ti.static(data.gridded):
+                    slot = data.grid_slot[s]
+                    if slot >= 0:
+                        data.grid_alive[slot // 6, slot % 6] = 0
                 data.broken[ti.atomic_add(data.torn[None], 1)] = s
     return data.torn[None]
 
@@ -73,19 +77,9 @@ class Tearing:
     def restore(self, spring_ids):
         """Break the scene springs ``spring_ids`` (in that order), as a checkpoint holds
         them: the same fields as if they had broken in this run."""
-        data = self.data
         position = np.empty(len(self.model.spring_order), dtype=np.int64)
         position[self.model.spring_order] = np.arange(len(self.model.spring_order))
-        rows = position[np.asarray(spring_ids, dtype=np.int64)]
-        alive = data.alive.to_numpy()
-        alive[rows] = 0
-        data.alive.from_numpy(alive)
-        broken = data.broken.to_numpy()
-        broken[:len(rows)] = rows
-        data.broken.from_numpy(broken)
-        data.torn[None] = len(rows)
-        data.rows_broken = rows
-        data.zero_broken()
+        self.data.break_rows(position[np.asarray(spring_ids, dtype=np.int64)])
         self.version += 1
         self._surface = None
 
