@@ -390,3 +390,18 @@ def test_a_torn_cloths_forces_are_its_intact_springs(f64, grid_stencil):
     expected = numpy_forces(sim.scene, sim.positions(), sim.velocities(), intact)
     free = ~sim.scene.pinned
     np.testing.assert_allclose(sim.forces()[free], expected[free], rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.parametrize("integrator", ["symplectic_euler", "verlet"])
+def test_a_batch_tears_as_single_steps_do_bit_for_bit(f64, integrator):
+    """Batches (``sim/batch.py``) break springs inside their kernel: the same springs at
+    the same steps and the same states as steps launched one by one."""
+    runs = []
+    for batch in (True, False):
+        sim = grid_pulled_apart(6, dt=2e-4, batch=batch, integrator=integrator)
+        assert (sim.fusion() is None) == batch
+        sim.step(1400)
+        runs.append((sim.positions(), sim.torn(), sim.surface()))
+    assert len(runs[0][1])
+    for a, b in zip(*runs):
+        np.testing.assert_array_equal(a, b)

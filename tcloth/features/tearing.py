@@ -78,16 +78,28 @@ class TearingData:
         self.torn[None] = 0
         self.rows_broken = np.zeros(0, dtype=np.int64)
 
-    def break_rows(self, rows):
-        """Break model rows ``rows`` (as the tearing kernel would, all at once)."""
+    def _flag(self, rows, value):
+        """``alive`` (and the grid slots' flags) of model rows ``rows`` set to value."""
         alive = self.alive.to_numpy()
-        alive[rows] = 0
+        alive[rows] = value
         self.alive.from_numpy(alive)
         if self.gridded:
             slots = self.grid_slot.to_numpy()[rows]
             grid_alive = self.grid_alive.to_numpy()
-            grid_alive[np.divmod(slots[slots >= 0], 6)] = 0
+            grid_alive[np.divmod(slots[slots >= 0], 6)] = value
             self.grid_alive.from_numpy(grid_alive)
+
+    def mend_rows(self, rows, stiffness, damping):
+        """Model rows ``rows`` hold again, with k_s ``stiffness`` and k_d ``damping``."""
+        self._flag(rows, 1)
+        for field, value in ((self.ks, stiffness), (self.kd, damping)):
+            values = field.to_numpy()
+            values[rows] = value
+            field.from_numpy(values)
+
+    def break_rows(self, rows):
+        """Break model rows ``rows`` (as the tearing kernel would, all at once)."""
+        self._flag(rows, 0)
         broken = self.broken.to_numpy()
         broken[:len(rows)] = rows
         self.broken.from_numpy(broken)

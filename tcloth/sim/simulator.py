@@ -214,8 +214,6 @@ class Simulator(LiveParameters):
     def _why_not_batched(self):
         if not self.settings["batch"]:
             return "batches are switched off (Simulator(..., batch=False))"
-        if self._tearing is not None:
-            return "tearing checks the springs from Python after every step"
         if not runtime.cpu():
             return (f"on {runtime.arch_name()} the loops of a step run in parallel, which a "
                     "batch's one thread would not")
@@ -229,7 +227,7 @@ class Simulator(LiveParameters):
                                                    self._contact.batch_obstacle())
         if why is None and self._limiter is not None and self.settings["strain_limiting"]:
             why = self._limiter.batch_obstacle()
-        return why
+        return why or (self._tearing and self._tearing.batch_obstacle())
 
     def time_at(self, steps):
         """The time after ``steps`` steps in all (at the current dt since its last change)."""

@@ -17,17 +17,17 @@ import taichi as ti
 from ..runtime import serial
 
 
-@ti.kernel
-def _tear(data: ti.template(), x: ti.template(), pairs: ti.template(), rest: ti.template(),
-          max_strain: float) -> ti.i32:
-    """Break the tearable springs that hold and are strained past ``max_strain``; returns
-    how many springs have broken in all."""
+@ti.func
+def tear_springs(data, x, pairs, rest):
+    """Break the tearable springs that hold and are strained past ``data.max_strain``;
+    returns how many broke now."""
+    before = data.torn[None]
     ti.loop_config(serialize=ti.static(serial(data.rows)))
     for k in range(data.count):
         s = data.rows[k]
         if data.alive[s] != 0:
             i, j = pairs[s][0], pairs[s][1]
-            if (x[i] - x[j]).norm() > (1.0 + max_strain) * rest[s]:
+            if (x[i] - x[j]).norm() > (1.0 + data.max_strain) * rest[s]:
                 data.alive[s] = 0
                 data.ks[s] = 0.0
                 data.kd[s] = 0.0
@@ -36,9 +36,17 @@ def _tear(data: ti.template(), x: ti.template(), pairs: ti.template(), rest: ti.
                     if slot >= 0:
                         data.grid_alive[slot // 6, slot % 6] = 0
                 data.broken[ti.atomic_add(data.torn[None], 1)] = s
-    return data.torn[None]
+    return data.torn[None] - before
 
 
+@ti.kernel
+def _tear(tearing: ti.template(), x: ti.template()) -> ti.i32:
+    """``tear_springs`` at positions x; returns how many springs have broken in all."""
+    tearing.tear(x)
+    return tearing.data.torn[None]
+
+
+@ti.data_oriented
 class Tearing:
     """A simulator's tearing: the check after each step (``after_step``), what broke
     (``torn``) and the cloth triangles that still hold (``surface``)."""
@@ -49,20 +57,55 @@ class Tearing:
         self.version = 0             # moves on with every step that breaks a spring
         self._surface = None
 
+    @ti.func
+    def tear(self, x):
+        """``tear_springs`` as a ``ti.func`` (the simulator's batches); how many broke."""
+        return tear_springs(self.data, x, self.model.spring_pairs, self.model.spring_rest)
+
+    def batch_obstacle(self):
+        if not serial(self.data.rows):
+            return f"tearing's {self.data.count} springs run on several threads"
+        return None
+
     def after_step(self, x):
         """Break the springs strained past the threshold at positions ``x`` (the accepted
         state); whether any broke."""
-        data = self.data
-        if not data.count:
+        if not self.data.count:
             return False
-        count = _tear(data, x, self.model.spring_pairs, self.model.spring_rest,
-                      data.max_strain)
+        return self._follow(_tear(self, x))
+
+    def sync(self):
+        """Take in what broke in the steps of a batch; whether any did."""
+        return self._follow(self.data.torn[None])
+
+    def _follow(self, count):
+        data = self.data
         if count == len(data.rows_broken):
             return False
         data.rows_broken = data.broken.to_numpy()[:count].astype(np.int64)
         self.version += 1
         self._surface = None
         return True
+
+    def mark(self):
+        """How many springs have broken in all (``rollback``'s argument)."""
+        return int(self.data.torn[None])
+
+    def rollback(self, mark):
+        """Mend the springs that broke after ``mark`` (a batch's steps taken again from
+        their start): held again, with the scene's stiffness and damping."""
+        data = self.data
+        count = int(data.torn[None])
+        if count == mark:
+            return
+        rows = data.broken.to_numpy()[mark:count].astype(np.int64)
+        springs = self.model.scene.springs
+        ids = self.model.spring_order[rows]
+        data.mend_rows(rows, springs["stiffness"][ids], springs["damping"][ids])
+        data.torn[None] = mark
+        data.rows_broken = data.rows_broken[:min(mark, len(data.rows_broken))]
+        self.version += 1
+        self._surface = None
 
     def mend(self):
         """Every spring holds again (``Simulator.reset``)."""
