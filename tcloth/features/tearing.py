@@ -18,8 +18,7 @@ from .base import Feature
 
 # the features whose elements span several springs' particles and do not yet follow a tear
 UNCUT = {"bending": "bending hinges", "membrane": "the membrane",
-         "pressure": "pressure's chambers", "self_collision": "self-collision",
-         "wind": "the wind's triangles"}
+         "pressure": "pressure's chambers", "self_collision": "self-collision"}
 
 
 @ti.data_oriented
@@ -28,7 +27,8 @@ class TearingData:
 
     Attributes:
         count: the number of tearable springs R.
-        rows: (max(R, 1),) i32: their model rows (``Model.spring_order``).
+        rows: (max(R, 1),) i32: their model rows (``Model.spring_order``); every: whether
+            they are all the model's rows (then row k is rows[k] = k, not read).
         max_strain: the strain past which a spring breaks.
         alive: (max(spring_count, 1),) i32 per model row: 1 while the spring holds, 0 once
             it broke (every row starts at 1).
@@ -46,6 +46,7 @@ class TearingData:
 
     def __init__(self, model, rows, max_strain):
         self.count = len(rows)
+        self.every = len(rows) == model.spring_count
         self.rows = ti.field(ti.i32, shape=max(len(rows), 1))
         if len(rows):
             self.rows.from_numpy(rows.astype(np.int32))

@@ -9,7 +9,7 @@ solver, nothing compiles again) and its row is appended to the model's ``broken`
 The kernel's count is read back once a step; only where it grew does Python do anything:
 the integrator drops what it built from the spring values (projective's constant matrix),
 the energy budget takes a new baseline (a break removes the spring's elastic energy and
-adds none), and the surface's version moves on.
+adds none), the surface's version moves on and the wind blows on what holds.
 """
 import numpy as np
 import taichi as ti
@@ -22,12 +22,17 @@ def tear_springs(data, x, pairs, rest):
     """Break the tearable springs that hold and are strained past ``data.max_strain``;
     returns how many broke now."""
     before = data.torn[None]
+    stretch = ti.static(1.0 + data.max_strain)
     ti.loop_config(serialize=ti.static(serial(data.rows)))
     for k in range(data.count):
-        s = data.rows[k]
+        s = k
+        if ti.static(not data.every):
+            s = data.rows[k]
         if data.alive[s] != 0:
             i, j = pairs[s][0], pairs[s][1]
-            if (x[i] - x[j]).norm() > (1.0 + data.max_strain) * rest[s]:
+            d = x[i] - x[j]
+            longest = stretch * rest[s]
+            if d.dot(d) > longest * longest:
                 data.alive[s] = 0
                 data.ks[s] = 0.0
                 data.kd[s] = 0.0
@@ -63,6 +68,8 @@ class Tearing:
         return tear_springs(self.data, x, self.model.spring_pairs, self.model.spring_rest)
 
     def batch_obstacle(self):
+        if self.model.wind is not None:
+            return "the wind's triangles follow a tear from Python"
         if not serial(self.data.rows):
             return f"tearing's {self.data.count} springs run on several threads"
         return None
@@ -83,9 +90,15 @@ class Tearing:
         if count == len(data.rows_broken):
             return False
         data.rows_broken = data.broken.to_numpy()[:count].astype(np.int64)
+        self._moved()
+        return True
+
+    def _moved(self):
+        """The surface changed: its version moves on, the wind blows on what holds."""
         self.version += 1
         self._surface = None
-        return True
+        if self.model.wind is not None:
+            self.model.wind.hold(self.surface())
 
     def mark(self):
         """How many springs have broken in all (``rollback``'s argument)."""
@@ -104,14 +117,12 @@ class Tearing:
         data.mend_rows(rows, springs["stiffness"][ids], springs["damping"][ids])
         data.torn[None] = mark
         data.rows_broken = data.rows_broken[:min(mark, len(data.rows_broken))]
-        self.version += 1
-        self._surface = None
+        self._moved()
 
     def mend(self):
         """Every spring holds again (``Simulator.reset``)."""
         self.data.mend()
-        self.version += 1
-        self._surface = None
+        self._moved()
 
     def torn(self):
         """(B,) int64: the scene spring ids that broke, in the order they did."""
@@ -123,8 +134,7 @@ class Tearing:
         position = np.empty(len(self.model.spring_order), dtype=np.int64)
         position[self.model.spring_order] = np.arange(len(self.model.spring_order))
         self.data.break_rows(position[np.asarray(spring_ids, dtype=np.int64)])
-        self.version += 1
-        self._surface = None
+        self._moved()
 
     def surface(self):
         """(T,) bool over ``scene.triangles``: the triangles that hold, those with no
