@@ -17,7 +17,7 @@ from ..validate import as_scalar
 from .base import Feature
 
 # the features whose elements span several springs' particles and do not yet follow a tear
-UNCUT = {"bending": "bending hinges", "membrane": "the membrane",
+UNCUT = {"membrane": "the membrane",
          "pressure": "pressure's chambers", "self_collision": "self-collision"}
 
 

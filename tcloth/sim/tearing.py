@@ -68,8 +68,8 @@ class Tearing:
         return tear_springs(self.data, x, self.model.spring_pairs, self.model.spring_rest)
 
     def batch_obstacle(self):
-        if self.model.wind is not None:
-            return "the wind's triangles follow a tear from Python"
+        if self.model.wind is not None or self.model.bending is not None:
+            return "the wind's triangles and the hinges follow a tear from Python"
         if not serial(self.data.rows):
             return f"tearing's {self.data.count} springs run on several threads"
         return None
@@ -94,11 +94,16 @@ class Tearing:
         return True
 
     def _moved(self):
-        """The surface changed: its version moves on, the wind blows on what holds."""
+        """The surface changed: its version moves on, the wind blows on what holds, and
+        the hinges of the torn triangles bend no more."""
         self.version += 1
         self._surface = None
-        if self.model.wind is not None:
-            self.model.wind.hold(self.surface())
+        model = self.model
+        if model.wind is not None:
+            model.wind.hold(self.surface())
+        if model.bending is not None:
+            model.bending.hold(model.scene.springs["pairs"][self.torn()],
+                               model.scene.bending["rigidity"])
 
     def mark(self):
         """How many springs have broken in all (``rollback``'s argument)."""
