@@ -133,7 +133,7 @@ class Batches:
                 self.start, sim.position_bound, sim.velocity_bound)
         run = self.kernels[key][1]
         counts = sim._contact and sim._contact.batch_counts()
-        self.mark = sim._tearing and sim._tearing.mark()
+        self.mark = sim._tearing and sim._tearing.mark(synced=True)
         fresh = 0 if sim.integrator.holds_forces(a) else 1
         args = (fresh, sim._time_base, sim.num_steps - sim._step_base, sim.dt)
         done, error, changed = n, None, False

@@ -105,9 +105,11 @@ class Tearing:
             model.bending.hold(model.scene.springs["pairs"][self.torn()],
                                model.scene.bending["rigidity"])
 
-    def mark(self):
-        """How many springs have broken in all (``rollback``'s argument)."""
-        return int(self.data.torn[None])
+    def mark(self, synced=False):
+        """How many springs have broken in all (``rollback``'s argument); synced: as taken
+        in last (``after_step``, ``sync``: no read from the device), right where nothing
+        stepped since."""
+        return len(self.data.rows_broken) if synced else int(self.data.torn[None])
 
     def rollback(self, mark):
         """Mend the springs that broke after ``mark`` (a batch's steps taken again from
