@@ -232,7 +232,7 @@ def _cloth(stage, k, cloth, colour, pinned, held=None):
     triangles written once), or ``_held``'s function: the triangles that hold written at
     the first frame and at every frame where a tear changed them (time-varying
     topology; faceVarying texture coordinates follow them)."""
-    UsdGeom, Vt = pxr_modules("UsdGeom", "Vt")
+    Usd, UsdGeom, Vt = pxr_modules("Usd", "UsdGeom", "Vt")
     ids = np.ravel(cloth.particles)
     local = np.asarray(cloth.triangles - cloth.offset, dtype=np.int32)
     mesh = UsdGeom.Mesh.Define(stage, f"/World/Cloths/cloth_{k}")
@@ -255,6 +255,7 @@ def _cloth(stage, k, cloth, colour, pinned, held=None):
 
     def topology(keep, code):
         """The faces ``keep`` at time code ``code`` (None: once, for all time)."""
+        code = Usd.TimeCode.Default() if code is None else code
         faces = shown["faces"] = local[keep]
         counts.Set(Vt.IntArray.FromNumpy(np.full(len(faces), 3, np.int32)), code)
         indices.Set(Vt.IntArray.FromNumpy(faces.ravel()), code)
