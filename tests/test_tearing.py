@@ -45,15 +45,15 @@ def ramp(sim, g0, rate, steps):
 def test_a_hanging_chain_tears_at_its_top_when_the_weight_reaches_k_strain_l0(f64):
     k, l0, eps = 200.0, 0.1, 0.2
     scene, free = hanging_chain(9.0, eps, k=k, l0=l0)
-    sim = tcloth.Simulator(scene, dt=1e-3)
-    g, before = ramp(sim, 9.0, 4.0, 2000)
+    sim = tcloth.Simulator(scene, dt=2e-3)
+    g, before = ramp(sim, 9.0, 4.0, 1000)
     # quasi-static: the top spring holds the whole free weight, g m = k eps l0 at the break
     assert g is not None
     assert g * free == pytest.approx(k * eps * l0, rel=0.02)
     assert list(sim.torn()) == [0]                           # the top spring, alone
     # not before: the step before the break left the top spring below its strain
     assert np.linalg.norm(before[1] - before[0]) <= (1 + eps) * l0
-    sim.step(300)                                            # the rest falls, unstrained
+    sim.step(150)                                            # the rest falls, unstrained
     assert list(sim.torn()) == [0]
     assert sim.positions()[1:, 1].max() < before[1:, 1].min()
 
@@ -61,11 +61,11 @@ def test_a_hanging_chain_tears_at_its_top_when_the_weight_reaches_k_strain_l0(f6
 def test_below_the_threshold_nothing_breaks(f64):
     k, l0, eps = 200.0, 0.1, 0.2
     scene, free = hanging_chain(9.0, eps, k=k, l0=l0)
-    sim = tcloth.Simulator(scene, dt=1e-3)
+    sim = tcloth.Simulator(scene, dt=2e-3)
     g_max = 0.97 * k * eps * l0 / free
-    g, _ = ramp(sim, 9.0, 4.0, int((g_max - 9.0) / 4.0 / 1e-3))
+    g, _ = ramp(sim, 9.0, 4.0, int((g_max - 9.0) / 4.0 / 2e-3))
     assert g is None
-    sim.step(1000)
+    sim.step(500)
     assert len(sim.torn()) == 0
     top = np.linalg.norm(np.diff(sim.positions()[:2], axis=0))
     assert top == pytest.approx(l0 * (1 + 0.97 * eps), rel=0.01)   # the static stretch
