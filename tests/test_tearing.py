@@ -476,3 +476,22 @@ def test_a_batch_taken_again_from_its_start_mends_what_broke_in_it(f64, monkeypa
     assert len(runs[0][1])
     for a, b in zip(*runs):
         np.testing.assert_array_equal(a, b)
+
+
+def test_the_strain_limit_leaves_a_broken_spring_alone(f64):
+    """Provot's limit (10 %) on springs that tear at 5 %: once broken, a spring's ends go
+    apart past the limit (the limiter no longer shortens it); those that hold stay
+    within it."""
+    scene = tcloth.Scene(gravity=(0.0, 0.0, 0.0))
+    ids = scene.add_particles([[0, 0, 0], [0.1, 0, 0], [0.2, 0, 0]], mass=0.01,
+                              velocities=[[-2, 0, 0], [0, 0, 0], [0, 0, 0]])
+    scene.add_springs([[ids[0], ids[1]], [ids[1], ids[2]]], 100.0, rest_length=0.1)
+    scene.limit_strain(max_stretch=0.1, kinds=("custom",))
+    scene.set_tearing(max_strain=0.05)
+    sim = tcloth.Simulator(scene, dt=1e-4)
+    sim.step(400)
+    assert list(sim.torn()) == [0]
+    x = sim.positions()
+    assert np.linalg.norm(x[1] - x[0]) > 0.15                 # far past 1.1 rest lengths
+    assert np.linalg.norm(x[2] - x[1]) <= 0.11 * (1 + 1e-9)
+    assert sim.max_strain() <= 0.1 + 1e-9                     # the broken one left out
