@@ -23,6 +23,8 @@ os.environ.setdefault("TI_OFFLINE_CACHE_MAX_SIZE_OF_FILES", str(4 << 30))
 # and .ci/run run them too. The same physics keeps a quick representative in the short set
 # (a stress case per family, the cheapest resolution or parameter).
 LONG = {
+    "test_tearing::test_a_hinge_across_a_tear_bends_no_more[projective]",
+    "test_tearing::test_a_batch_tears_as_single_steps_do_bit_for_bit[verlet]",
     "test_grad::test_every_parameters_gradient_matches_central_differences[backward_euler]",
     "test_grad::test_a_backward_euler_steps_adjoint_is_its_jacobians_transpose",
     "test_grad::test_every_parameters_gradient_matches_central_differences[projective]",

@@ -177,13 +177,13 @@ def test_no_function_is_over_80_lines():
 
 def test_every_term_feature_is_registered():
     """``features.FEATURES`` holds each term's feature (the same object), in the terms'
-    order, then the strain limit: the model builds, refreshes and saves a feature only
-    through that list."""
+    order, then the strain limit and tearing: the model builds, refreshes and saves a
+    feature only through that list."""
     from tcloth.features import FEATURES
     from tcloth.terms import TERMS
     of_terms = [t.feature for t in TERMS if t.feature is not None]
     assert list(FEATURES[:len(of_terms)]) == of_terms
-    assert [f.name for f in FEATURES[len(of_terms):]] == ["strain_limit"]
+    assert [f.name for f in FEATURES[len(of_terms):]] == ["strain_limit", "tearing"]
 
 
 def test_the_model_keeps_each_feature_on_its_own_object(f32):
@@ -205,11 +205,15 @@ def test_the_model_keeps_each_feature_on_its_own_object(f32):
     scene.set_pressure(100.0, cloths=[1])
     scene.set_self_collision()
     scene.limit_strain()
-    model = Model(scene)
+    torn = tcloth.Scene()           # tearing refuses the features a tear does not cut yet
+    torn.add_cloth(resolution=(4, 4))
+    torn.set_tearing()
+    model, torn_model = Model(scene), Model(torn)
     for feature in FEATURES:
-        data = getattr(model, feature.name)
+        data = getattr(torn_model if feature.name == "tearing" else model, feature.name)
         assert not isinstance(data, (type(None), dict, tuple)), feature.name
         assert f"``features.{feature.name}.{type(data).__name__}``" in Model.__doc__ or \
             f"``contact.topology.{type(data).__name__}``" in Model.__doc__, feature.name
     prefixes = tuple(f"{f.name}_" for f in FEATURES) + ("limit_", "triangle")
-    assert not [name for name in vars(model) if name.startswith(prefixes)]
+    assert not [name for m in (model, torn_model) for name in vars(m)
+                if name.startswith(prefixes)]

@@ -24,11 +24,14 @@ class BendingData:
         K, area, share, cloth, family: NumPy, per hinge (``scene.hinges.cloth_hinge_parts``;
             cloth: its cloth's row in the settings), from which ``scaled`` makes c at
             any rigidities: B_e = share * rigidity[cloth, family].
+        held: (H,) bool NumPy: the hinges whose two triangles hold (``hold``: a tear cut
+            the others, whose c is 0).
     """
 
     def __init__(self, ids, parts, rigidity, n):
         self.ids = ids
         self.K, self.area, self.share, self.cloth, self.family = parts
+        self.held = np.ones(len(ids), dtype=bool)
         self.count = len(ids)
         weights = self.scaled(rigidity)
         self.hinges, self.weights, self.start, self.entries = element_fields(ids, n, weights)
@@ -38,7 +41,20 @@ class BendingData:
     def scaled(self, rigidity):
         """The weights c ((H, 4) NumPy) at rigidities ``rigidity`` ((cloths, 2), N m)."""
         rigidity = np.asarray(rigidity, dtype=np.float64)[self.cloth, self.family]
-        return hinge_weights(self.K, self.area, self.share, rigidity)
+        return hinge_weights(self.K, self.area, self.share, rigidity) * self.held[:, None]
+
+    def hold(self, torn, rigidity):
+        """Bend only at the hinges none of whose particle pairs is in ``torn`` ((B, 2)
+        particle pairs whose springs broke): the others, one of whose triangles a tear
+        cut, get c = 0; at rigidities ``rigidity``."""
+        n = int(max(self.ids.max(initial=0), np.max(torn, initial=0))) + 1
+        cut = np.sort(np.asarray(torn, dtype=np.int64).reshape(-1, 2), axis=1)
+        keys = cut[:, 0] * n + cut[:, 1]
+        self.held = np.ones(len(self.ids), dtype=bool)
+        for a, b in ((0, 1), (0, 2), (1, 2), (0, 3), (1, 3)):     # the two triangles' edges
+            edge = np.sort(self.ids[:, [a, b]], axis=1)
+            self.held &= ~np.isin(edge[:, 0] * n + edge[:, 1], keys)
+        self.set_rigidity(rigidity)
 
     def set_rigidity(self, rigidity):
         """The weights and the diagonal at rigidities ``rigidity`` ((cloths, 2), N m)."""

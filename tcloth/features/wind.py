@@ -38,7 +38,8 @@ class WindData:
     Attributes:
         settings: the scene's wind dict (``Scene.set_wind``), the one ``refresh`` was last
             given (its ``callable`` gust is evaluated from Python).
-        triangles: (T,) vec3 i32 particle ids of the scene's cloth triangles.
+        triangles: (T,) vec3 i32 particle ids of the scene's cloth triangles (one torn
+            by ``Scene.set_tearing``: (a, a, a), ``hold``); all_triangles: them in NumPy.
         params: (11,) reals: (velocity (3), gust amplitude (3), frequency, phase, drag,
             lift, tangential) (``pack``).
     """
@@ -48,6 +49,14 @@ class WindData:
         self.triangles = ti.Vector.field(3, ti.i32, shape=len(triangles))
         self.triangles.from_numpy(triangles.astype(np.int32))
         self.params = ti.field(runtime.real(), shape=11)
+        self.all_triangles = np.asarray(triangles, dtype=np.int32)
+
+    def hold(self, held):
+        """Blow on the triangles ``held`` (T,) bool only (a tear cut the others): the
+        others become (a, a, a), of no area, so no force."""
+        tris = self.all_triangles.copy()
+        tris[~held] = tris[~held, :1]
+        self.triangles.from_numpy(tris)
 
 
 class WindFeature(Feature):

@@ -143,6 +143,7 @@ class Projective(Integrator):
             springs = self.residual_forces.springs
             self.grid_forces = (springs.grid_forces() if springs is not None else
                                 ti.Vector.field(3, real, shape=(1, 6)))
+            self.grid_mask = springs.mask if springs is not None else None    # tearing
         else:
             self.ks, self.kd = model.spring_ks, model.spring_kd
             springs = self.residual_forces.springs or term_modules.Springs(model)
@@ -456,7 +457,8 @@ class Projective(Integrator):
         Returns |g|^2."""
         ny, nx = ti.static(self.mg.shapes[0])
         families = ti.static(self.grid.families)
-        owned_grid_springs(x, v, 0, nx, ny, self.grid_reals[0], families, self.grid_forces)
+        owned_grid_springs(x, v, 0, nx, ny, self.grid_reals[0], families, self.grid_forces,
+                           self.grid_mask)
         total = ti.cast(0.0, ti.f64)
         ti.loop_config(serialize=ti.static(self.mg.serial))
         for j, i in ti.ndrange(ny, nx):

@@ -46,6 +46,24 @@ class GridBlock:
         """True when the grid holds every particle of the scene."""
         return self.offset == 0 and self.nx * self.ny == particle_count
 
+    def owned_slots(self, pairs, kinds):
+        """(M,) int64: for springs ``pairs`` (M, 2) of ``kinds`` (codes, ``FAMILIES``'
+        order), the stencil slot that evaluates each, p * 6 + 2 family + s for the
+        particle p that owns it as ``OWNED[family][s]``; -1 for a spring not of this grid
+        (its ends elsewhere, or another kind)."""
+        pairs = np.asarray(pairs, dtype=np.int64)
+        slots = np.full(len(pairs), -1, dtype=np.int64)
+        local = pairs - self.offset
+        inside = np.all((local >= 0) & (local < self.nx * self.ny), axis=1)
+        j, i = np.divmod(local, self.nx)
+        for fam in range(len(FAMILIES)):
+            for s, (di, dj) in enumerate(OWNED[fam]):
+                for a, b in ((0, 1), (1, 0)):
+                    hit = inside & (kinds == fam) & (i[:, b] - i[:, a] == di) & \
+                        (j[:, b] - j[:, a] == dj)
+                    slots[hit] = (pairs[hit, a] * 6) + 2 * fam + s
+        return slots
+
 
 @ti.data_oriented
 class GridTable:

@@ -90,7 +90,9 @@ class Model:
                 entries;
             self_collision: ``contact.topology.SelfCollisionTable``;
             strain_limit: ``features.strain_limit.StrainLimitData``: count, index,
-                max_stretch, iterations.
+                max_stretch, iterations;
+            tearing: ``features.tearing.TearingData``: count, rows, max_strain, alive,
+                broken, torn, rows_broken, gridded, grid_alive, grid_slot.
         contact: ``contact.stage.ContactStage`` (self-collision's candidates and the guard
             of every step) or None in a scene with neither self-collision nor colliders.
         grab: the grab spring (``terms.grab.GrabSpring``, the mouse spring of the viewer)

@@ -158,6 +158,12 @@ class Renderer(Shading):
         self.mesh_vertices = sum(len(v) for v in mesh_rows)
         count = self.tri_count + self.mesh_count
         self.corners = ti.Vector.field(3, ti.i32, shape=max(count, 1))
+        # the cloth's triangles drawn: the first ``cloth_live`` (``_follow_surface``)
+        self.cloth_live = ti.field(ti.i32, shape=())
+        self.cloth_live[None] = self.tri_count
+        self._cloth_rows = (cloth_tris, np.concatenate(cloth_of) if cloth_of else
+                            np.zeros(0, np.int64), mesh_tris, len(palette) - 1)
+        self._surface_version = 0
         self.faces = ti.Vector.field(3, ti.f32, shape=max(count, 1))
         self.surface = ti.field(ti.i32, shape=max(count, 1))
         self.vertices = ti.Vector.field(3, ti.f32, shape=self.particles + self.mesh_vertices)
@@ -198,6 +204,8 @@ class Renderer(Shading):
         if self.mesh_count > self.mesh_static:
             with self._timed("meshes.move"):
                 self._mesh_world(time, 1)
+        if self.tri_count and self.sim.surface_version != self._surface_version:
+            self._follow_surface()
         if self.tri_count:
             with self._timed("cloth.drawn"):
                 self.cloth.update(x, time)
@@ -217,7 +225,7 @@ class Renderer(Shading):
                                      self.tri_count + self.mesh_count, MESH_ID - self.tri_count)
             if self.tri_count:
                 with self._timed(name + ".cloth"):
-                    target.triangles(self.vertices, self.corners, 0, self.tri_count, 0)
+                    target.triangles(self.vertices, self.corners, 0, self.cloth_live[None], 0)
             if self.sphere_count:
                 with self._timed(name + ".spheres"):
                     target.spheres(x, self.sphere_ends, self.sphere_t, self.sphere_count,
@@ -230,6 +238,19 @@ class Renderer(Shading):
         with self._timed("to_numpy"):
             image = self.image.to_numpy()
         return image
+
+    def _follow_surface(self):
+        """The cloth triangles that hold (``Simulator.surface``) first in ``corners``,
+        ``cloth_live`` of them, the torn ones after them (neither drawn nor in the vertex
+        normals); the mesh colliders' stay where they are."""
+        cloth_tris, cloth_of, mesh_tris, collider_row = self._cloth_rows
+        held = self.sim.surface()
+        order = np.concatenate([np.flatnonzero(held), np.flatnonzero(~held)])
+        self.corners.from_numpy(np.concatenate([cloth_tris[order], mesh_tris]).astype(np.int32))
+        self.surface.from_numpy(np.concatenate(
+            [cloth_of[order], np.full(self.mesh_count, collider_row)]).astype(np.int32))
+        self.cloth_live[None] = int(held.sum())
+        self._surface_version = self.sim.surface_version
 
     def _draw_static(self, targets, time):
         """What never moves, into each target's ``static``."""
@@ -276,8 +297,9 @@ class Renderer(Shading):
         for k in range(self.tri_count):
             n = self._face(k)
             self.faces[k] = n.normalized()
-            for j in ti.static(range(3)):
-                self.normals[self.corners[k][j]] += n
+            if k < self.cloth_live[None]:
+                for j in ti.static(range(3)):
+                    self.normals[self.corners[k][j]] += n
 
     @ti.func
     def _face(self, k):

@@ -4,7 +4,8 @@ says how to install it (``scene/usdfile.py``, which reads USD meshes in).
 
 The stage: ``/World`` (the default prim) holds
   - ``Cloths/cloth_<k>``: a ``Mesh`` per cloth, its triangles (counter-clockwise seen
-    from the front, written once, no subdivision, double-sided), its ``points``,
+    from the front, written once, no subdivision, double-sided; with tearing, those that
+    hold, at the first frame and at every frame where a tear changed them), its ``points``,
     ``normals`` (area-weighted, per vertex) and ``extent`` at every frame, ``primvars:st``
     where the cloth has texture coordinates (grid cloths; meshes whose file or arrays
     gave them), ``primvars:displayColor`` the renderer's front colour for it and
@@ -96,7 +97,9 @@ class UsdWriter:
         extent = float(np.linalg.norm(x0.max(0) - x0.min(0))) or 1.0    # as the renderer's
         _, radius = particle_spheres(scene, particle_radius, extent)
         palette = cloth_palette(cloth_colours, len(scene.cloths))
-        self.parts = [_cloth(stage, k, c, palette[k, 0], scene.pinned)
+        first = np.cumsum([0] + [len(c.triangles) for c in scene.cloths])
+        self.parts = [_cloth(stage, k, c, palette[k, 0], scene.pinned,
+                             _held(sim, first[k], first[k + 1]))
                       for k, c in enumerate(scene.cloths)]
         self.parts += [_strand(stage, f"/World/Ropes/rope_{k}", r.particles, radius,
                                scene.pinned) for k, r in enumerate(scene.ropes)]
@@ -216,30 +219,61 @@ def _st(uv, triangles, count):
     return uv.reshape(-1, 2), "faceVarying"
 
 
-def _cloth(stage, k, cloth, colour, pinned):
-    """Define cloth k's Mesh; returns its frame writer (x, t, time code)."""
-    UsdGeom, Vt = pxr_modules("UsdGeom", "Vt")
+def _held(sim, begin, end):
+    """None for a simulator without tearing, else a function () -> (the version of its
+    surface, which of the cloth triangles ``scene.triangles[begin:end]`` hold)."""
+    if sim.scene.tearing is None:
+        return None
+    return lambda: (sim.surface_version, sim.surface()[begin:end])
+
+
+def _cloth(stage, k, cloth, colour, pinned, held=None):
+    """Define cloth k's Mesh; returns its frame writer (x, t, time code). held: None (its
+    triangles written once), or ``_held``'s function: the triangles that hold written at
+    the first frame and at every frame where a tear changed them (time-varying
+    topology; faceVarying texture coordinates follow them)."""
+    Usd, UsdGeom, Vt = pxr_modules("Usd", "UsdGeom", "Vt")
     ids = np.ravel(cloth.particles)
     local = np.asarray(cloth.triangles - cloth.offset, dtype=np.int32)
     mesh = UsdGeom.Mesh.Define(stage, f"/World/Cloths/cloth_{k}")
     mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
     mesh.CreateDoubleSidedAttr(True)
-    mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(local), 3, np.int32)))
-    mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(local.ravel()))
+    counts, indices = mesh.CreateFaceVertexCountsAttr(), mesh.CreateFaceVertexIndicesAttr()
     _colour(mesh, colour)
     _pinned(mesh, ids, pinned)
+    st = None
     if cloth.uv is not None:
         values, interpolation = _st(cloth.uv, local, len(ids))
         _primvar(mesh.GetPrim(), "st", "TexCoord2fArray", interpolation,
                  Vt.Vec2fArray.FromNumpy(values.astype(np.float32)))
+        if interpolation == "faceVarying" and held is not None:
+            st = UsdGeom.PrimvarsAPI(mesh.GetPrim()).GetPrimvar("st")
     mesh.SetNormalsInterpolation(UsdGeom.Tokens.vertex)
     points, normals, extent = (mesh.CreatePointsAttr(), mesh.CreateNormalsAttr(),
                                mesh.CreateExtentAttr())
+    shown = {"version": None, "faces": local}
+
+    def topology(keep, code):
+        """The faces ``keep`` at time code ``code`` (None: once, for all time)."""
+        code = Usd.TimeCode.Default() if code is None else code
+        faces = shown["faces"] = local[keep]
+        counts.Set(Vt.IntArray.FromNumpy(np.full(len(faces), 3, np.int32)), code)
+        indices.Set(Vt.IntArray.FromNumpy(faces.ravel()), code)
+        if st is not None:
+            st.Set(Vt.Vec2fArray.FromNumpy(cloth.uv[keep].reshape(-1, 2).astype(np.float32)),
+                   code)
+    if held is None:
+        topology(np.ones(len(local), bool), None)
 
     def write(x, t, code):
+        if held is not None:
+            version, keep = held()
+            if version != shown["version"]:
+                shown["version"] = version
+                topology(keep, code)
         p = x[ids].astype(np.float32)
         points.Set(_vec3f(p), code)
-        normals.Set(_vec3f(vertex_normals(p, local)), code)
+        normals.Set(_vec3f(vertex_normals(p, shown["faces"])), code)
         extent.Set(_vec3f([p.min(0), p.max(0)]), code)
     return write
 

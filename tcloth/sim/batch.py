@@ -27,12 +27,15 @@ from ..integrators.linalg import copy
 
 @ti.func
 def _substep(integrator: ti.template(), limiter: ti.template(), contact: ti.template(),
-             budget: ti.template(), a, b, t, dt, fresh, x_bound, v_bound):
+             budget: ti.template(), tearing: ti.template(), a, b, t, dt, fresh, x_bound,
+             v_bound):
     """One step of State a in place (b: scratch), with the contact stage's collider sweep
     and its check of the cloth's own pairs (``ContactStage.batch_begin`` /
-    ``batch_end``); returns (the budget's ``check`` of the result: -1, a bad particle, or
-    particles + the fastest one; the paths the sweep cut; whether the step needs the
-    rest of the stage's guard from Python, and then no check)."""
+    ``batch_end``), and the springs that break at its end where it checks good
+    (``Tearing.tear``); returns (the budget's ``check`` of the result: -1, a bad
+    particle, or particles + the fastest one; the paths the sweep cut, plus the springs
+    that broke; whether the step needs the rest of the stage's guard from Python, and
+    then no check)."""
     if ti.static(bool(contact)):
         contact.batch_begin(a.x)
     integrator.advance(a, b, t, dt, fresh)
@@ -44,10 +47,13 @@ def _substep(integrator: ti.template(), limiter: ti.template(), contact: ti.temp
     bad = -1
     if unfinished == 0:
         bad = budget.check(a.x, a.v, t + dt, x_bound, v_bound, 0.0)
+        if ti.static(bool(tearing)):
+            if bad < 0:
+                cut += tearing.tear(a.x)       # a's forces are of the springs before
     return bad, cut, unfinished
 
 
-def kernel(integrator, limiter, contact, budget, a, b, start, x_bound, v_bound):
+def kernel(integrator, limiter, contact, budget, tearing, a, b, start, x_bound, v_bound):
     """The batch kernel of one configuration: ``run(n, fresh, time_base, steps_before, dt)``.
 
     Its objects are the closure's (compile-time constants), so a launch passes five
@@ -79,8 +85,8 @@ def kernel(integrator, limiter, contact, budget, a, b, start, x_bound, v_bound):
             evaluate = fresh if k == 0 else 0
             if ti.static(bool(limiter)) or cut > 0:     # a's forces are of another state
                 evaluate = 1
-            bad, cut, unfinished = _substep(integrator, limiter, contact, budget, a, b, t,
-                                            dt, evaluate, x_bound, v_bound)
+            bad, cut, unfinished = _substep(integrator, limiter, contact, budget, tearing,
+                                            a, b, t, dt, evaluate, x_bound, v_bound)
             if unfinished:
                 result = -2 - ti.cast(k, ti.i64)
                 break
@@ -99,6 +105,7 @@ class Batches:
     def __init__(self, sim):
         self.sim = sim
         self.start = None
+        self.mark = None     # the springs broken when the batch (or checked step) began
         # (integrator, limiter, State) -> (the contact stage's batch_key, its batch kernel)
         self.kernels = {}
 
@@ -122,10 +129,11 @@ class Batches:
         fields = sim._contact and sim._contact.batch_key()
         if key not in self.kernels or self.kernels[key][0] != fields:
             self.kernels[key] = fields, kernel(
-                sim.integrator, limiter, sim._contact, sim.budget, a, b,
+                sim.integrator, limiter, sim._contact, sim.budget, sim._tearing, a, b,
                 self.start, sim.position_bound, sim.velocity_bound)
         run = self.kernels[key][1]
         counts = sim._contact and sim._contact.batch_counts()
+        self.mark = sim._tearing and sim._tearing.mark(synced=True)
         fresh = 0 if sim.integrator.holds_forces(a) else 1
         args = (fresh, sim._time_base, sim.num_steps - sim._step_base, sim.dt)
         done, error, changed = n, None, False
@@ -158,6 +166,9 @@ class Batches:
             sim.integrator.adopt_forces(sim.state)
         else:
             sim.integrator.invalidate()
+        if sim._tearing is not None and sim._tearing.sync():
+            sim.integrator.parameters_changed()      # the springs' values changed
+            sim._rebase()
         if error is not None:
             raise error
         return done
@@ -169,13 +180,16 @@ class Batches:
         return sim._contact.batch_finish(a.x, a.v, sim.time_at(steps), sim.dt)
 
     def _restore_start(self, a, counts=None):
-        """a and the contact stage's counts (``batch_counts``, where given) as the batch
-        started, for its steps to run again one at a time."""
+        """a, the contact stage's counts (``batch_counts``, where given) and the springs
+        that held (``Tearing.rollback`` to ``mark``) as the batch started, for its steps
+        to run again one at a time."""
         sim = self.sim
         for name in ("x", "v", "f"):
             getattr(a, name).copy_from(getattr(self.start, name))
         if counts:
             sim._contact.batch_replay(counts)
+        if sim._tearing is not None:
+            sim._tearing.rollback(self.mark)
 
     def _checked_steps(self, run, a, n, args):
         """n steps of the batch kernel ``run`` one at a time, each state checked with its
@@ -185,6 +199,7 @@ class Batches:
         fresh, time_base, before, dt = args
         for k in range(n):
             changed = False                                 # run keeps a's state as the start
+            self.mark = sim._tearing and sim._tearing.mark()
             if run(1, fresh, time_base, before + k, dt) <= -2:
                 changed = self._finish(a, sim.num_steps + k)
             error = sim._checker.verify(a, sim.num_steps + k)

@@ -227,7 +227,7 @@ def save(sim, path):
             "num_steps": sim.num_steps, "time_base": sim._time_base,
             "step_base": sim._step_base, "grabbed": _plain(sim.grabbed),
             "forces_valid": sim.integrator.holds_forces(sim.state),
-            "splits": sim._splitter.saved()}
+            "splits": sim._splitter.saved(), "torn": sim.torn().tolist()}
     state = sim.state
     payload = {f"scene_{k}": v for k, v in arrays.items()}
     payload.update(meta=np.array(json.dumps(meta)), state_x=state.x.to_numpy(),
@@ -317,6 +317,9 @@ def load(simulator_class, path):
     scene = scene_from_arrays(meta["scene"], scene_arrays)
     sim = simulator_class(scene, meta["integrator"], dt=meta["dt"], **meta["settings"],
                           **meta["options"])
+    if meta.get("torn"):
+        sim._tearing.restore(meta["torn"])
+        sim.integrator.parameters_changed()
     npr = runtime.numpy_real()
     state = sim.state
     state.x.from_numpy(files["state_x"].astype(npr))

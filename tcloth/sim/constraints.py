@@ -44,6 +44,9 @@ class StrainLimiter:
         real_np = np.dtype(runtime.numpy_real()).type
         self.stretch_factor = float(real_np(1.0) + real_np(limit.max_stretch))
         self.iterations = limit.iterations
+        # a torn scene's per-row flags: a broken spring is not limited
+        self.torn = model.tearing is not None
+        self.alive = model.tearing.alive if self.torn else self.hits
 
     def batch_obstacle(self):
         if not serial(self.index):
@@ -65,7 +68,10 @@ class StrainLimiter:
             length = d.norm()
             limit = self.stretch_factor * rest[s]
             wsum = inv_mass[i] + inv_mass[j]
-            if length > limit and wsum > 0.0:
+            held = True
+            if ti.static(self.torn):
+                held = self.alive[s] != 0
+            if length > limit and wsum > 0.0 and held:
                 corr = (length - limit) / (length * wsum) * d
                 dx[i] -= inv_mass[i] * corr
                 dx[j] += inv_mass[j] * corr

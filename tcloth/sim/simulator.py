@@ -12,6 +12,7 @@ from ..features.wind import wind_velocity
 from .instability import StepCheck
 from .live import LiveParameters
 from .split import StepSplitter, check_split
+from .tearing import Tearing
 from ..integrators import INTEGRATORS
 from ..model.model import Model, copy_state
 from ..runtime import serial_count
@@ -118,6 +119,7 @@ class Simulator(LiveParameters):
         self._contact = self.model.contact
         if self._contact is not None:
             self._contact.refresh(self.state.x)
+        self._tearing = Tearing(self.model) if self.model.tearing is not None else None
         self._rebase()
 
     @property
@@ -181,6 +183,9 @@ class Simulator(LiveParameters):
         copy_state(s_in, s_out)
         if cached:
             self.integrator.adopt_forces(s_in)
+        if self._tearing is not None and self._tearing.after_step(s_in.x):
+            self.integrator.parameters_changed()     # the springs' values changed
+            self._rebase()
         if whole:
             self.num_steps += 1
             self.state.t = self.time
@@ -222,7 +227,7 @@ class Simulator(LiveParameters):
                                                    self._contact.batch_obstacle())
         if why is None and self._limiter is not None and self.settings["strain_limiting"]:
             why = self._limiter.batch_obstacle()
-        return why
+        return why or (self._tearing and self._tearing.batch_obstacle())
 
     def time_at(self, steps):
         """The time after ``steps`` steps in all (at the current dt since its last change)."""
@@ -298,6 +303,9 @@ class Simulator(LiveParameters):
         if self._contact is not None:
             self._contact.reset_stats()          # a new run counts from zero
         self._splitter.reset()
+        if self._tearing is not None:
+            self._tearing.mend()
+            self._parameters_changed()
         self.set_state(self.scene.positions, self.scene.velocities)
 
     # -- live changes ------------------------------------------------------------------------
@@ -414,6 +422,25 @@ class Simulator(LiveParameters):
         return self.diagnostics.self_contacts(self.state)
 
     def max_strain(self):
-        """Max over springs of (length - rest) / rest."""
+        """Max over springs of (length - rest) / rest (springs that broke left out)."""
         self._check()
         return self.diagnostics.max_strain(self.state)
+
+    def torn(self):
+        """(B,) int64: the scene spring ids that broke so far (``Scene.set_tearing``), in
+        the order they did; empty without tearing."""
+        self._check()
+        return (np.zeros(0, np.int64) if self._tearing is None else self._tearing.torn())
+
+    def surface(self):
+        """(T,) bool over ``scene.triangles``: the cloth triangles that hold (all of them
+        without tearing; a torn one has a broken spring along an edge)."""
+        self._check()
+        if self._tearing is None:
+            return np.ones(len(self.scene.triangles), dtype=bool)
+        return self._tearing.surface()
+
+    @property
+    def surface_version(self):
+        """A number that changes whenever ``surface()`` may have (a spring broke)."""
+        return 0 if self._tearing is None else self._tearing.version

@@ -83,22 +83,28 @@ def list_springs(pairs, ks, kd, rest, count, x, v, f_out):
 
 
 # -- the grid stencil -------------------------------------------------------------------------
+def masked(mask):
+    """Whether a stencil is given the tearing's per-slot flags (``mask``: a field or None)."""
+    return mask is not None
+
+
 @ti.func
 def _owned_springs(x, v, offset, nx, ny, i, j, g, rest, families: ti.template(),
-                   grid_forces):
+                   grid_forces, mask: ti.template()):
     """Forces of the springs particle (i, j) owns, on it, into grid_forces[p, slot]
-    (slot = 2 family + s); 0 where the other end is off the grid."""
+    (slot = 2 family + s); 0 where the other end is off the grid, or where ``mask`` (None,
+    or the tearing's (particles, 6) flags) says the spring broke."""
     if 1 <= i < nx - 2 and j < ny - 2:     # no owned spring can leave the grid
         _owned_springs_checked(x, v, offset, nx, ny, i, j, g, rest, families, grid_forces,
-                               False)
+                               mask, False)
     else:
         _owned_springs_checked(x, v, offset, nx, ny, i, j, g, rest, families, grid_forces,
-                               True)
+                               mask, True)
 
 
 @ti.func
 def _owned_springs_checked(x, v, offset, nx, ny, i, j, g, rest, families: ti.template(),
-                           grid_forces, checked: ti.template()):
+                           grid_forces, mask: ti.template(), checked: ti.template()):
     """``_owned_springs``; checked: test that each spring's other end exists."""
     p = offset + j * nx + i
     xp, vp = x[p], v[p]
@@ -113,6 +119,8 @@ def _owned_springs_checked(x, v, offset, nx, ny, i, j, g, rest, families: ti.tem
                     q = offset + jj * nx + ii
                     force = spring_force(xp, x[q], vp, v[q], ks, kd,
                                          grid_layout.rest_length(rest, di, dj))
+                if ti.static(masked(mask)):
+                    force *= ti.cast(mask[p, 2 * fam + s], float)
                 grid_forces[p, 2 * fam + s] = force
 
 
@@ -134,9 +142,11 @@ def grid_spring_sum(offset, nx, ny, i, j, families: ti.template(), grid_forces):
 
 
 @ti.func
-def owned_grid_springs(x, v, offset, nx, ny, g, families: ti.template(), grid_forces):
+def owned_grid_springs(x, v, offset, nx, ny, g, families: ti.template(), grid_forces,
+                       mask: ti.template()):
     """A loop over the grid: the forces of the springs each particle owns (``OWNED``)
-    into grid_forces[p, 2 family + s]. g: the grid's ``GridTable.reals`` row.
+    into grid_forces[p, 2 family + s]. g: the grid's ``GridTable.reals`` row. mask: None,
+    or the tearing's per-slot flags (0: that spring broke, no force).
 
     On CPUs rows in parallel and the particles of a row in order (no index division per
     particle); elsewhere every particle in parallel."""
@@ -145,10 +155,11 @@ def owned_grid_springs(x, v, offset, nx, ny, g, families: ti.template(), grid_fo
         ti.loop_config(serialize=ti.static(serial(grid_forces)))
         for j in range(ny):
             for i in range(nx):
-                _owned_springs(x, v, offset, nx, ny, i, j, g, rest, families, grid_forces)
+                _owned_springs(x, v, offset, nx, ny, i, j, g, rest, families, grid_forces,
+                               mask)
     else:
         for j, i in ti.ndrange(ny, nx):
-            _owned_springs(x, v, offset, nx, ny, i, j, g, rest, families, grid_forces)
+            _owned_springs(x, v, offset, nx, ny, i, j, g, rest, families, grid_forces, mask)
 
 
 @ti.func
@@ -164,7 +175,7 @@ def _gather_grid(x, v, t, offset, nx, ny, i, j, families: ti.template(), first: 
 
 @ti.func
 def grid_springs(grids, k, families: ti.template(), first: ti.template(), x, v, t,
-                 grid_forces, f_out):
+                 grid_forces, mask: ti.template(), f_out):
     """Provot springs of cloth grid k, each evaluated once and gathered per particle (no
     atomics): every particle computes the springs it owns (``OWNED``) into grid_forces,
     then adds those and subtracts the ones its neighbours own with it.
@@ -172,10 +183,10 @@ def grid_springs(grids, k, families: ti.template(), first: ti.template(), x, v, 
     grids: the ``GridTable``; families: static (structural, shear, flexion) flags.
     first: None (f += springs), or a per-particle term whose force the gather sets first
     (f = its force + springs: one pass fewer), when the grid holds every particle.
-    grid_forces: (particles, 6) vec3 scratch.
+    grid_forces: (particles, 6) vec3 scratch. mask: None, or the tearing's per-slot flags.
     """
     offset, nx, ny = grids.ints[k][0], grids.ints[k][1], grids.ints[k][2]
-    owned_grid_springs(x, v, offset, nx, ny, grids.reals[k], families, grid_forces)
+    owned_grid_springs(x, v, offset, nx, ny, grids.reals[k], families, grid_forces, mask)
     if ti.static(cpu()):
         ti.loop_config(serialize=ti.static(serial(f_out)))
         for j in range(ny):
@@ -190,11 +201,12 @@ def grid_springs(grids, k, families: ti.template(), first: ti.template(), x, v, 
 # -- diagnostics ------------------------------------------------------------------------------
 @ti.kernel
 def spring_sums(x: ti.template(), pairs: ti.template(), ks: ti.template(),
-                rest: ti.template(), count: ti.i32, load: float,
-                out: ti.template()) -> ti.types.vector(3, ti.f64):
+                rest: ti.template(), count: ti.i32, load: float, torn: ti.template(),
+                alive: ti.template(), out: ti.template()) -> ti.types.vector(3, ti.f64):
     """[spring potential sum k_s/2 (|x_ij| - l0)^2, max strain (|x_ij| - l0)/l0, max
     strain of the springs whose tension k_s (|x_ij| - l0) exceeds ``load`` (N)],
-    accumulated in ``out``'s type."""
+    accumulated in ``out``'s type. torn: whether ``alive`` holds the tearing's per-row
+    flags (a broken spring's strain is not counted; without tearing any field)."""
     out[0] = 0
     out[1] = -1e30
     out[2] = -1e30
@@ -205,9 +217,13 @@ def spring_sums(x: ti.template(), pairs: ti.template(), ks: ti.template(),
         stretch = length - rest[s]
         out[0] += ti.cast(0.5 * ks[s] * stretch * stretch, out.dtype)
         strain = ti.cast(stretch / rest[s], out.dtype)
-        ti.atomic_max(out[1], strain)
-        if ks[s] * stretch > load:
-            ti.atomic_max(out[2], strain)
+        counted = True
+        if ti.static(torn):
+            counted = alive[s] != 0
+        if counted:
+            ti.atomic_max(out[1], strain)
+            if ks[s] * stretch > load:
+                ti.atomic_max(out[2], strain)
     return ti.Vector([ti.cast(out[0], ti.f64), ti.cast(out[1], ti.f64),
                       ti.cast(out[2], ti.f64)])
 
@@ -285,6 +301,12 @@ class Springs(Term, ColouredConstraints):
         self.count, self.list_count = model.spring_count, model.list_spring_count
         self.pairs, self.rest = model.spring_pairs, model.spring_rest
         self.ks, self.kd = model.spring_ks, model.spring_kd
+        # (torn, a torn scene's per-row flags): ``spring_sums``' last arguments but one
+        self.alive = ((True, model.tearing.alive) if model.tearing is not None else
+                      (False, model.spring_ks))
+        # the stencil's per-slot flags where a torn scene has grids (``grid_springs``)
+        self.mask = (model.tearing.grid_alive if model.tearing is not None and
+                     model.tearing.gridded else None)
         self.grids, self.grid_table = model.grids, model.grid_table
         self.spring_grids = [k for k, g in enumerate(self.grids) if any(g.families)]
         first = self.grids[self.spring_grids[0]] if self.spring_grids else None
@@ -341,17 +363,18 @@ class Springs(Term, ColouredConstraints):
         for k in ti.static(self.spring_grids):
             if ti.static(k == self.spring_grids[0]):
                 grid_springs(self.grid_table, k, ti.static(self.grids[k].families), self.first,
-                             x, v, t, self._grid_forces, f_out)
+                             x, v, t, self._grid_forces, self.mask, f_out)
             else:
                 grid_springs(self.grid_table, k, ti.static(self.grids[k].families), None,
-                             x, v, t, self._grid_forces, f_out)
+                             x, v, t, self._grid_forces, self.mask, f_out)
         if ti.static(self.list_count):
             list_springs(self.pairs, self.ks, self.kd, self.rest, self.list_count, x, v,
                          f_out)
 
     def sums(self, x, out):
         """(spring energy, max strain) over all springs."""
-        values = spring_sums(x, self.pairs, self.ks, self.rest, self.count, 0.0, out)
+        values = spring_sums(x, self.pairs, self.ks, self.rest, self.count, 0.0, *self.alive,
+                             out)
         return float(values[0]), float(values[1])
 
     def energy(self, x, t, out):
@@ -361,7 +384,8 @@ class Springs(Term, ColouredConstraints):
         """(spring energy, the largest strain of a spring that pulls harder than
         ``load``): the strain bound's part of the instability test (``sim/instability.py``
         says why a spring holding no more than the scene's weight may stretch further)."""
-        values = spring_sums(x, self.pairs, self.ks, self.rest, self.count, self.load, out)
+        values = spring_sums(x, self.pairs, self.ks, self.rest, self.count, self.load,
+                             *self.alive, out)
         return float(values[0]), float(values[2])
 
     def adjacency(self):

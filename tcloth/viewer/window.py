@@ -76,12 +76,12 @@ class Viewer:
         if not self.tri_count:
             return
         palette = cloth_palette(cloth_colours, len(tris))
-        all_tris = self.triangles = np.concatenate(tris).astype(np.int32)
+        all_tris = self.all_triangles = np.concatenate(tris).astype(np.int32)
         self.drawn = DrawnCloth(self.sim.model.colliders, all_tris, n)
         self.front_idx = ti.field(ti.i32, shape=3 * self.tri_count)
         self.back_idx = ti.field(ti.i32, shape=3 * self.tri_count)
-        self.front_idx.from_numpy(all_tris.ravel())
-        self.back_idx.from_numpy(all_tris[:, ::-1].ravel().copy())
+        self._surface_version = None
+        self._follow_surface()
         colours = np.zeros((2, n, 3), dtype=np.float32)
         for k, c in enumerate(scene.cloths):
             colours[:, c.particles.ravel()] = palette[k][:, None, :]
@@ -89,6 +89,18 @@ class Viewer:
         self.back_c = ti.Vector.field(3, ti.f32, shape=n)
         self.front_c.from_numpy(colours[0])
         self.back_c.from_numpy(colours[1])
+
+    def _follow_surface(self):
+        """The cloth triangles that hold (``Simulator.surface``: all but those a tear cut)
+        first in the index fields, ``triangles`` of them drawn."""
+        if self.sim.surface_version == self._surface_version:
+            return
+        held = self.sim.surface()
+        tris = self.all_triangles[np.concatenate([np.flatnonzero(held), np.flatnonzero(~held)])]
+        self.front_idx.from_numpy(tris.ravel())
+        self.back_idx.from_numpy(tris[:, ::-1].ravel().copy())
+        self.triangles = self.all_triangles[held]
+        self._surface_version = self.sim.surface_version
 
     def _build_spheres(self, scene):
         ti = self.ti
@@ -151,6 +163,8 @@ class Viewer:
         s3.point_light(tuple(cam.eye), (0.35, 0.35, 0.35))
         x = sim.positions().astype(np.float64)
         if self.tri_count:
+            self._follow_surface()
+        if self.tri_count and len(self.triangles):
             # where the off-screen renderer draws it too: out of the colliders it rests on
             y = self.drawn.update(sim.state.x, sim.time).to_numpy().astype(np.float64)
             # each side a hair off the surface towards its own side, so that the side facing
@@ -161,10 +175,11 @@ class Viewer:
             self.back_x.from_numpy((y - offset).astype(np.float32))
             self.front_n.from_numpy(normals.astype(np.float32))
             self.back_n.from_numpy(-normals.astype(np.float32))
+            count = 3 * len(self.triangles)
             s3.mesh(self.front_x, indices=self.front_idx, normals=self.front_n,
-                    per_vertex_color=self.front_c)
+                    per_vertex_color=self.front_c, index_count=count)
             s3.mesh(self.back_x, indices=self.back_idx, normals=self.back_n,
-                    per_vertex_color=self.back_c)
+                    per_vertex_color=self.back_c, index_count=count)
         if self.sphere_count:
             a, b = x[self.sphere_ends[:, 0]], x[self.sphere_ends[:, 1]]
             self.sphere_x.from_numpy((a + self.sphere_t * (b - a)).astype(np.float32))
@@ -200,6 +215,8 @@ class Viewer:
             w.text(f"{st['fps']:.0f} frames/s, {st['ms_per_substep']:.3f} ms/substep")
             w.text(f"t = {st['time']:.3f} s   energy {st['energy']:.4g} J")
             w.text(f"max strain {100 * st['max_strain']:.1f} %")
+            if self.sim.scene.tearing is not None:
+                w.text(f"torn springs: {len(self.sim.torn())}")
             w.text(split_line(st["splits"]))
             for line in contact_lines(st["contacts"]):
                 w.text(line)
