@@ -42,6 +42,7 @@ LONG = {
     "test_contact::test_the_frame_rate_solvers_keep_the_planes_inside_their_iterations[vbd-False]",
     "test_contact::test_the_frame_rate_solvers_keep_the_planes_inside_their_iterations[vbd-True]",
     "test_contact::test_the_guard_adds_no_energy_at_any_dt[True]",
+    "test_contact::test_vbds_substeps_end_on_the_planes_the_guard_checks",
     "test_contact::test_guard_stops_cloths_passing_wholly_through_each_other[True]",
     "test_batch::test_a_batch_equals_single_steps_bit_for_bit[forward_euler]",
     "test_batch::test_a_batch_equals_single_steps_bit_for_bit[rk4]",

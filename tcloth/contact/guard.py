@@ -53,7 +53,7 @@ from ..runtime import jacobi_apply, jacobi_zero, serial
 from ..geometry.shapes import SHAPES
 from .broad import near
 from .field_sweep import field_paths
-from .normals import LEAST_GAP, VERTEX_PAIRS, normal_margin, spans, vertex_normals
+from .normals import LEAST_GAP, VERTEX_PAIRS, normal_margin, room, spans, vertex_normals
 from .search import POINT_TRIANGLE
 
 SLACK = 1e-3             # a violation below this fraction of delta is no violation
@@ -159,6 +159,19 @@ def _plane(cl, pl, c, x0, x1, thickness, reach, choose: ti.template()):
     pl.delta[c] = 0.0
     if d0 > LEAST_GAP:
         pl.delta[c] = delta if d0 - closing <= reach else FAR_APART
+
+
+@ti.kernel
+def choose_again(cl: ti.template(), pl: ti.template(), count: ti.i32, x0: ti.template(),
+                 x: ti.template(), thickness: float):
+    """The planes (``planes``, every row kept) of the rows that x crosses chosen again for
+    the motion x0 -> x (``normals.normal_margin``)."""
+    vertex_normals(cl.table, x0, cl.table.normals)
+    ti.loop_config(serialize=ti.static(serial(cl.ids)))
+    for c in range(count):
+        delta = pl.delta[c]
+        if delta > 0.0 and room(cl.ids[c], cl.kind[c], x, pl.n[c], delta) < -SLACK * delta:
+            _plane(cl, pl, c, x0, x, thickness, 1e30, True)
 
 
 @ti.func

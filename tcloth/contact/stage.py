@@ -192,14 +192,18 @@ class ContactStage(BatchSteps):
         self.solve_list = (cl, count)
         return cl, self.planes_of(cl), count
 
-    def follow_solve(self, x0, x):
+    def follow_solve(self, x0, x, choose=False):
         """(list, its planes, rows) of ``begin_solve`` for the iterate x: the same while
-        they hold the motion x0 -> x, else searched again for it."""
+        they hold the motion x0 -> x, else searched again for it; with ``choose``, the
+        planes x crosses chosen again for that motion (``guard.choose_again``)."""
         cl, count = self.solve_list
         held = (self.broad.covers(x0, x) if cl is self.broad.candidates
                 else self.swept.holds(x0, x))
-        return ((cl, self.planes_of(cl), count) if held
-                else self.begin_solve(x0, x, self.solve_near))
+        if not held:
+            return self.begin_solve(x0, x, self.solve_near)
+        if choose:
+            guard.choose_again(cl, self.planes_of(cl), count, x0, x, self.thickness)
+        return cl, self.planes_of(cl), count
 
     def truncate_solve(self, x0, x_pred, v):
         """The predicted motion of the last ``begin_solve``, from x0 to x_pred, cut short

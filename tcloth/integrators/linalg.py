@@ -48,6 +48,14 @@ def copy_into(out: ti.template(), a: ti.template()):
 
 
 @ti.kernel
+def extrapolate_into(out: ti.template(), a: ti.template(), alpha: float, b: ti.template()):
+    """out = a + alpha (b - a): where the move from a to b, taken alpha times, ends."""
+    ti.loop_config(serialize=ti.static(serial(out)))
+    for p in range(out.shape[0]):
+        out[p] = a[p] + alpha * (b[p] - a[p])
+
+
+@ti.kernel
 def scale_into(out: ti.template(), alpha: float, d: ti.template()):
     """out = alpha d."""
     ti.loop_config(serialize=ti.static(serial(out)))

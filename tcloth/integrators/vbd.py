@@ -2,57 +2,58 @@
 
 Backward Euler's step minimises the incremental potential E(x) (``potential.py``). VBD
 minimises it by block coordinate descent: one vertex at a time, all others held, E as a
-function of that vertex's position alone is its inertia m/(2h^2) |x_i - x_hat_i|^2 plus
-the terms touching it, and one Newton step on it,
+function of that vertex's position alone is its inertia m/(2h^2) |x_i - x_hat_i|^2 plus the
+terms touching it, and one Newton step on it,
 
     x_i <- x_i - H_i^-1 g_i,
 
 with g_i its gradient and H_i its 3 x 3 Hessian block (the springs' blocks projected to
 positive semi-definite, as backward Euler's preconditioner has them), lowers E when H_i is
-positive definite. Vertices that share no spring do not change each other's block, so
-they are updated together: the particle graph (an edge per spring, every family) is
-coloured greedily once per model, and an iteration is one parallel pass per colour.
-Since E is backward Euler's own potential, VBD's iterates converge to backward Euler's
-step (tested), and damping, friction, colliders and the grab spring enter as they do
-there, but for friction's block: sliding, its potential is a cone with no curvature along
-the sliding, where a vertex's Newton step with the exact block overshoots the stop (the
-fold's landing row shot off at 15 m/s), so VBD takes its majorant's
-(``colliders.add_dissipation``).
+positive definite. Vertices that share no spring do not change each other's block, so they
+are updated together: the particle graph (an edge per spring, every family) is coloured
+greedily once per model, and an iteration is one parallel pass per colour. Since E is
+backward Euler's own potential, VBD's iterates converge to backward Euler's step (tested),
+and damping, friction, colliders and the grab spring enter as they do there, but for
+friction's block: sliding, its potential is a cone with no curvature along the sliding,
+where a vertex's Newton step with the exact block overshoots the stop (the fold's landing
+row shot off at 15 m/s), so VBD takes its majorant's (``colliders.add_dissipation``).
 
-Hinge bending (``terms/bending.py``) and the triangle membrane (``terms/membrane.py``)
-are Gauss-Seidel like the springs: a vertex's gradient and block are summed over its
-hinges and triangles at the current positions, and vertices sharing a hinge or a
-triangle get different colours. Self-contact couples vertices through the contact list,
-which changes every step: each vertex's rows are evaluated afresh in its update too
-(``SelfContact.vertex_system``, from a per-vertex index made at the step's start), but
-they are not in the colouring, so two vertices of one colour may share a row. The
-penalty's stiffness switches on at the thickness, where a Newton step
-from outside overshoots: a step that can bring a row into contact is searched along
-(``vbd_local.py``), so that VBD converges to backward Euler's step in contact too
-(tested). Each iteration ends keeping the contact stage's pairs on their sides of their
-separating planes (``ContactStage.begin_solve`` at the step's start with the initial
-guess as the predicted motion, searched again where an iterate leaves it;
-``guard.keep_apart``), and Chebyshev's mix is skipped in an iteration after one whose
-planes moved a vertex (extrapolating a plane's move tore the fold at its first step);
-the contact stage's guard (``contact/guard.py``) keeps the step free of crossings as for
-every integrator. Pressure couples every vertex of a chamber (``terms/pressure.py``): it
-is a Jacobi term too, with diagonal blocks that bound its rank-one part so that the
-vertices' simultaneous moves do not overshoot the chamber's volume. With
-``bounds=True`` every move is kept inside its vertex's conservative displacement bound
-(``contact/bounds.py``, as Offset Geometric Contact does), detected at the step's start
-and again after an iteration that clamped a move, so the iterations never take cloth
-through cloth, at the price of capping how fast cloth near other cloth can move.
+Hinge bending (``terms/bending.py``) and the triangle membrane (``terms/membrane.py``) are
+Gauss-Seidel like the springs: a vertex's gradient and block are summed over its hinges and
+triangles at the current positions, and vertices sharing a hinge or a triangle get
+different colours. Self-contact couples vertices through the contact list, which changes
+every step: each vertex's rows are evaluated afresh in its update too
+(``SelfContact.vertex_system``, from a per-vertex index made at the step's start), but they
+are not in the colouring, so two vertices of one colour may share a row. The penalty's
+stiffness switches on at the thickness, where a Newton step from outside overshoots: a step
+that can bring a row into contact is searched along (``vbd_local.py``), so that VBD
+converges to backward Euler's step in contact too (tested). Each iteration ends keeping the
+contact stage's pairs on their sides of their separating planes at the whole step's start,
+in every substep (``ContactStage.begin_solve`` once a step, for the first substep's guess
+carried over the step, searched again where an iterate leaves it, a plane it crosses chosen
+again for its motion; ``guard.keep_apart``): the guard checks the step's motion against
+these planes, and substeps that kept only their own left it corrections that stretch the
+cloth (``docs/realtime.md``). Chebyshev's mix is skipped in an iteration after one whose
+planes moved a vertex (extrapolating a plane's move tore the fold at its first step); the
+contact stage's guard (``contact/guard.py``) keeps the step free of crossings as for every
+integrator. Pressure couples every vertex of a chamber (``terms/pressure.py``): it is a
+Jacobi term too, with diagonal blocks that bound its rank-one part so that the vertices'
+simultaneous moves do not overshoot the chamber's volume. With ``bounds=True`` every move
+is kept inside its vertex's conservative displacement bound (``contact/bounds.py``, as
+Offset Geometric Contact does), detected at the step's start and again after an iteration
+that clamped a move, so the iterations never take cloth through cloth, at the price of
+capping how fast cloth near other cloth can move.
 
 Where a scene has neither colliders nor self-contact, ``step(n)`` runs its n steps in one
 kernel launch (``advance``, ``batch.py``), the same functions as the launches from Python
 and so the same numbers.
 
-Chebyshev acceleration (the paper's Section 3.7; Wang 2015) mixes each iterate with the
-one two iterations back, x^(n) = w_n (x^(n) - x^(n-2)) + x^(n-2), with w_1 = 1,
-w_2 = 2 / (2 - rho^2), w_n = 4 / (4 - rho^2 w_(n-1)), rho the estimated spectral radius of
-the plain iteration (0: off), for the particles no collider can reach in the step:
-a collider's penalty switches on and off between iterations, and extrapolating through
-it made a cloth lying on a frictionless floor creep across it (``accelerate``).
+Chebyshev acceleration (the paper's Section 3.7; Wang 2015) mixes each iterate with the one
+two iterations back, x^(n) = w_n (x^(n) - x^(n-2)) + x^(n-2), with w_1 = 1, w_2 = 2 / (2 -
+rho^2), w_n = 4 / (4 - rho^2 w_(n-1)), rho the estimated spectral radius of the plain
+iteration (0: off), for the particles no collider can reach in the step: a collider's
+penalty switches on and off between iterations, and extrapolating through it made a cloth
+lying on a frictionless floor creep across it (``accelerate``).
 """
 import numpy as np
 import taichi as ti
@@ -66,7 +67,7 @@ from ..terms import springs as spring_term
 from ..terms.springs import Springs
 from .base import (ForceCache, Integrator, check_substeps, substep_count,
                    substeps_in_kernel)
-from .linalg import copy, copy_into
+from .linalg import copy, copy_into, extrapolate_into
 from .potential import IncrementalPotential
 from .vbd_local import VertexLocal
 
@@ -137,15 +138,12 @@ class VBD(VertexLocal, ForceCache, Integrator):
         if self.has_springs:
             self.pairs, self.rest = self.springs.pairs, self.springs.rest
             self.ks, self.kd = self.springs.ks, self.springs.kd
-        # pair terms with a per-vertex system (bending, membrane) are Gauss-Seidel like
-        # the springs; pressure is Jacobi, held through an iteration, with diagonal blocks
-        # that bound its couplings (the term option ``jacobi``, given to those that
-        # declare it)
+        # bending and the membrane are Gauss-Seidel like the springs; pressure is Jacobi,
+        # held through an iteration (its term option ``jacobi``: bounding blocks)
         self.local_terms = tuple(t for t in self.potential.pair_terms
                                  if t.has("local_system"))
-        # self-contact: each particle's rows evaluated afresh in its update (Gauss-Seidel,
-        # as Newton's VBD does; its couplings change every step, so they are not in the
-        # colouring)
+        # self-contact: each particle's rows evaluated afresh in its update (not in the
+        # colouring: they change every step)
         self.vertex_terms = tuple(t for t in self.potential.pair_terms
                                   if t.has("vertex_system"))
         self.pair_terms = tuple(t for t in self.potential.pair_terms
@@ -170,6 +168,7 @@ class VBD(VertexLocal, ForceCache, Integrator):
         # with self-collision and no bounds, the stage's pairs kept on their planes
         self.stage = (stage if not self.bounded and stage is not None
                       and stage.broad is not None else None)
+        self.x_start = ti.Vector.field(3, real, shape=n) if self.stage is not None else None
         self.track_potential = False
         self.stats = {}
         if self.has_springs:
@@ -208,14 +207,15 @@ class VBD(VertexLocal, ForceCache, Integrator):
         count = substep_count(self.options["substeps"], dt, self.options["iterations"],
                               self._explicit_limit)
         source = state_in
-        for _ in range(count):
-            self._substep(model, source, state_out, dt / count)
+        for sub in range(count):
+            self._substep(model, source, state_out, dt / count, count if sub == 0 else 0)
             source = state_out
         self.stats["substeps"] = count
 
-    def _substep(self, model, state_in, state_out, dt):
+    def _substep(self, model, state_in, state_out, dt, predict=0):
         """One step of dt from state_in to state_out (which may be the same State: the
-        step's start is then read from the potential's copy x0)."""
+        step's start is then read from the potential's copy x0); ``predict``: the step's
+        substeps, where this is its first (the step's planes are searched)."""
         copy_into(self.v_start, state_in.v)
         h, t1 = dt, state_in.t + dt
         opt = self.options
@@ -229,7 +229,11 @@ class VBD(VertexLocal, ForceCache, Integrator):
         if self.bounds is not None:
             model.contact.detect_bounds(self.bounds, x0)
             self._clamp(x)
-        planes = self.stage.begin_solve(x0, x) if self.stage else None
+        if self.stage is not None and predict:      # the step's start and predicted end
+            self.x_start.copy_from(x0)
+            extrapolate_into(self.dx, self.x_start, float(predict), x)
+            self.stage.begin_solve(self.x_start, self.dx)
+        planes = self.stage.follow_solve(self.x_start, x, True) if self.stage else None
         pushed = False
         energies = [e.evaluate(x, h, t1, False)[0]] if self.track_potential else []
         rho = float(opt["rho"])
@@ -242,7 +246,7 @@ class VBD(VertexLocal, ForceCache, Integrator):
             if rho > 0.0 and it > 1 and not pushed:
                 self._accelerate(x, omegas[it])
             if planes is not None:
-                planes = self.stage.follow_solve(x0, x)
+                planes = self.stage.follow_solve(self.x_start, x, True)
                 pushed = keep_apart(*planes, x, self.potential.inv_mass, self.dx, self.hits) > 0
             if self.bounds is not None and self.bounds.any_clamped() and it < opt["iterations"]:
                 if model.contact.detect_bounds(self.bounds, x):

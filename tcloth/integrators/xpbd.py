@@ -56,6 +56,7 @@ from ..terms.forces import Forces
 from ..runtime import serial
 from ..terms.colliders import Colliders
 from .base import Integrator, check_substeps, substep_count, substeps_in_kernel
+from .linalg import extrapolate_into
 
 
 @ti.data_oriented
@@ -131,7 +132,8 @@ class XPBD(Integrator):
             self._predict(x, v, h)
             if self.iterated:
                 if self.stage is not None and sub == 0:
-                    self._extrapolate(x, float(count))
+                    # the step's predicted end: count times the first substep's move
+                    extrapolate_into(self.dx, self.x_start, float(count), x)
                     self.stage.begin_solve(self.x_start, self.dx)
                 self._solve(x, h, opt["iterations"])
             self._velocities(x, v, 1.0 / h)
@@ -170,14 +172,6 @@ class XPBD(Integrator):
             if self.stage is not None:
                 contacts = self.stage.follow_solve(self.x_start, x)
                 guard.keep_apart(*contacts, x, self.inv_mass, self.dx, self.hits)
-
-    @ti.kernel
-    def _extrapolate(self, x: ti.template(), count: float):
-        """dx = the step's start plus ``count`` times the first substep's predicted move:
-        the step's predicted end, for ``ContactStage.begin_solve``."""
-        ti.loop_config(serialize=ti.static(serial(x)))
-        for p in range(x.shape[0]):
-            self.dx[p] = self.x_start[p] + count * (x[p] - self.x_start[p])
 
     def batch_obstacle(self):
         """None where a step can run inside a batch of substeps (``batch.py``): not with
