@@ -24,7 +24,8 @@ scene:
   edge_crossings: the most cloth edges through mesh triangles plus mesh edges through
       cloth triangles at a frame's end (``crossings.count_obstacle_crossings``);
   self_crossings: the most cloth edges through cloth triangles at a frame's end, in a
-      scene with self-collision (``crossings.count_crossings``);
+      scene with self-collision (``crossings.count_crossings``), of the frame's merged
+      mesh (``Simulator.triangles``: a welded seam's pair is one particle);
   edge_depth_mm: at the last frame, how deep the cloth's edges reach inside a closed
       mesh collider (``crossings.edge_depth``);
   mesh<k>_field, mesh<k>_nodes, mesh<k>_bake_s: whether mesh collider k is a distance
@@ -113,7 +114,6 @@ def run(path, frames):
     start = time.perf_counter()
     sim = tcloth.Simulator(scene, cfg["integrator"], dt=dt, **cfg["options"])
     figures = {"build_s": time.perf_counter() - start}
-    triangles = scene.triangles
     wall, stage, touching, counts = [], [], [], []
     x, t = sim.positions().astype(np.float64), sim.time
     compiles = 0
@@ -129,7 +129,7 @@ def run(path, frames):
         stage.append(stats.get("seconds", 0.0) - seconds)
         touching.append(stats.get("collider", 0))
         x1, t1 = sim.positions().astype(np.float64), sim.time
-        counts.append(crossings(scene, x, x1, t, t1, triangles))
+        counts.append(crossings(scene, x, x1, t, t1, sim.triangles()))
         x, t = x1, t1
     frame_s = steps * dt
     wall, stage = np.array(wall), np.array(stage)
@@ -147,7 +147,7 @@ def run(path, frames):
     figures["paths_through"] = sum(c["paths_through"] for c in counts)
     closed = [c for c in scene.colliders if c["kind"] == "mesh" and c["closed"]]
     if closed:
-        edges = triangle_edges(triangles)
+        edges = triangle_edges(sim.triangles())
         figures["edge_depth_mm"] = 1e3 * max(edge_depth(x, edges, world_vertices(c, t),
                                                         c["faces"]) for c in closed)
     for k, path in enumerate(sim.contact_stats().get("mesh_paths", ())):
