@@ -10,6 +10,7 @@ import pytest
 import tcloth
 from tcloth import SceneError
 from tcloth.contact.topology import contact_topology
+from tcloth.render.mesh import cloth_mesh
 
 from conftest import scene_module
 
@@ -201,6 +202,9 @@ def test_a_welded_seam_shares_its_particles(tmp_path):
     assert len(np.unique(tri)) == scene.num_particles - len(a)
     assert np.abs(scene.masses @ v).max() < 1e-5
     assert np.all(np.isfinite(x)) and sim.max_strain() < 0.2
+    vertices, faces = cloth_mesh(sim)                 # exported as one mesh
+    assert len(vertices) == scene.num_particles - len(a)
+    assert np.array_equal(vertices[faces], x[tri])
     path = str(tmp_path / "welded.npz")
     sim.save(path)
     sim.step(50)
