@@ -15,7 +15,7 @@ from tcloth.render.mesh import cloth_mesh
 from conftest import scene_module
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tools"))
-from crossings import count_crossings, crossing_pairs, triangle_edges  # noqa: E402
+from crossings import count_crossings, seam_ids  # noqa: E402
 
 SQUARE = ((0.0, 0.0), (0.2, 0.0), (0.2, 0.2), (0.0, 0.2))
 CLOTH = {"mass": 0.02, "structural": (100.0, 0.02), "flexion": (1.0, 0.001), "pinned": []}
@@ -147,24 +147,6 @@ def merged_triangles(scene, a, b):
     return merge, merge[scene.triangles]
 
 
-def sewn_crossings(x, triangles, merge):
-    """How many edges pass through triangles at x (tools/crossings.py), leaving out the
-    pairs that share a particle once each sewn particle is taken as its partner
-    (``merge``): those touch by construction at the seam, as in the merged mesh."""
-    rows = crossing_pairs(x, triangles)
-    e = merge[triangle_edges(triangles)[rows[:, 0]]]
-    t = merge[np.asarray(triangles)[rows[:, 1]]]
-    return int((~(e[:, :, None] == t[:, None, :]).any(axis=(1, 2))).sum())
-
-
-def seam_merge(scene):
-    """Each particle's id, each seam's second particle mapped to its first."""
-    pairs = scene.springs["pairs"][scene.springs["kind"] == 4]
-    merge = np.arange(scene.num_particles)
-    merge[pairs[:, 1]] = pairs[:, 0]
-    return merge
-
-
 def test_self_contact_takes_a_seams_pair_as_one_particle():
     """The contact neighbours of a sewn pair's particles are those of one particle in the
     welded mesh (b replaced by a): no contact across the seam can hold it open."""
@@ -209,6 +191,7 @@ def test_a_welded_seam_shares_its_particles(tmp_path):
     sim.save(path)
     sim.step(50)
     again = tcloth.Simulator.load(path)             # the welds and their seams come back
+    assert np.array_equal(again.welded(), welded)
     again.step(50)
     assert np.array_equal(again.positions(), sim.positions())
     assert np.array_equal(again.welded(), sim.welded())
@@ -224,10 +207,10 @@ def test_a_seam_closes_through_the_contact_thickness(f32, integrator, dt):
     scene, a, b = two_panels(gap=0.05, ks=20.0, kd=0.2, air_damping=3.0)
     sim = tcloth.Simulator(scene, integrator=integrator, dt=dt)
     steps = int(round(1 / 60 / dt))
-    merge = merged_triangles(scene, a, b)[0]          # a sewn pair is one point of the mesh
+    same = seam_ids(np.stack([a, b], 1), scene.num_particles)   # a sewn pair: one point
     for _ in range(60):                               # one second
         sim.step(steps)
-        assert sewn_crossings(sim.positions(), scene.triangles, merge) == 0
+        assert count_crossings(sim.positions(), scene.triangles, same=same) == 0
     x = sim.positions()
     gap = np.linalg.norm(x[a] - x[b], axis=1)
     assert gap.max() < 0.05 * scene.self_collision["thickness"], gap.max()
@@ -243,12 +226,12 @@ def test_the_garment_has_no_self_crossings_at_any_frame(f32):
     config = module.CONFIG
     sim = tcloth.Simulator(scene, integrator=config["integrator"], dt=config["dt"])
     pairs = scene.springs["pairs"][scene.springs["kind"] == 4]
-    merge = seam_merge(scene)
+    same = seam_ids(pairs, scene.num_particles)
     for frame in range(90):
         sim.step(config["steps_per_frame"])
         x = sim.positions()
         assert np.all(np.isfinite(x))
-        assert sewn_crossings(x, scene.triangles, merge) == 0, frame
+        assert count_crossings(x, scene.triangles, same=same) == 0, frame
         if frame == 60:
             assert len(sim.welded()) == len(pairs)
     assert count_crossings(x, sim.triangles()) == 0             # the merged mesh's

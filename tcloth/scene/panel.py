@@ -14,7 +14,7 @@ points in them; a panel whose outline segments are not all triangle edges is ref
 import numpy as np
 
 from ..errors import SceneError
-from ..validate import as_scalar, fmt
+from ..validate import as_scalar, as_vec3, fmt
 
 
 class Panel:
@@ -40,7 +40,7 @@ class Panel:
         if r.shape != (3, 3) or not np.allclose(r @ r.T, np.eye(3), atol=1e-6):
             raise SceneError(f"rotation must be a 3x3 rotation matrix (got {fmt(rotation)})")
         uvw = np.concatenate([self.vertices, np.zeros((len(self.vertices), 1))], 1)
-        return np.asarray(origin, dtype=np.float64) + uvw @ r.T
+        return as_vec3("origin", origin) + uvw @ r.T
 
     def add_to(self, scene, origin=(0.0, 0.0, 0.0), rotation=None, **cloth):
         """Add the panel, placed (``place``), to ``scene`` as a mesh cloth

@@ -242,6 +242,8 @@ def save(sim, path):
     payload = {f"scene_{k}": v for k, v in arrays.items()}
     payload.update(meta=np.array(json.dumps(meta)), state_x=state.x.to_numpy(),
                    state_v=state.v.to_numpy(), state_f=state.f.to_numpy())
+    if sim._welds is not None:                  # which welded seams' pairs have met
+        payload["state_welded"] = sim._welds.welded.to_numpy()
     folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder):
         raise SceneError(f"cannot save checkpoint: folder {folder!r} does not exist")
@@ -332,6 +334,8 @@ def load(simulator_class, path):
     state.x.from_numpy(files["state_x"].astype(npr))
     state.v.from_numpy(files["state_v"].astype(npr))
     state.f.from_numpy(files["state_f"].astype(npr))
+    if sim._welds is not None and "state_welded" in files:
+        sim._welds.welded.from_numpy(files["state_welded"])
     if meta["forces_valid"]:
         sim.integrator.adopt_forces(state)
     if sim._contact is not None:
