@@ -19,6 +19,7 @@ from .runtime import device, init  # noqa: E402
 from .scene.builders import Cloth, MeshCloth, Rope  # noqa: E402
 from .scene.fabric import Fabric  # noqa: E402
 from .scene.objfile import load_obj  # noqa: E402
+from .scene.panel import Panel, panel  # noqa: E402
 from .scene.scene import Scene  # noqa: E402
 from .scene.usdfile import load_usd  # noqa: E402
 from .sim.simulator import Simulator  # noqa: E402
@@ -28,7 +29,7 @@ from .viewer import view  # noqa: E402
 moved.install()
 
 __all__ = ["cli", "init", "device", "Scene", "Cloth", "MeshCloth", "Rope", "Fabric", "load_obj",
-           "load_usd", "Simulator", "SceneError", "InstabilityError", "ConvergenceWarning",
+           "panel", "Panel", "load_usd", "Simulator", "SceneError", "InstabilityError", "ConvergenceWarning",
            "DeviceWarning", "GradientWarning", "MissingExtraError", "StaleSimulatorError",
            "Camera", "Renderer", "render", "record", "record_usd", "UsdWriter", "write_png",
            "export_mesh", "write_obj", "write_ply", "view", "__version__"]

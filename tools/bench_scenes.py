@@ -24,7 +24,8 @@ scene:
   edge_crossings: the most cloth edges through mesh triangles plus mesh edges through
       cloth triangles at a frame's end (``crossings.count_obstacle_crossings``);
   self_crossings: the most cloth edges through cloth triangles at a frame's end, in a
-      scene with self-collision (``crossings.count_crossings``);
+      scene with self-collision (``crossings.count_crossings``; an edge and a triangle
+      sewn together at a seam touch there by construction: ``crossings.seam_ids``);
   edge_depth_mm: at the last frame, how deep the cloth's edges reach inside a closed
       mesh collider (``crossings.edge_depth``);
   mesh<k>_field, mesh<k>_nodes, mesh<k>_bake_s: whether mesh collider k is a distance
@@ -57,10 +58,11 @@ import numpy as np
 import tcloth
 from tcloth.app.script import build_scene, load_script, timing
 from tcloth.scene.meshcollider import world_vertices
+from tcloth.scene.scene import KIND_CODE
 from bench_contact import signed_distances
 from benchcsv import write_csv
 from crossings import (count_crossings, count_obstacle_crossings, count_paths_through,
-                       edge_depth, inside_mask, triangle_edges)
+                       edge_depth, inside_mask, seam_ids, triangle_edges)
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 SCENES = os.path.join(HERE, "..", "scenes")
@@ -99,7 +101,10 @@ def crossings(scene, x0, x1, t0, t1, triangles):
         shapes = SimpleNamespace(colliders=[scene.colliders[k] for k in analytic])
         out["inside"] += int((signed_distances(shapes, x1, t1) < 0.0).any(axis=1).sum())
     if scene.self_collision is not None:
-        out["self_crossings"] = count_crossings(x1, triangles)
+        springs = scene.springs
+        seams = springs["pairs"][springs["kind"] == KIND_CODE["seam"]]
+        out["self_crossings"] = count_crossings(x1, triangles,
+                                                same=seam_ids(seams, scene.num_particles))
     return out
 
 
@@ -113,7 +118,6 @@ def run(path, frames):
     start = time.perf_counter()
     sim = tcloth.Simulator(scene, cfg["integrator"], dt=dt, **cfg["options"])
     figures = {"build_s": time.perf_counter() - start}
-    triangles = scene.triangles
     wall, stage, touching, counts = [], [], [], []
     x, t = sim.positions().astype(np.float64), sim.time
     compiles = 0
@@ -129,7 +133,7 @@ def run(path, frames):
         stage.append(stats.get("seconds", 0.0) - seconds)
         touching.append(stats.get("collider", 0))
         x1, t1 = sim.positions().astype(np.float64), sim.time
-        counts.append(crossings(scene, x, x1, t, t1, triangles))
+        counts.append(crossings(scene, x, x1, t, t1, scene.triangles))
         x, t = x1, t1
     frame_s = steps * dt
     wall, stage = np.array(wall), np.array(stage)
@@ -147,7 +151,7 @@ def run(path, frames):
     figures["paths_through"] = sum(c["paths_through"] for c in counts)
     closed = [c for c in scene.colliders if c["kind"] == "mesh" and c["closed"]]
     if closed:
-        edges = triangle_edges(triangles)
+        edges = triangle_edges(scene.triangles)
         figures["edge_depth_mm"] = 1e3 * max(edge_depth(x, edges, world_vertices(c, t),
                                                         c["faces"]) for c in closed)
     for k, path in enumerate(sim.contact_stats().get("mesh_paths", ())):

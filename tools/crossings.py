@@ -1,11 +1,14 @@
 """Edge-triangle intersections of a cloth state, counted with NumPy alone (independent of
 tcloth's contact stage, for tests and benchmarks).
 
-``count_crossings(positions, triangles, edges=None)``: the number of (edge, triangle) pairs
-that share no particle and where the edge's segment passes through the triangle. The
-edges are the triangles' edges (each once) plus any given (rope segments). A cloth that
-passes through itself or another cloth has such pairs; one that is merely folded or
-piled has none.
+``count_crossings(positions, triangles, edges=None, same=None)``: the number of (edge,
+triangle) pairs that share no particle and where the edge's segment passes through the
+triangle. The edges are the triangles' edges (each once) plus any given (rope segments).
+A cloth that passes through itself or another cloth has such pairs; one that is merely
+folded or piled has none. ``same`` gives sewn particles one id (``seam_ids``): an edge
+and a triangle joined at a seam touch there by construction, as in the merged mesh.
+``seam_ids(pairs, n)``: that id, each particle's least partner through the seams'
+(K, 2) pairs.
 
 ``count_obstacle_crossings(positions, triangles, obstacle_vertices, obstacle_triangles)``:
 the same against a triangle-mesh obstacle: cloth edges through obstacle triangles plus
@@ -145,9 +148,31 @@ def crossing_pairs(positions, triangles, edges=None):
     return _crossing_rows(x, edges, x, triangles, ei, ti)
 
 
-def count_crossings(positions, triangles, edges=None):
-    """How many (edge, triangle) pairs sharing no particle intersect (see the module)."""
-    return int(len(crossing_pairs(positions, triangles, edges)))
+def seam_ids(pairs, n):
+    """(n,) each particle's least id among the particles that seams (K, 2) join to it,
+    directly or through others (its own where unsewn)."""
+    ids = np.arange(n)
+    pairs = np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    for _ in range(len(pairs) + 1):          # each pass lowers both ends to their lesser
+        low = np.minimum(ids[pairs[:, 0]], ids[pairs[:, 1]])
+        if np.array_equal(low, ids[pairs[:, 0]]) and np.array_equal(low, ids[pairs[:, 1]]):
+            break
+        ids[pairs[:, 0]] = low
+        ids[pairs[:, 1]] = low
+    return ids
+
+
+def count_crossings(positions, triangles, edges=None, same=None):
+    """How many (edge, triangle) pairs sharing no particle intersect (see the module);
+    ``same``: None, or (N,) an id per particle (a sewn scene's particles, each seam's
+    pair under one id): pairs that share an id are left out too."""
+    rows = crossing_pairs(positions, triangles, edges)
+    if same is None or not len(rows):
+        return int(len(rows))
+    triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    edges = triangle_edges(triangles) if edges is None else np.asarray(edges, np.int64)
+    e, t = same[edges[rows[:, 0]]], same[triangles[rows[:, 1]]]
+    return int((~(e[:, :, None] == t[:, None, :]).any(axis=(1, 2))).sum())
 
 
 def _median_edge(x, edges):

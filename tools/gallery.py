@@ -16,7 +16,8 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 STILLS = {"hanging_cloth": 1.6, "cloth_on_sphere": 2.0, "cloth_on_box": 2.0, "rope": 0.4,
           "negative_examples": 2.0, "incline": 0.8, "sphere_through_cloth": 1.5,
           "flag": 2.5, "strain_limiting": 3.0, "orbit": 2.0, "cloth_pile": 1.5, "fold": 1.5,
-          "tablecloth": 2.0, "curtain": 0.8, "table": 2.0, "turntable": 3.0, "breathing": 4.0}
+          "tablecloth": 2.0, "curtain": 0.8, "table": 2.0, "turntable": 3.0, "breathing": 4.0,
+          "garment": 2.0}
 
 
 def main(argv=None):

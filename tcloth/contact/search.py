@@ -7,7 +7,8 @@ near it that pair with it, each pair once: the grid's ``for_each_partner``). Its
 bins the particles and the edges in two grids (``hashgrid.py``: points for the proximity
 list, ``broad.py``; swept boxes for a step's swept search, ``swept.py``) and gives each
 query its box (``Search.lo``, ``hi``); ``Search.run`` visits, for each query, the grid's
-items in its box, leaves out pairs that share a particle, pairs of pinned particles only
+items in its box, leaves out pairs that share a particle (or a seam's pair of them:
+``topology.SelfCollisionTable.same``), pairs of pinned particles only
 and pairs the owner's ``keep`` turns down, and marks the pairs that touch by
 construction (``topology.py``) as ones that do not repel (``ContactList.repels``; they
 are still listed for the guard).
@@ -102,13 +103,16 @@ class Search:
     @ti.func
     def _point_triangle(self, item, t):
         tri, p = self.table.triangles[t], self.table.points[item]
-        if p != tri[0] and p != tri[1] and p != tri[2]:
+        tab = self.table
+        if not (tab.same(p, tri[0]) or tab.same(p, tri[1]) or tab.same(p, tri[2])):
             self._consider(ti.Vector([p, tri[0], tri[1], tri[2]]), POINT_TRIANGLE, 1, t, item)
 
     @ti.func
     def _edge_edge(self, item, e):
         a, b = self.table.edges[e], self.table.edges[item]
-        if a[0] != b[0] and a[0] != b[1] and a[1] != b[0] and a[1] != b[1]:
+        tab = self.table
+        if not (tab.same(a[0], b[0]) or tab.same(a[0], b[1]) or tab.same(a[1], b[0])
+                or tab.same(a[1], b[1])):
             self._consider(ti.Vector([a[0], a[1], b[0], b[1]]), EDGE_EDGE, 2,
                            self.table.triangle_count + e, item)
 

@@ -71,6 +71,9 @@ def unsupported(scene):
     if features:
         return f"{', '.join(features)} {'is' if len(features) == 1 else 'are'} not " \
                "differentiated yet (the scene sets it)"
+    if scene.welds:
+        return "welded seams are not differentiated (Scene.sew(..., weld=True): a weld " \
+               "is a merge at a step's end; sew without weld)"
     for i, c in enumerate(scene.colliders):
         if c["kind"] == "mesh":
             return f"mesh colliders are not differentiated yet (collider {i})"

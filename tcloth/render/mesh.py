@@ -9,14 +9,16 @@ from ..errors import SceneError
 def cloth_mesh(sim):
     """(vertices (V,3), faces (F,3)) of the cloth triangles that hold (all of them, but
     those a tear cut: ``Simulator.surface``) at the current state; vertices are the cloth
-    particles only, faces index them from 0."""
+    particles only, each welded seam's pair as one (``sim.triangles()``), faces index them
+    from 0."""
     scene = sim.scene
     if not scene.cloths:
         raise SceneError("the scene has no cloth to export (mesh export writes cloth triangles)")
     ids = np.concatenate([c.particles.ravel() for c in scene.cloths])
+    ids = ids[~np.isin(ids, sim.welded()[:, 1])]
     remap = np.full(scene.num_particles, -1, dtype=np.int64)
     remap[ids] = np.arange(len(ids))
-    faces = remap[scene.triangles[sim.surface()]]
+    faces = remap[sim.triangles()[sim.surface()]]
     return sim.positions()[ids].astype(np.float64), faces
 
 

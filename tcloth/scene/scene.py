@@ -6,13 +6,13 @@ input when it is added, so that a ``Simulator`` built from it never sees bad dat
 """
 import numpy as np
 
-from . import builders, meshcollider
+from . import builders, meshcollider, seams
 from .builders import unset
 from ..errors import SceneError
 from ..geometry.shapes import SHAPE_NAMES, SHAPES, collider_builder
 from ..validate import as_per_item, as_points, as_scalar, as_vec3, fmt
 
-SPRING_KINDS = ("structural", "shear", "flexion", "custom")
+SPRING_KINDS = ("structural", "shear", "flexion", "custom", "seam")
 KIND_CODE = {name: code for code, name in enumerate(SPRING_KINDS)}
 
 
@@ -48,6 +48,7 @@ class Scene:
         self.cloths = []
         self.ropes = []
         self.colliders = []
+        self.welds = []
 
     # -- particles -------------------------------------------------------------------------
     def add_particles(self, positions, mass=1.0, velocities=None, pinned=False):
@@ -85,7 +86,8 @@ class Scene:
         Args:
             pairs: (M,2) particle ids. stiffness k_s (N/m) and damping k_d (N s/m): scalar
                 or (M,), >= 0. rest_length: None (the current distance) or scalar/(M,), > 0.
-            kind: "structural" | "shear" | "flexion" | "custom".
+            kind: "structural" | "shear" | "flexion" | "custom" | "seam" (``sew``: rest
+                length 0 and nothing else, its ends may coincide).
         Returns:
             (M,) int array of spring ids.
         """
@@ -113,12 +115,20 @@ class Scene:
         kd = as_per_item("damping", damping, m, minimum=0.0)
         x = self.positions
         length = np.linalg.norm(x[p[:, 0]] - x[p[:, 1]], axis=1)
+        if kind == "seam":
+            if rest_length is None or np.any(np.asarray(rest_length) != 0.0):
+                raise SceneError(f"a seam spring has rest length 0 (got rest_length="
+                                 f"{fmt(rest_length)})")
+            rest_length, length = np.zeros(m), np.ones(m)
+        elif rest_length is not None and np.any(np.asarray(rest_length) == 0.0):
+            raise SceneError("rest_length 0 is a seam's: Scene.sew (got rest_length="
+                             f"{fmt(rest_length)} for kind={kind!r})")
         if (length == 0).any():
             r = int(np.argmax(length == 0))
             raise SceneError(f"pairs[{r}] = {p[r].tolist()} joins two coincident particles "
                              "(zero-length spring: its direction is undefined)")
         rest = length if rest_length is None else \
-            as_per_item("rest_length", rest_length, m, minimum=0.0, strict=True)
+            as_per_item("rest_length", rest_length, m, minimum=0.0, strict=kind != "seam")
         keys = np.minimum(p[:, 0], p[:, 1]) << 32 | np.maximum(p[:, 0], p[:, 1])
         uniq, first, counts = np.unique(keys, return_index=True, return_counts=True)
         if (counts > 1).any():
@@ -138,6 +148,27 @@ class Scene:
         self._spring_keys = np.concatenate([self._spring_keys, keys])
         self.num_springs += m
         return sids
+
+    def sew(self, a, b, stiffness, damping=0.0, weld=False, weld_distance=None):
+        """Sew particle a[i] to particle b[i]: seam springs of rest length 0 (kind "seam",
+        force -k_s x_ij - k_d (v_ij . d) d) that pull each pair together; self-contact
+        treats a pair as one particle, so a seam closes through the contact thickness
+        (docs/sewing.md).
+
+        Args:
+            a, b: (K,) particle ids, a[i] sewn to b[i] (e.g. a panel's outline edges,
+                ``tcloth.panel``; one of them reversed where the edges run opposite ways).
+            stiffness k_s (N/m), damping k_d (N s/m): scalar or (K,), >= 0.
+            weld: True merges each pair into one particle when it first comes within
+                ``weld_distance``: from then on the two move as one, of their summed mass
+                (``Simulator.welded()``, ``Simulator.triangles()``: the cloths' triangles
+                with the pair's one particle). A particle welds to one other at most.
+            weld_distance: m, > 0; None: the self-collision thickness where the scene
+                has self-collision, else 1 mm.
+        Returns:
+            (K,) int array of the seam springs' ids.
+        """
+        return seams.sew(self, a, b, stiffness, damping, weld, weld_distance)
 
     def set_masses(self, masses):
         """Every particle's mass (N,), kg, > 0 (a number: the same for all). What the scene

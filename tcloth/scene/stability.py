@@ -16,7 +16,9 @@ def _blocks(scene):
     springs = scene.springs
     pairs = springs["pairs"]
     d = scene.positions[pairs[:, 0]] - scene.positions[pairs[:, 1]]
+    # a seam's ends may coincide: rest length 0 makes its block k I whatever d
     length = np.linalg.norm(d, axis=1)
+    length = np.where(length > 0.0, length, 1.0)
     d = d / length[:, None]
     dd = d[:, :, None] * d[:, None, :]
     geometric = (1.0 - springs["rest_length"] / length)[:, None, None]

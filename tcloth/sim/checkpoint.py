@@ -123,6 +123,9 @@ def scene_to_arrays(scene):
     for k, c in enumerate(scene.colliders):
         desc["colliders"].append(_plain(c) if c["kind"] != "mesh" else _mesh_to_arrays(
             k, c, arrays))
+    desc["welds"] = [w["distance"] for w in scene.welds]
+    for k, w in enumerate(scene.welds):
+        arrays[f"weld{k}_pairs"] = w["pairs"]
     _save_features(scene, desc, arrays)
     return desc, arrays
 
@@ -201,6 +204,13 @@ def scene_from_arrays(desc, arrays):
         scene.cloths.append(cloth)
     for k in range(desc["ropes"]):
         scene.ropes.append(Rope(arrays[f"rope{k}_particles"], arrays[f"rope{k}_springs"]))
+    seams = {tuple(p) for p in scene.springs["pairs"][scene.springs["kind"] ==
+                                                      KIND_CODE["seam"]].tolist()}
+    for k, distance in enumerate(desc.get("welds", [])):      # absent before welds
+        pairs = np.asarray(arrays[f"weld{k}_pairs"], dtype=np.int64).reshape(-1, 2)
+        if any(tuple(p) not in seams for p in pairs.tolist()):
+            raise SceneError(f"checkpoint weld {k} joins particles no stored seam joins")
+        scene.welds.append({"pairs": pairs, "distance": distance})
     for k, c in enumerate(desc["colliders"]):
         kind = c.get("kind")
         if kind not in SHAPE_NAMES:
@@ -232,6 +242,8 @@ def save(sim, path):
     payload = {f"scene_{k}": v for k, v in arrays.items()}
     payload.update(meta=np.array(json.dumps(meta)), state_x=state.x.to_numpy(),
                    state_v=state.v.to_numpy(), state_f=state.f.to_numpy())
+    if sim._welds is not None:                  # which welded seams' pairs have met
+        payload["state_welded"] = sim._welds.welded.to_numpy()
     folder = os.path.dirname(os.path.abspath(path))
     if not os.path.isdir(folder):
         raise SceneError(f"cannot save checkpoint: folder {folder!r} does not exist")
@@ -325,6 +337,8 @@ def load(simulator_class, path):
     state.x.from_numpy(files["state_x"].astype(npr))
     state.v.from_numpy(files["state_v"].astype(npr))
     state.f.from_numpy(files["state_f"].astype(npr))
+    if sim._welds is not None and "state_welded" in files:
+        sim._welds.welded.from_numpy(files["state_welded"])
     if meta["forces_valid"]:
         sim.integrator.adopt_forces(state)
     if sim._contact is not None:

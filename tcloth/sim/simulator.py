@@ -13,6 +13,7 @@ from .instability import StepCheck
 from .live import LiveParameters
 from .split import StepSplitter, check_split
 from .tearing import Tearing
+from .welds import Welds
 from ..integrators import INTEGRATORS
 from ..model.model import Model, copy_state
 from ..runtime import serial_count
@@ -108,6 +109,9 @@ class Simulator(LiveParameters):
         limit = self.model.strain_limit
         self._limiter = (StrainLimiter(self.model) if limit is not None and limit.count
                          else None)
+        contact = scene.self_collision
+        self._welds = Welds(self.model, 1e-3 if contact is None else contact["thickness"]) \
+            if scene.welds else None
         self.diagnostics = Diagnostics(self.model)
         self.budget = EnergyBudget(self.model, bool(energy_bound))
         self._checker = StepCheck(self)
@@ -170,9 +174,13 @@ class Simulator(LiveParameters):
         if limiter is not None:
             limiter.apply(s_out, dt)
             self.integrator.invalidate()
+        if self._welds is not None and self._welds.apply(s_out):
+            self.integrator.invalidate()
         if self._contact is not None and self._contact.end_step(
                 s_in.x, s_out.x, s_out.v, s_in.t, dt):
             self.integrator.invalidate()
+            if self._welds is not None:        # a pair the guard's cuts took apart
+                self._welds.apply(s_out)
         self._see_gust(t0 + dt)
         error = self._checker.verify(s_out, self.num_steps, t0 + dt, dt)
         if error is not None:
@@ -220,6 +228,8 @@ class Simulator(LiveParameters):
         if not self.integrator.batched:
             return (f"integrator '{self.integrator_name}' steps from Python (its solver "
                     "decides between launches)")
+        if self._welds is not None:
+            return "welded seams merge their pairs from Python after each step"
         n = self.model.particle_count
         if not serial_count(n):
             return f"the {n} particles' loops run on several threads"
@@ -300,6 +310,8 @@ class Simulator(LiveParameters):
         self.num_steps = 0
         self._time_base, self._step_base = 0.0, 0
         self.state.t = 0.0
+        if self._welds is not None:
+            self._welds.reset()
         if self._contact is not None:
             self._contact.reset_stats()          # a new run counts from zero
         self._splitter.reset()
@@ -420,6 +432,24 @@ class Simulator(LiveParameters):
         thickness at the current state (both 0 without ``Scene.set_self_collision``)."""
         self._check()
         return self.diagnostics.self_contacts(self.state)
+
+    def welded(self):
+        """(W, 2) the pairs (a, b) of welded seams that have met so far, now one particle
+        each (``Scene.sew(..., weld=True)``, ``welds.py``)."""
+        self._check()
+        return np.zeros((0, 2), np.int64) if self._welds is None else \
+            self._welds.welded_pairs()
+
+    def triangles(self):
+        """(T, 3) the cloths' triangles with each welded pair's second particle replaced by
+        its first: the merged mesh (``Scene.triangles`` before any weld)."""
+        tri = self.scene.triangles
+        welded = self.welded()
+        if not len(welded):
+            return tri
+        one = np.arange(self.model.particle_count)
+        one[welded[:, 1]] = welded[:, 0]
+        return one[tri]
 
     def max_strain(self):
         """Max over springs of (length - rest) / rest (springs that broke left out)."""

@@ -29,18 +29,36 @@ from .base import ColouredConstraints, Term
 @ti.func
 def spring_force(xi, xj, vi, vj, ks, kd, rest):
     """Force on particle i from spring (i, j). Coincident ends give no force (direction
-    undefined). Written as one scalar times x_ij (not times the unit vector): three
-    multiplications fewer per spring (docs/benchmarks.md)."""
+    undefined; a seam's rest length 0 is its minimum, where -k_s x_ij is 0 too). Written
+    as one scalar times x_ij (not times the unit vector): three multiplications fewer per
+    spring (docs/benchmarks.md)."""
     d = xi - xj
     length = d.norm()
-    inv = 1.0 / ti.max(length, 1e-30)
+    inv = inverse(length)
     return (-(ks * (length - rest) + kd * inv * (vi - vj).dot(d)) * inv) * d
+
+
+@ti.func
+def inverse(length):
+    """1 / length, and 0 at length 0 (``unit``)."""
+    return 1.0 / length if length > 0.0 else 0.0
+
+
+@ti.func
+def unit(d, length):
+    """d / length, and 0 at length 0: a zero-rest-length spring (a seam) whose ends meet
+    then gives no force and the Hessian block k_s I, whatever tiny d underflowed to the
+    zero length (d over a floor on the length would be a huge vector there)."""
+    n = d * 0.0
+    if length > 0.0:
+        n = d / length
+    return n
 
 
 @ti.func
 def direction(xi, xj):
     d = xi - xj
-    return d / ti.max(d.norm(), 1e-30)
+    return unit(d, d.norm())
 
 
 @ti.func
@@ -62,7 +80,7 @@ def hessian_blocks(xi, xj, ks, kd, rest, d0, h):
     projected one clamps the transverse stiffness k (1 - l0/|x_ij|) at 0."""
     d = xi - xj
     length = d.norm()
-    n = d / ti.max(length, 1e-30)
+    n = unit(d, length)
     nn = n.outer_product(n)
     transverse = 1.0 - rest / ti.max(length, 1e-30)
     eye = ti.Matrix.identity(float, 3)
@@ -216,11 +234,12 @@ def spring_sums(x: ti.template(), pairs: ti.template(), ks: ti.template(),
         length = (x[i] - x[j]).norm()
         stretch = length - rest[s]
         out[0] += ti.cast(0.5 * ks[s] * stretch * stretch, out.dtype)
-        strain = ti.cast(stretch / rest[s], out.dtype)
-        counted = True
+        counted = rest[s] > 0.0         # a seam (rest length 0) has no strain
         if ti.static(torn):
-            counted = alive[s] != 0
+            if alive[s] == 0:
+                counted = False
         if counted:
+            strain = ti.cast(stretch / rest[s], out.dtype)
             ti.atomic_max(out[1], strain)
             if ks[s] * stretch > load:
                 ti.atomic_max(out[2], strain)
