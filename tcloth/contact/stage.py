@@ -48,6 +48,7 @@ from .batching import BatchSteps
 from .broad import BroadPhase
 from .obstacle import ObstaclePairs
 from .swept import SweptSearch, search_step
+from .warm import WarmUp
 
 SWEEPS = 20          # sweeps of the pairs' projection a round (projection.project)
 ROUNDS = 4           # rounds of the projection and the colliders' sweep before the fail-safe
@@ -92,7 +93,7 @@ STATS = {
 
 
 @ti.data_oriented
-class ContactStage(BatchSteps):
+class ContactStage(BatchSteps, WarmUp):
     """The contact set and the guard of one model (module docstring).
 
     Attributes:

@@ -118,7 +118,16 @@ class Simulator(LiveParameters):
         self._contact = self.model.contact
         if self._contact is not None:
             self._contact.refresh(self.state.x)
+            self._warm_contact()
         self._rebase()
+
+    def _warm_contact(self):
+        """The contact stage's kernels compiled now for the steps this simulator takes
+        (a batch's, from the stage's start to the State; else from the State to the
+        other), rather than in a later frame (``contact/warm.py``)."""
+        a, b = self._states
+        step = (self._contact.x_start, a.x, a.v) if self.fusion() is None else (a.x, b.x, b.v)
+        self._contact.warm_up([step], a.x, a.t, self.dt)
 
     @property
     def scene(self):
