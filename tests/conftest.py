@@ -23,6 +23,7 @@ os.environ.setdefault("TI_OFFLINE_CACHE_MAX_SIZE_OF_FILES", str(4 << 30))
 # and .ci/run run them too. The same physics keeps a quick representative in the short set
 # (a stress case per family, the cheapest resolution or parameter).
 LONG = {
+    "test_compile_once::test_two_cloths_landing_compile_nothing_after_the_first_frame[False]",
     "test_grad::test_every_parameters_gradient_matches_central_differences[backward_euler]",
     "test_grad::test_a_backward_euler_steps_adjoint_is_its_jacobians_transpose",
     "test_grad::test_every_parameters_gradient_matches_central_differences[projective]",
