@@ -19,9 +19,9 @@ Afterwards the step's fields hold what they held, the proximity list is built ag
 the state, and ``stats`` and the mesh colliders' counts are as before: nothing counted,
 nothing moved, nothing kept in a gradient's logs (they are off until ``record``).
 
-What this does not cover compiles later: a solver's own fields (``begin_solve``,
-``follow_solve``, ``truncate_solve``, ``begin_hold``: the integrators warm those up in
-their first step), a list that outgrows its capacity (``search.CandidateSearch.fit``
+What this does not cover compiles later: a solver's calls with its own fields
+(``begin_solve``, ``follow_solve``, ``truncate_solve``, ``begin_hold``: they run in its
+first step, but a branch first taken later compiles then), a list that outgrows its capacity (``search.CandidateSearch.fit``
 doubles it, and every kernel that reads it compiles again; the capacities are chosen so
 that the shipped scenes never do: docs/contact.md, "Compile once"), and a simulator's
 switch between batches of substeps and steps from Python after it was built (a live
