@@ -3,6 +3,7 @@
 ``init`` may be called again; every call starts a new *generation*, and objects that
 hold Taichi fields from an earlier generation refuse to run (``StaleSimulatorError``).
 """
+import os
 import warnings
 
 import numpy as np
@@ -224,3 +225,15 @@ def check_generation(gen, what="simulator"):
         raise StaleSimulatorError(
             f"this {what} was made before tcloth.init() was called again; its Taichi "
             "fields are gone. Build a new tcloth.Simulator from the scene.")
+
+
+def compile_ahead(value):
+    """``Simulator(compile_ahead=...)`` as a bool: None reads TCLOTH_COMPILE_AHEAD."""
+    if value is None:
+        text = os.environ.get("TCLOTH_COMPILE_AHEAD", "1")
+        if text not in ("0", "1"):
+            raise SceneError(f"TCLOTH_COMPILE_AHEAD must be 0 or 1 (got {text!r})")
+        return text == "1"
+    if not isinstance(value, bool):
+        raise SceneError(f"compile_ahead must be True, False or None (got {value!r})")
+    return value

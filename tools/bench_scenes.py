@@ -16,7 +16,8 @@ scene:
   contact_share: the contact stage's time (``contact_stats()["seconds"]``) over the wall
       time of those frames;
   compiles_after_first: Taichi kernels compiled after the first frame, in the steps
-      (``tcloth.runtime.compilations``; each a stall);
+      (``tcloth.runtime.compilations``; each a stall), and stalled_frames: the frames
+      after the first that compiled any (docs/contact.md, "Compile once");
   inside: the most particles inside a closed mesh collider (``crossings.inside_mask``)
       or an analytic sphere, plane or box at a frame's end;
   paths_through: particle paths through a rigid mesh collider over the frames, each
@@ -120,7 +121,7 @@ def run(path, frames):
     figures = {"build_s": time.perf_counter() - start}
     wall, stage, touching, counts = [], [], [], []
     x, t = sim.positions().astype(np.float64), sim.time
-    compiles = 0
+    compiles = stalled = 0
     for frame in range(frames):
         seconds = sim.contact_stats().get("seconds", 0.0)
         before = tcloth.runtime.compilations()
@@ -129,6 +130,7 @@ def run(path, frames):
         wall.append(time.perf_counter() - start)
         if frame > 0 and before is not None:
             compiles += tcloth.runtime.compilations() - before
+            stalled += tcloth.runtime.compilations() > before
         stats = sim.contact_stats()
         stage.append(stats.get("seconds", 0.0) - seconds)
         touching.append(stats.get("collider", 0))
@@ -141,7 +143,7 @@ def run(path, frames):
     figures.update(first_frame_s=wall[0], wall_per_sim_s=rest.sum() / (len(rest) * frame_s),
                    resting_per_sim_s=np.median(wall[frames // 2:]) / frame_s,
                    contact_share=stage[1:].sum() / max(rest.sum(), 1e-30),
-                   compiles_after_first=compiles)
+                   compiles_after_first=compiles, stalled_frames=stalled)
     first_touch = next((k for k, n in enumerate(touching) if n), len(touching))
     if first_touch > 1:
         figures["falling_per_sim_s"] = np.median(wall[1:first_touch]) / frame_s

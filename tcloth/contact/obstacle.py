@@ -54,6 +54,9 @@ SLACK = 1e-3        # a violation below this fraction of FLOOR T is none
 ADVANCES = 24       # conservative advancement's steps before it takes the plane where it is
 ADVANCE_SLACK = 0.05  # a gap within this fraction above delta has come down to it
 FLAT = 1e-6         # faces whose unit normals' dot is within this of 1 are in one plane
+# rows at first per cloth query: more is made again larger (twice what a search found) and
+# every kernel that reads them compiles again (breathing's blanket needed 16 to 32)
+ROWS_PER_QUERY = 32
 
 
 def _owners(triangles):
@@ -177,7 +180,7 @@ class ObstaclePairs:
         self.anchor = ti.Vector.field(3, real, shape=model.particle_count)
         self.margin = 0.0
         self.searched = None        # the step (t0, dt) a moving obstacle was searched for
-        self.rows = Rows(4 * sum(self.counts) + 64)
+        self.rows = Rows(ROWS_PER_QUERY * sum(self.counts) + 64)
         self.count = 0
         self.searches = 0
         self.search_seconds = 0.0     # wall time of the searches (their kernels waited for)

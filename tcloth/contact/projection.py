@@ -279,6 +279,16 @@ def project(cl, pl, count, x1, v1, inv_mass, held, sweeps, work, log):
                                           log))
 
 
+def warm(cl, pl, x1, v1, inv_mass, held, work, log):
+    """Compile the kernels ``project`` launches for these fields, each run on no rows
+    (nothing moves; ``contact/warm.py``)."""
+    if JACOBI or not runtime.cpu():
+        for velocity, first in ((False, True), (False, False), (True, False)):
+            _project_pass(cl, pl, 0, x1, v1, inv_mass, held, *work, velocity, first)
+    else:
+        _gauss_seidel(cl, pl, 0, x1, v1, inv_mass, held, 1, log)
+
+
 @ti.data_oriented
 class ProjectionLog:
     """The corrections of one step of the self-contact term's projection (projective

@@ -29,11 +29,14 @@ POINT_TRIANGLE, EDGE_EDGE = 0, 1
 # runtime.SERIAL_BELOW is set for, so its loop goes parallel from that many / this
 SEARCH_COST = 16
 QUERY_BLOCK = 64
-# a block's slots for what its queries find, at first, per query: a search that overflows
-# them is made again larger, and every kernel that reads it compiles again (seconds, in the
-# middle of a run: the 64 x 64 fold's proximity list needed 19 a query where the layers
-# overlap, projective's near search at a margin of one thickness 43)
-SLOTS_PER_QUERY = 32
+# a block's slots for what its queries find, and the list's rows, at first, per query
+# (triangle or edge): a search that overflows them is made again larger, and every kernel
+# that reads it compiles again (seconds, in the middle of a run: the 64 x 64 fold's
+# proximity list needed 19 a query where the layers overlap, projective's near search at a
+# margin of one thickness 43; cloth_pile's swept search outgrew half of these). Chosen so
+# that no shipped scene grows them (docs/contact.md, "Compile once")
+SLOTS_PER_QUERY = 64
+ROWS_PER_QUERY = 16
 
 
 @ti.func
@@ -167,7 +170,7 @@ class CandidateSearch:
     def __init__(self, table, inv_mass, grids, keep=every_pair):
         self.table, self.inv_mass, self.grids, self.keep = table, inv_mass, grids, keep
         self.search = self._search(SLOTS_PER_QUERY * QUERY_BLOCK)
-        self.candidates = self._list(8 * (table.point_count + table.edge_count))
+        self.candidates = self._list(ROWS_PER_QUERY * (table.point_count + table.edge_count))
         self.count = 0
 
     def _search(self, block_slots):

@@ -4,6 +4,8 @@ guarantee that no step takes cloth through cloth or a particle into a collider.
 It is built with the model (``Model.contact``) of a scene with self-collision or
 colliders, and updated only at named points, all called by the ``Simulator``:
 
+  - ``warm_up(steps, x, t0, dt)``: once, when the simulator is built: every kernel
+    ``end_step`` may launch compiled then, not in a later frame (``warm.py``).
   - ``refresh(x)``: after the state was set from outside (``set_state``, ``reset``, a
     checkpoint, the simulator's start): the proximity list covers x.
   - ``end_step(x0, x1, v1, t0, dt)``: after the integrator and the strain limit: the
@@ -48,6 +50,7 @@ from .batching import BatchSteps
 from .broad import BroadPhase
 from .obstacle import ObstaclePairs
 from .swept import SweptSearch, search_step
+from .warm import WarmUp
 
 SWEEPS = 20          # sweeps of the pairs' projection a round (projection.project)
 ROUNDS = 4           # rounds of the projection and the colliders' sweep before the fail-safe
@@ -92,7 +95,7 @@ STATS = {
 
 
 @ti.data_oriented
-class ContactStage(BatchSteps):
+class ContactStage(BatchSteps, WarmUp):
     """The contact set and the guard of one model (module docstring).
 
     Attributes:

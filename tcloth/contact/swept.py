@@ -50,6 +50,10 @@ from .guard import relative_path
 from .hashgrid import BoxGrid
 from .search import CandidateSearch
 
+# each grid's entries at first, per point or edge (a box spans a few cells a side): more
+# is made again larger, and the search compiles again (``search.SLOTS_PER_QUERY``)
+ENTRIES_PER_ITEM = 32
+
 
 def _box_grids(table, capacity):
     """The grids of the points' and the edges' swept boxes, ``capacity`` entries each."""
@@ -70,7 +74,7 @@ class SweptSearch(CandidateSearch):
         self.reach = ti.field(runtime.real(), shape=())
         self.filtered = ti.field(ti.i32, shape=())
         super().__init__(table, inv_mass,
-                         _box_grids(table, 16 * (table.point_count + table.edge_count)),
+                         _box_grids(table, ENTRIES_PER_ITEM * (table.point_count + table.edge_count)),
                          self._may_meet)
 
     @ti.func

@@ -71,6 +71,11 @@ class Simulator(LiveParameters):
         batch: let ``step(n)`` run its n substeps in one kernel launch where the scene
             allows (default True; ``fusion()`` says whether it does, and why not). The
             results are the same numbers either way.
+        compile_ahead: compile every kernel the contact stage may need in a later step
+            while the simulator is built (True), so that no frame stalls compiling one
+            mid-run, or each at its first use (False: a quicker start, for short runs
+            such as tests); the numbers are the same. Default None: the environment's
+            TCLOTH_COMPILE_AHEAD ("0" or "1"), else True.
         **options: the integrator's own options.
 
     Live changes (the viewer's controls, tcloth.grad) keep the state and recompile
@@ -84,7 +89,7 @@ class Simulator(LiveParameters):
     def __init__(self, scene, integrator="symplectic_euler", dt=1e-3, grid_stencil=True,
                  position_bound=1e6, velocity_bound=1e8, strain_bound=1.0, energy_bound=True,
                  strain_limiting=True, colliders_off=(), grab=False, batch=True, split=True,
-                 **options):
+                 compile_ahead=None, **options):
         if not isinstance(scene, Scene):
             raise SceneError(f"scene must be a tcloth.Scene (got {type(scene).__name__})")
         integrator_class = _integrator_class(integrator)
@@ -99,7 +104,8 @@ class Simulator(LiveParameters):
                          self.position_bound, "velocity_bound": self.velocity_bound,
                          "strain_bound": self.strain_bound, "energy_bound": bool(energy_bound),
                          "strain_limiting": bool(strain_limiting), "colliders_off": off,
-                         "grab": bool(grab), "batch": bool(batch), "split": check_split(split)}
+                         "grab": bool(grab), "batch": bool(batch), "split": check_split(split),
+                         "compile_ahead": runtime.compile_ahead(compile_ahead)}
         self.model = Model(scene, grid_stencil=bool(grid_stencil), colliders_off=off,
                            grab=GrabSpring() if grab else None)
         self.precision = runtime.precision()
@@ -120,11 +126,21 @@ class Simulator(LiveParameters):
         self._time_base, self._step_base = 0.0, 0      # the time at step _step_base
         self._batches = Batches(self)
         self._fusion = None          # (fusion(),) once computed; reset by the live changes
+        self._tearing = Tearing(self.model) if self.model.tearing is not None else None
         self._contact = self.model.contact
         if self._contact is not None:
             self._contact.refresh(self.state.x)
-        self._tearing = Tearing(self.model) if self.model.tearing is not None else None
+            if self.settings["compile_ahead"]:
+                self._warm_contact()
         self._rebase()
+
+    def _warm_contact(self):
+        """The contact stage's kernels compiled now for the steps this simulator takes
+        (a batch's, from the stage's start to the State; else from the State to the
+        other), rather than in a later frame (``contact/warm.py``)."""
+        a, b = self._states
+        step = (self._contact.x_start, a.x, a.v) if self.fusion() is None else (a.x, b.x, b.v)
+        self._contact.warm_up([step], a.x, a.t, self.dt)
 
     @property
     def scene(self):
