@@ -152,13 +152,8 @@ class ContactStage(BatchSteps, WarmUp):
                 meshes[m]["thickness"] for m in self.colliders.certified))
 
     # -- the proximity list ------------------------------------------------------------------
-    @property
-    def candidates(self):
-        return self.broad.candidates
-
-    @property
-    def count(self):
-        return self.broad.count
+    candidates = property(lambda self: self.broad.candidates)
+    count = property(lambda self: self.broad.count)
 
     def refresh(self, x):
         """Make the proximity list cover x (after the state was set from outside)."""
@@ -202,11 +197,10 @@ class ContactStage(BatchSteps, WarmUp):
         cl, count = self.solve_list
         held = (self.broad.covers(x0, x) if cl is self.broad.candidates
                 else self.swept.holds(x0, x))
-        if not held:
-            return self.begin_solve(x0, x, self.solve_near)
-        if choose:
+        if held and choose:
             guard.choose_again(cl, self.planes_of(cl), count, x0, x, self.thickness)
-        return cl, self.planes_of(cl), count
+        return ((cl, self.planes_of(cl), count) if held
+                else self.begin_solve(x0, x, self.solve_near))
 
     def truncate_solve(self, x0, x_pred, v):
         """The predicted motion of the last ``begin_solve``, from x0 to x_pred, cut short
