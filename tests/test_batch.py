@@ -39,6 +39,7 @@ def run(integrator, batch, before, after, dt, colliders=True, **options):
     return sim
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("integrator", ["forward_euler", "symplectic_euler", "verlet", "rk4"])
 def test_a_batch_equals_single_steps_bit_for_bit(f32, integrator):
     dt = 2e-4 if integrator == "forward_euler" else 1e-3
@@ -75,6 +76,7 @@ def start_falling(sim):
     sim.set_state(velocities=np.tile([0.0, -6.0, 0.0], (sim.scene.num_particles, 1)))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("integrator", ["symplectic_euler", "rk4"])
 def test_a_batch_with_self_collision_equals_single_steps_bit_for_bit(f32, integrator):
     """With self-collision a batch stops at each step that needs the contact stage from
@@ -129,6 +131,7 @@ def test_a_batch_with_self_collision_equals_single_steps_bit_for_bit(f32, integr
     assert ends[1][2]["guard_corrections"] > 0
 
 
+@pytest.mark.slow
 def test_xpbd_batches_where_it_projects_nothing(f32):
     """XPBD's step runs in a batch where it has no projections to run from Python (no
     self-contact; colliders act inside its iterations): bit for bit the single steps,
@@ -155,6 +158,7 @@ def test_xpbd_batches_where_it_projects_nothing(f32):
     assert "projects" in tcloth.Simulator(scene, "xpbd", dt=1e-3).fusion()
 
 
+@pytest.mark.slow
 def test_vbd_batches_without_colliders_or_self_contact(f32):
     """VBD's step runs in a batch where nothing in it needs Python (no colliders, no
     self-contact): bit for bit the single steps, with hinge bending, the adaptive initial
@@ -183,6 +187,7 @@ def test_vbd_batches_without_colliders_or_self_contact(f32):
     assert "colliders" in sim.fusion()
 
 
+@pytest.mark.slow_cases("False")
 @pytest.mark.parametrize("self_collision", [False, True])
 def test_a_bad_step_inside_a_batch_is_named_and_the_state_before_it_kept(f64,
                                                                          self_collision):
@@ -211,6 +216,7 @@ def test_a_bad_step_inside_a_batch_is_named_and_the_state_before_it_kept(f64,
         assert batched.contact_stats()["rebuilds"] == single.contact_stats()["rebuilds"] > 1
 
 
+@pytest.mark.slow
 def test_fusion_names_what_keeps_a_scene_out_of_batches(f64):
     scene = tcloth.Scene()
     scene.add_cloth(resolution=(4, 4))

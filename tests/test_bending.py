@@ -179,6 +179,7 @@ def test_hessian_product_is_the_force_difference():
     assert np.abs(product + df).max() < 1e-9 * np.abs(df).max()
 
 
+@pytest.mark.slow
 def test_vbd_xpbd_and_projective_converge_to_backward_euler():
     """One step from a bent state of a cloth with hinges and no springs: VBD
     (Gauss-Seidel over the hinges' colours) and XPBD (hinges as linear constraints)
@@ -214,6 +215,7 @@ def test_multigrid_refuses_a_bending_scene():
                          linear_solver="multigrid")
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", ["grid", "mesh"])
 def test_checkpoint_continues_a_bending_cloth(kind, tmp_path):
     """Saved mid-fall (the cloth bent), loaded, continued: the same positions bit for

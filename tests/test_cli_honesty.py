@@ -54,6 +54,7 @@ def free_fall_drop(steps, dt):
 
 
 # -- 3: --dt ----------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_dt_alone_fills_a_frame_with_its_steps(falling, tmp_path):
     """The script says 133 steps of 0.25 ms a frame; --dt 0.01 alone runs
     round(1 / (30 * 0.01)) = 3 steps a frame, so that a frame is 1/30 s of simulated time
@@ -159,6 +160,7 @@ def test_add_cloth_pins_two_corners_by_default_even_with_a_fabric():
     assert "pinned=[]" in fragment and "(0, 0), (nx-1, 0) pinned" in fragment
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("batch", [True, False])
 def test_contact_stats_start_again_at_reset(batch):
     """A cloth falling under 100 m/s^2 onto the ground, 2 ms steps: the collider stops its

@@ -33,6 +33,7 @@ def landing(batch, compile_ahead):
     return tcloth.runtime.compilations() - before, sim.positions(), first, sim.contact_stats()
 
 
+@pytest.mark.slow_cases("False")
 @pytest.mark.parametrize("batch", [True, False])
 def test_two_cloths_landing_compile_nothing_after_the_first_frame(batch):
     """The lower cloth lands in the sixth frame, the upper one on it: the cloths' own
@@ -46,6 +47,7 @@ def test_two_cloths_landing_compile_nothing_after_the_first_frame(batch):
     assert late == 0
 
 
+@pytest.mark.slow
 def test_compiled_at_first_use_the_same_run_compiles_late_and_ends_the_same():
     """compile_ahead=False (the tests' default): the same landing compiles kernels in
     the later frames, and ends at the same positions, bit for bit."""

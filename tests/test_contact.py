@@ -73,6 +73,7 @@ def flight(masses, res=12):
     return sim, scene, x, v, cloths
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("jacobi", [False, True])
 def test_guard_stops_cloths_passing_wholly_through_each_other(f64, monkeypatch, jacobi):
     """The projection (Gauss-Seidel as on CPUs, and Jacobi as on GPUs), and the fail-safe
@@ -103,6 +104,7 @@ def test_guard_stops_cloths_passing_wholly_through_each_other(f64, monkeypatch, 
             assert stats["failsafe_steps"] == 1 and stats["failsafe_vertices"] > 0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("jacobi", [False, True])
 def test_the_guard_adds_no_energy_at_any_dt(f64, monkeypatch, jacobi):
     """Two parallel cloths a tenth of the thickness apart closing at 1 m/s: the guard
@@ -148,6 +150,7 @@ def small_thrown(speed, gap=0.1):
     return lambda: thrown(speed, res=12, gap=gap)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("integrator,jacobi", [("xpbd", False), ("vbd", False),
                                                 ("vbd", True)])
 def test_the_frame_rate_solvers_keep_the_planes_inside_their_iterations(f32, integrator,
@@ -181,6 +184,7 @@ def test_the_frame_rate_solvers_keep_the_planes_inside_their_iterations(f32, int
     assert with_planes["guard_corrections"] < share * without["guard_corrections"]
 
 
+@pytest.mark.slow
 def test_vbds_substeps_end_on_the_planes_the_guard_checks(f32):
     """Two 24 x 24 cloths thrown at each other at 3 m/s, VBD at its defaults at dt = 1/60
     (3 substeps): every spring within 10 % of its rest length after each step of the
@@ -198,6 +202,7 @@ def test_vbds_substeps_end_on_the_planes_the_guard_checks(f32):
         assert (np.linalg.norm(y[pairs[:, 0]] - y[pairs[:, 1]], axis=1) / rest).max() < 1.1
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("integrator", ["xpbd", "vbd", "projective"])
 def test_self_collision_does_not_hold_a_falling_cloth_back(f32, integrator):
     """A 16 x 16 cloth dropped flat from 0.5 m at one step per frame falls as far in
@@ -219,6 +224,7 @@ def test_self_collision_does_not_hold_a_falling_cloth_back(f32, integrator):
     assert abs(heights[0] - heights[1]) < 1e-3, heights
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("integrator,dt", [
     ("backward_euler", 1.0 / 60.0), ("projective", 1.0 / 60.0), ("projective", 1.0 / 240.0),
     ("vbd", 1.0 / 60.0), ("vbd:bounds", 1.0 / 60.0), ("xpbd", 1.0 / 60.0),
@@ -242,6 +248,7 @@ def test_thrown_cloths_never_cross_at_any_step(f32, integrator, dt):
     assert r["closing_speed_end"] < 5.0, "the cloths never met"
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("integrator,dt,collider", [
     ("backward_euler", 1.0 / 60.0, "box"), ("backward_euler", 1.0 / 60.0, "sphere"),
     ("projective", 1.0 / 60.0, "box"), ("projective", 1.0 / 60.0, "sphere"),
@@ -276,6 +283,7 @@ def test_cloth_falling_at_10_m_per_s_stays_out_of_thin_colliders(f32, integrator
     assert r["through"] == 0 and r["crossings_max"] == 0, r
 
 
+@pytest.mark.slow
 def test_displacement_bounds_keep_any_moves_inside_them_crossing_free(f64):
     """Offset Geometric Contact's bounds over the proximity list, on the folded cloth of
     the benchmark: each radius is at most gamma times the distance to any particle three
@@ -335,6 +343,7 @@ def crossed_at_start():
     return scene, scene.positions, v, (a, b)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("integrator,dt", [("backward_euler", 1.0 / 60.0)])
 def test_a_scene_that_starts_crossed_gets_no_worse(f32, integrator, dt):
     """Pairs that touch or cross at a step's start have no separating plane and are left
@@ -350,6 +359,7 @@ def test_a_scene_that_starts_crossed_gets_no_worse(f32, integrator, dt):
     assert r["failsafe_steps"] == 0
 
 
+@pytest.mark.slow
 def test_the_fold_bench_counts_crossings_after_every_step(f32, monkeypatch):
     """tools/bench_self_collision.py --implicit reports the worst crossing count over every
     step of the run with self-collision, whatever the solver (853f19f had it count once,
@@ -373,6 +383,7 @@ def test_the_fold_bench_counts_crossings_after_every_step(f32, monkeypatch):
 
 
 # -- statistics -----------------------------------------------------------------------------
+@pytest.mark.slow
 def test_contact_stats_count_what_the_stage_did(f32):
     """A cloth thrown onto a box in one batch of 600 substeps (the collider sweep runs inside
     the batch kernel), then two crossed cloths: the statistics and the viewer's lines. The
@@ -500,6 +511,7 @@ def test_the_swept_list_holds_every_pair_that_can_meet_on_a_motion_it_holds(f64)
     assert not swept.holds(*motion(x0, b))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("integrator,kept", [
     pytest.param("xpbd", 0.99, marks=pytest.mark.xfail(
         strict=True, reason="XPBD's substeps brake the sliding cloth: 0.41 m/s at 5 substeps")),
@@ -521,6 +533,7 @@ def test_a_cloth_slides_over_another_at_one_step_per_frame(f32, integrator, kept
     assert count_crossings(sim.positions(), scene.triangles) == 0
 
 
+@pytest.mark.slow
 def test_vbd_converges_to_backward_eulers_step_in_contact(f64):
     """``tools/bench_sliding.py``'s case, smaller (a 6 x 6 cloth sliding at 1 m/s over a
     12 x 12 one), six backward Euler steps in, where the layers touch (180 contacts):
@@ -554,6 +567,7 @@ def test_vbd_converges_to_backward_eulers_step_in_contact(f64):
         assert abs(vbd.momentum()[0][0] - momentum) < 2e-6, iterations
 
 
+@pytest.mark.slow
 def test_projectives_velocity_pass_keeps_most_of_a_sliding_cloths_speed(f32):
     """``tools/bench_sliding.py``'s case with projective dynamics, 0.5 s at 1/60: the
     self-contact projection's velocity pass removes approach along the layers' normal

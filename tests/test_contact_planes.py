@@ -190,6 +190,7 @@ def test_the_planes_forces_and_matrix_match_numpy_and_finite_differences(f64):
     assert np.allclose(f.sum(axis=0), 0.0, atol=1e-12)       # equal and opposite
 
 
+@pytest.mark.slow
 def test_projective_holds_thrown_cloths_apart_inside_its_step(f32):
     """Two 12 x 12 cloths thrown at each other at 10 m/s, one step of 1/60 per frame:
     with the planes in projective dynamics' step the run has no crossing, keeps the
@@ -218,6 +219,7 @@ def test_a_gradient_of_projective_leaves_its_planes_out(f32):
         Trajectory(scene, 2, 1.0 / 60.0, "projective", planes=True)
 
 
+@pytest.mark.slow
 def test_the_deflated_solve_solves_the_same_system_in_fewer_iterations(f64):
     """The planes' second level (``integrators/deflation.py``) on the folded cloth at one
     step per frame: its E equals U^T A U with A applied by the solver's own product to

@@ -101,6 +101,7 @@ def _pulled_strip(kind, cells, strain, fabric):
     return sim, right, width, middle
 
 
+@pytest.mark.slow_cases("mesh-30", "grid-20")
 @pytest.mark.parametrize("kind,cells", [("grid", 20), ("grid", 40), ("mesh", 30)])
 def test_uniaxial_stretch_force_is_the_fabric_stiffness(kind, cells):
     """Pulled at 1 % strain, the strip's end force over its width and the strain of its
@@ -118,6 +119,7 @@ def test_uniaxial_stretch_force_is_the_fabric_stiffness(kind, cells):
     assert force / (width * strain) == pytest.approx(fabric.stretch[0], rel=0.05)
 
 
+@pytest.mark.slow
 def test_weft_stretch_is_the_fabric_weft_stiffness():
     """The same strip turned: pulled along j, the weft stiffness (a different number)."""
     fabric = tcloth.Fabric(density=0.2, stretch=(800.0, 300.0), shear=20.0, bending=1e-6,
@@ -139,6 +141,7 @@ def test_weft_stretch_is_the_fabric_weft_stiffness():
     assert force / (0.03 * strain) == pytest.approx(fabric.stretch[1], rel=0.05)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind,cells", [("grid", 10), ("grid", 20), ("mesh", 20),
                                         ("mesh", 30)])
 def test_cantilever_follows_the_elastica(kind, cells):
@@ -149,6 +152,7 @@ def test_cantilever_follows_the_elastica(kind, cells):
         assert angle == pytest.approx(elastica.chord_angle(alpha), abs=2.0), alpha
 
 
+@pytest.mark.slow
 def test_flexion_springs_cannot_pass_the_cantilever():
     """The lecture's flexion springs, matched to B at the curvature 1/L, bend the strip
     almost the same whatever alpha (their energy is quartic in the angle: no stiffness at
@@ -159,6 +163,7 @@ def test_flexion_springs_cannot_pass_the_cantilever():
     assert abs(angles[1] - elastica.chord_angle(16.0)) > 10.0
 
 
+@pytest.mark.slow
 def test_cantilever_converges_with_resolution():
     """The angle changes by less than 1 degree from one resolution to the next finer."""
     coarse, _ = cantilever.simulate("grid", 16.0, 10)
@@ -166,6 +171,7 @@ def test_cantilever_converges_with_resolution():
     assert abs(fine - coarse) < 1.0
 
 
+@pytest.mark.slow
 def test_render_takes_a_fabric_preset_by_name(tmp_path):
     """``tcloth render scenes/drape.py --set fabric=NAME`` builds the preset's drape; an
     unknown name is one clear line naming the presets."""

@@ -94,6 +94,7 @@ def references():
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("integrator", INTEGRATORS)
 def test_every_field_force_acts_under_every_integrator(f64, references, integrator):
     for name, (make, quantity) in CASES.items():

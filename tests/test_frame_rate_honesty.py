@@ -18,6 +18,7 @@ def spring_energy(scene, x):
     return np.sum(0.5 * springs["stiffness"] * (d - springs["rest_length"]) ** 2)
 
 
+@pytest.mark.slow_cases("backward_euler", "vbd", "xpbd", "rk4", "forward_euler", "verlet")
 @pytest.mark.parametrize("integrator", INTEGRATORS)
 def test_the_strain_bound_names_the_step_that_passes_it(f64, integrator):
     """A pinned particle moving away at 1 m/s from another pinned at 0.105 m stretches
@@ -51,6 +52,7 @@ def landing(res):
     return scene
 
 
+@pytest.mark.slow
 def test_energy_stored_in_torn_springs_is_what_the_budget_sees(f64):
     """XPBD with one substep of ten iterations at dt = 1/60 cannot follow a stress wave
     across this cloth: landing, it stretches its springs without moving fast. With the
@@ -77,6 +79,7 @@ def test_energy_stored_in_torn_springs_is_what_the_budget_sees(f64):
     assert err.value.step == first_over and checked.num_steps == first_over - 1
 
 
+@pytest.mark.slow_cases("vbd-options1", "projective-options0")
 @pytest.mark.parametrize("integrator,options", [
     ("projective", {}), ("vbd", {"substeps": "auto"}), ("xpbd", {"substeps": "auto"})])
 def test_a_cloth_landing_on_a_small_sphere_holds_at_one_step_per_frame(f64, integrator,

@@ -78,6 +78,7 @@ def run(request):
     return request.getfixturevalue(request.param)
 
 
+@pytest.mark.slow
 def test_every_parameters_gradient_matches_central_differences(f64, run):
     """Each parameter kind over 60 steps with the pinned corners driven and particles on a
     frictional sphere (a contact set the small differences leave unchanged): the
@@ -92,6 +93,7 @@ def test_every_parameters_gradient_matches_central_differences(f64, run):
     check_gradients(trajectory, loss, result, trajectory.names, rng, 1e-7)
 
 
+@pytest.mark.slow
 def test_checkpoints_change_the_memory_not_the_gradient(f64, symplectic_euler):
     """Every state stored against one checkpoint per 20 steps: the same gradient (the
     segments run again step for step), a third of the memory."""
@@ -143,6 +145,7 @@ def _one_step(trajectory, x0, v0, directions, step, rng):
     return directions.T @ adjoint, jd.T @ np.concatenate([wx.ravel(), wv.ravel()]), result
 
 
+@pytest.mark.slow
 def test_a_backward_euler_steps_adjoint_is_its_jacobians_transpose(f64, backward_euler):
     """One step of the module's cloth from a disturbed state: its Jacobian d(x1, v1)/d(x0,
     v0) formed column by column by central differences of the simulator's step; J^T (w_x,
@@ -156,6 +159,7 @@ def test_a_backward_euler_steps_adjoint_is_its_jacobians_transpose(f64, backward
     np.testing.assert_allclose(adjoint, expected, rtol=1e-6, atol=1e-6 * np.abs(expected).max())
 
 
+@pytest.mark.slow
 def test_projective_steps_left_unconverged_are_named_and_warned_of(f64, projective):
     """Three iterations a step instead of a hundred: steps are left above forward_tol, the
     gradient names them and warns that it is not the run's; with forward_tol above the
@@ -182,6 +186,7 @@ def test_projective_steps_left_unconverged_are_named_and_warned_of(f64, projecti
         sim.set_integrator_options(iterations=OPTIONS["projective"]["iterations"])
 
 
+@pytest.mark.slow
 def test_a_projective_steps_adjoint_is_its_jacobians_transpose(f64, projective):
     """One projective step from a state on the sphere, disturbed: J^T (w_x, w_v) from the
     adjoint against directional derivatives of the simulator's step J d by central
@@ -197,6 +202,7 @@ def test_a_projective_steps_adjoint_is_its_jacobians_transpose(f64, projective):
     np.testing.assert_allclose(adjoint, expected, rtol=1e-6)
 
 
+@pytest.mark.slow
 def test_the_adjoints_kernels_are_the_simulators_terms(f64, run):
     """The explicit adjoint's force is the simulator's force; the implicit one's gradient
     vanishes at the simulator's backward Euler step and its Jacobian (by differences) is
@@ -259,6 +265,7 @@ def test_what_it_does_not_differentiate_is_named(f64, what):
         grad.Trajectory(scene, steps=2, dt=1e-3, integrator=integrator)
 
 
+@pytest.mark.slow_cases("backward_euler")
 @pytest.mark.parametrize("integrator", ["symplectic_euler", "backward_euler"])
 def test_a_wind_along_the_cloths_normal_has_its_gradient(f64, integrator):
     """A flat cloth at rest, the wind blowing along its normal: the wind's speed along the
@@ -371,6 +378,7 @@ def test_measured_losses_refuse_bad_arguments():
             make()
 
 
+@pytest.mark.slow
 def test_the_fabric_fit_recovers_a_known_fabric():
     """tools/fit_fabric.py --quick (the test-sized specimens: cantilever strips of 8 cells,
     a disc of 5 rings, the bias strip; denim measured with 1 mm of noise, the fit started
@@ -387,6 +395,7 @@ def test_the_fabric_fit_recovers_a_known_fabric():
     assert max(errors.values()) < 0.05, out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("integrator", ["symplectic_euler", "backward_euler", "projective"])
 def test_a_cloth_of_springs_alone(f64, integrator):
     """A scene with none of the features (springs, gravity and drag only: projective

@@ -60,6 +60,7 @@ CUT = [("sphere", 15.0, 1000.0, "symplectic_euler", 5e-4),
        ("sphere", 4.0, 100.0, "backward_euler", 1.0 / 120.0)]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case", CUT, ids=[f"{c[3]}-{c[0]}" for c in CUT])
 def test_the_collider_sweeps_cuts_are_differentiated(case):
     """A cloth thrown into a collider: the steps whose paths the sweep cut are taken by
@@ -73,6 +74,7 @@ def test_the_collider_sweeps_cuts_are_differentiated(case):
     _check(trajectory, loss, result)
 
 
+@pytest.mark.slow
 def test_a_cloth_resting_on_a_frictional_plane_has_its_gradient():
     """Backward Euler, a cloth landing on a plane (mu 0.3) and coming to rest on it: the
     friction's tangential speed is then exactly 0, where the norm's derivative is 0/0 (it

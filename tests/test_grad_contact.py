@@ -79,6 +79,7 @@ def run(request, prepared):
     return prepared(request.param)
 
 
+@pytest.mark.slow
 def test_gradients_through_self_contact_match_central_differences(f64, run):
     """Over 60 steps of the top cloth pressed on the lower one (contacts touching from the
     first step, the guard idle), the gradient along random directions (arrays) or of
@@ -96,6 +97,7 @@ def test_gradients_through_self_contact_match_central_differences(f64, run):
                     np.random.default_rng(2), 1e-8)
 
 
+@pytest.mark.slow
 def test_the_adjoints_contact_terms_are_the_simulators(f64, run):
     """With the stage's contacts frozen into the adjoint: its force is the simulator's
     (symplectic Euler), its gradient of backward Euler's incremental potential vanishes at
@@ -145,6 +147,7 @@ def _thrown(trajectory, speed):
     return v
 
 
+@pytest.mark.slow
 def test_the_guards_projection_is_differentiated_as_its_corrections(f64, prepared):
     """The top cloth thrown down at 1.5 m/s: the guard's projection changes the first
     step. Its log replayed in NumPy from the solver's end of the step gives the guard's
@@ -190,6 +193,7 @@ def test_the_guards_projection_is_differentiated_as_its_corrections(f64, prepare
         trajectory.set_steps(STEPS)
 
 
+@pytest.mark.slow
 def test_steps_the_gradient_does_not_take_are_reported(f64, prepared, monkeypatch):
     """The projection's Jacobi passes (the GPUs') keep no log: a step they change is
     guarded, and the gradient says which and warns."""
@@ -208,6 +212,7 @@ def test_steps_the_gradient_does_not_take_are_reported(f64, prepared, monkeypatc
     assert 0 in result.guarded_steps and not result.projected_steps
 
 
+@pytest.mark.slow
 def test_the_fail_safe_is_differentiated_as_its_cuts(f64, monkeypatch):
     """The guard's fail-safe alone (no projection rounds: ``stage.ROUNDS`` 0), the top
     cloth thrown at 6 m/s (12 mm a step of 2 ms, past its 9.8 mm gap): the step's
@@ -240,6 +245,7 @@ def test_the_fail_safe_is_differentiated_as_its_cuts(f64, monkeypatch):
                     1e-8)
 
 
+@pytest.mark.slow
 def test_projectives_self_contact_projection_has_its_gradient(f64, prepared):
     """Projective dynamics on the stack over 60 steps of 5 ms: its self-contact projection
     corrects contacts at each step of the first segment (the record keeps the segment

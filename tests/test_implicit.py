@@ -17,6 +17,7 @@ def cloth(k, kd=1.0, n=8, pinned=None):
     return scene
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("k", [1e4, 1e6])
 def test_stiff_cloth_explodes_explicitly_but_is_stable_and_dissipative_implicitly(f64, k):
     with pytest.raises(InstabilityError):
@@ -55,6 +56,7 @@ def potential_never_rises(stats, slack):
     return bool(np.all(np.diff(e) <= slack * max(1.0, np.abs(e).max())))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("precision", ["f32", "f64"])
 def test_newton_never_raises_the_incremental_potential_and_reports_non_convergence(precision):
     """The undamped, pinned 32 x 32 cloth of k_s = 1e5 at dt = 1/60, where truncated CG
@@ -94,6 +96,7 @@ def test_newton_never_raises_the_incremental_potential_and_reports_non_convergen
     assert len([w for w in caught if w.category is tcloth.ConvergenceWarning]) == 1
 
 
+@pytest.mark.slow
 def test_a_newton_direction_too_long_to_search_is_replaced_not_taken(f64, monkeypatch):
     """CG stopped at negative curvature can return a descent direction of any length
     (docs/implicit.md). Scaled by 1e7, no step the line search tries lowers E: Newton then
@@ -118,6 +121,7 @@ def test_a_newton_direction_too_long_to_search_is_replaced_not_taken(f64, monkey
     assert sim.energy()["total"] <= before + 1e-9
 
 
+@pytest.mark.slow
 def test_hessian_product_matches_finite_differences_of_the_gradient(f64):
     scene = tcloth.Scene(gravity=(0, -9.81, 0), air_drag=0.05)
     c = scene.add_cloth(resolution=(4, 3), size=(0.6, 0.4), center=(0, 0.003, 0),
@@ -163,6 +167,7 @@ def hessian_product_matches_finite_differences(scene, pinned, solver):
     assert np.isclose(fd_e, (g * direction).sum(), rtol=1e-6)
 
 
+@pytest.mark.slow
 def test_newton_on_the_exact_hessian_converges_quadratically_on_folded_cloth(f64):
     """The benchmark's cloth (16 x 16, 0.1 kg, k_s = 1e4, no damping) folded by a second
     of swinging (projective steps, quick): its compressed springs make the step's Hessian
@@ -198,6 +203,7 @@ def test_newton_on_the_exact_hessian_converges_quadratically_on_folded_cloth(f64
     assert runs[False][0] > 3 * runs[True][0] and runs[False][1] > 10 * runs[True][1], runs
 
 
+@pytest.mark.slow
 def test_multigrid_and_block_jacobi_cg_give_the_same_backward_euler_steps(f64):
     """The grid's block stencil with multigrid-preconditioned CG (the default on a cloth
     grid; 10 x 10: two levels) against blocks per spring end with block-Jacobi CG, both
@@ -221,6 +227,7 @@ def test_multigrid_and_block_jacobi_cg_give_the_same_backward_euler_steps(f64):
     assert np.abs(out[0] - out[1]).max() < 1e-12
 
 
+@pytest.mark.slow
 def test_backward_euler_converges_with_order_one(f64):
     scene = random_network(n=5, seed=11, k=(20.0, 60.0))
     t_end = 0.4
@@ -253,6 +260,7 @@ def one_step(scene, x0, v0, integrator, **options):
     return sim
 
 
+@pytest.mark.slow
 def test_projective_converges_to_the_backward_euler_step(f64):
     """On a 16 x 16 cloth (three multigrid levels); the 5 x 5 damped case below has exact
     global solves."""
@@ -279,6 +287,7 @@ def test_projective_converges_to_the_backward_euler_step(f64):
     assert np.abs(runs[10][0] - exact.positions()).max() < 0.1 * gaps[0]
 
 
+@pytest.mark.slow
 def test_anderson_acceleration_reaches_the_same_step_in_fewer_iterations(f64):
     """Anderson acceleration (``integrators/anderson.py``) converges to the fixed point of
     Liu's iterations, the backward Euler step, further in the same iterations: on the
@@ -310,6 +319,7 @@ def test_anderson_is_checked():
             tcloth.Simulator(scene, "projective", anderson=depth)
 
 
+@pytest.mark.slow
 def test_projective_converges_to_backward_euler_with_axial_spring_damping(f64):
     """The fixed point solves M (x - x0 - h v0) / h^2 = f(x, (x - x0) / h) with the
     lecture's axial damping (NumPy forces), not a damping of the whole relative velocity."""
@@ -328,6 +338,7 @@ def test_projective_converges_to_backward_euler_with_axial_spring_damping(f64):
     assert np.abs(residual(pd.positions(), damped=False)).max() > 1e-2 * start
 
 
+@pytest.mark.slow
 def test_projective_grid_kernel_matches_the_general_path(f64):
     """On a grid of at most 64 particles the multigrid cycle is an exact solve, so the
     fused grid iteration (stencil springs, gravity, drag) and the general one
@@ -351,6 +362,7 @@ def test_projective_grid_kernel_matches_the_general_path(f64):
     assert np.abs(runs[0] - runs[1]).max() < 1e-9 * moved
 
 
+@pytest.mark.slow_cases("projective")
 @pytest.mark.parametrize("integrator", ["projective", "backward_euler"])
 def test_linear_solver_is_checked(integrator):
     scene = tcloth.Scene()
@@ -405,6 +417,7 @@ def test_exact_hessian_is_checked_and_needs_the_line_search():
         assert sim.integrator.grid is not None
 
 
+@pytest.mark.slow
 def test_projective_keeps_particles_out_of_colliders(f64):
     """A light stiff cloth dropped onto a sphere resting on the ground: the colliders'
     penalty is inside the iterations, so the cloth never comes within half the thickness
@@ -486,6 +499,7 @@ def test_projectives_step_residual_is_the_steps_equation(f64):
                                atol=1e-12 * np.abs(expected).max())
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("integrator", ["backward_euler", "projective"])
 def test_static_equilibrium_matches_a_long_explicit_run(f64, integrator):
     def hanging():
@@ -544,6 +558,7 @@ def grid_paths():
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("paths", [general_paths, grid_paths])
 def test_parallel_loops_give_the_serial_results(paths):
     """Loops below init(serial_below=...) items run on one thread, so the tests mostly see

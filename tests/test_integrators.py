@@ -130,6 +130,7 @@ def converged():
     return scene, ref.positions()
 
 
+@pytest.mark.slow_cases("forward_euler-1", "rk4-4")
 @pytest.mark.parametrize("integrator,order", [("forward_euler", 1), ("symplectic_euler", 1),
                                               ("verlet", 2), ("rk4", 4)])
 def test_convergence_order(f64, converged, integrator, order):

@@ -87,6 +87,7 @@ def continue_like(sim, scene, integrator="symplectic_euler", steps=40, **setting
     return ref.positions(), sim.positions()
 
 
+@pytest.mark.slow_cases("projective", "symplectic_euler")
 @pytest.mark.parametrize("integrator", ["symplectic_euler", "projective", "vbd", "xpbd"])
 def test_live_parameters_act_as_a_scene_built_with_them(f64, integrator):
     """Springs, gravity, drag and wind changed live continue exactly as a simulator whose
@@ -108,6 +109,7 @@ def test_live_parameters_act_as_a_scene_built_with_them(f64, integrator):
     assert sim.scene.cloths[0].params["structural"] == (900.0, 0.2)
 
 
+@pytest.mark.slow
 def test_collider_and_strain_limit_switches(f64):
     """A collider switched off acts as absent (no force, energy, projection); switching
     strain limiting off acts as a scene without the limit."""
@@ -131,6 +133,7 @@ def test_collider_and_strain_limit_switches(f64):
         sim.set_collider_enabled(3, False)
 
 
+@pytest.mark.slow
 def test_integrator_switch_and_dt_change_keep_the_state(f64):
     sim = tcloth.Simulator(cloth_scene(), "symplectic_euler", dt=2e-3)
     sim.step(25)
@@ -145,6 +148,7 @@ def test_integrator_switch_and_dt_change_keep_the_state(f64):
     assert sim.time == pytest.approx(t + 40 * 1e-3, abs=1e-12)
 
 
+@pytest.mark.slow
 def test_checkpoint_keeps_live_changes(f64, tmp_path):
     """A simulator saved after live changes (springs, dt, a collider off, a held grab)
     loads and continues bit for bit."""
@@ -202,6 +206,7 @@ def test_pick_and_drag_pull_the_particle_under_the_cursor(f64):
                                                   aspect)) != 0
 
 
+@pytest.mark.slow
 def test_controls_apply_reset_and_instability(f64):
     sim = tcloth.Simulator(cloth_scene(limit_strain=(0.1,)), "forward_euler", dt=1e-3)
     controls = Controls(sim, substeps=10)

@@ -17,6 +17,7 @@ def _scene():
     return scene
 
 
+@pytest.mark.slow
 def test_masses_set_live_step_as_a_simulator_built_with_them(f64):
     """Masses varied over the cloth (up to 3 times the built ones): 20 projective steps at
     1/60 onto the sphere after ``set_masses`` equal, bit for bit, those of a simulator

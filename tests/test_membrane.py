@@ -157,6 +157,7 @@ def _forces_derivative(sim, x, v, eps=1e-6):
     return -(up - sim.forces()) / (2 * eps)
 
 
+@pytest.mark.slow
 def test_hessian_products_are_the_force_derivative_and_the_projection_is_never_negative():
     """Backward Euler's Hessian of the membrane (diagonal blocks and couplings) times v:
     exact, -(df/dx) v in any state (here compressed, sheared and bent); projected
@@ -186,6 +187,7 @@ def test_hessian_products_are_the_force_derivative_and_the_projection_is_never_n
         assert np.sum(w * _product(terms[1], y, X, w, 1e-2)) >= 0.0
 
 
+@pytest.mark.slow
 def test_vbd_xpbd_and_projective_converge_to_backward_euler():
     """One step of 1/60 from a perturbed, moving state of a hanging membrane (heavy enough
     that the iterations converge in a few hundred sweeps): VBD reaches backward Euler's
@@ -238,6 +240,7 @@ def test_vbd_xpbd_and_projective_converge_to_backward_euler():
     assert g[0] > 0.02 * moved > g[1], (g, moved)
 
 
+@pytest.mark.slow
 def test_a_mesh_fabric_has_its_shear_and_the_checkpoint_keeps_it(tmp_path):
     """``add_mesh_cloth(fabric=...)`` gives the mesh a membrane with the fabric's stretch
     and shear and no springs; a checkpoint continues it bit for bit."""
@@ -258,6 +261,7 @@ def test_a_mesh_fabric_has_its_shear_and_the_checkpoint_keeps_it(tmp_path):
     assert loaded.energy()["membrane"] == sim.energy()["membrane"] > 0
 
 
+@pytest.mark.slow_cases("vbd", "xpbd")
 @pytest.mark.parametrize("integrator", ["symplectic_euler", "vbd", "xpbd"])
 def test_a_batch_of_steps_equals_single_steps_bit_for_bit(integrator):
     """The membrane is in-kernel: n steps in one launch (``batch.py``) are the single

@@ -203,6 +203,7 @@ def test_free_mesh_cloth_conserves_linear_momentum(f64):
     np.testing.assert_allclose(sim.momentum()[0], p0, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_mesh_cloth_checkpoint_render_and_self_collision(f32, tmp_path):
     x, faces = disc()
     scene = tcloth.Scene()
@@ -219,6 +220,12 @@ def test_mesh_cloth_checkpoint_render_and_self_collision(f32, tmp_path):
     assert (np.abs(img.astype(int) - tcloth.render(sim, 160, 120)).max()) == 0
 
 
+@pytest.mark.slow_cases(
+    "backward_euler-0.008333333333333333",
+    "projective-0.008333333333333333",
+    "forward_euler-5e-05",
+    "rk4-0.0005",
+)
 @pytest.mark.parametrize("integrator,dt", [
     ("forward_euler", 5e-5), ("symplectic_euler", 2e-4), ("verlet", 2e-4), ("rk4", 5e-4),
     ("backward_euler", 1 / 120), ("projective", 1 / 120)])

@@ -40,6 +40,7 @@ def collider_contacts(table: ti.template(), x: ti.types.ndarray(), t: float,
                 out[k, 4 + j] = u[j]
 
 
+@pytest.mark.slow_cases("True")
 @pytest.mark.parametrize("closed", [True, False])
 def test_distance_normal_and_surface_velocity_match_a_brute_force(f64, closed):
     """A turned, moving and spinning mesh (a closed sphere, or its open upper half) at
@@ -178,6 +179,7 @@ def test_a_mesh_drape_rests_as_the_analytic_shape_s(f32, collider):
     assert gap <= 0.1 * chord + 0.005, (gap, chord)
 
 
+@pytest.mark.slow
 def test_a_particle_on_a_sloped_mesh_obeys_coulomb_s_bound(f64):
     """A particle resting on a mesh slope (two triangles) of 20 degrees, friction 0.5,
     sticks (tan 20 < 0.5: it creeps at most at the friction's regularisation speed), and
@@ -272,6 +274,7 @@ def test_a_checkpoint_stores_the_mesh_and_continues_bit_for_bit(f32, tmp_path):
     assert stats["obstacle_searches"] > 0
 
 
+@pytest.mark.slow
 def test_bad_meshes_are_refused_with_the_file_face_or_vertex_named(f32, tmp_path):
     """Each bad input raises one SceneError naming what is wrong; a mesh wound
     inconsistently is taken as open, with a warning."""
@@ -334,6 +337,7 @@ def test_a_deforming_mesh_whose_vertex_count_changes_is_refused_at_that_frame(f3
     assert changing["closed"] is False
 
 
+@pytest.mark.slow
 def test_faces_in_one_plane_are_no_self_crossing(f32):
     """A closed solid of revolution whose flat rings lie in one plane (scenes/turntable.py's
     turntable: its foot's underside and its platter's top are fans and annuli in a plane)

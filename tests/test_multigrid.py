@@ -226,6 +226,7 @@ def vcycle_matrix(solver, free):
     return b, dofs
 
 
+@pytest.mark.slow
 def test_block_vcycle_is_symmetric_with_the_spectrum_of_b_a_in_0_1(f64):
     """Symmetric Gauss-Seidel smoothing around an exact coarse solve: B A = I - E^T Q E
     (E the smoother's error propagation, Q an A-orthogonal projector), so B is symmetric
@@ -252,6 +253,7 @@ def test_block_vcycle_is_symmetric_with_the_spectrum_of_b_a_in_0_1(f64):
     assert not np.allclose(stale, b)
 
 
+@pytest.mark.slow
 def test_multigrid_preconditioned_cg_solves_in_a_few_iterations(f64):
     ny, nx = 40, 33
     dense, weights, free = random_block_grid_matrix(ny, nx, pinned=[(0, 0), (0, 32)], seed=6)

@@ -96,6 +96,7 @@ def test_inflated_balloon_rests_at_the_closed_form_radius(f64):
     assert np.abs(radius / lo - 1).max() < 1e-6, (radius.min(), radius.max(), lo)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("integrator", ["symplectic_euler", "vbd", "xpbd", "projective"])
 def test_every_solver_reaches_the_same_inflated_balloon(f64, integrator):
     """The balloon of the closed-form test settles to the same radius under the other
@@ -111,6 +112,7 @@ def test_every_solver_reaches_the_same_inflated_balloon(f64, integrator):
     assert np.linalg.norm(sim.positions(), axis=1).mean() == pytest.approx(r_ref, rel=1e-3)
 
 
+@pytest.mark.slow
 def test_winding_and_checkpoints(f64, tmp_path):
     """Faces wound inward give the same forces; a checkpoint keeps the gas (its rest
     volume too) and continues the run exactly."""
@@ -259,6 +261,7 @@ def test_backward_euler_gradient_and_hessian_products_match_finite_differences(f
             assert np.sum(v * product) >= 0.0
 
 
+@pytest.mark.slow_cases("vbd-options2", "backward_euler-options0")
 @pytest.mark.parametrize("integrator, options", [
     ("backward_euler", {}), ("projective", {}), ("vbd", {}), ("xpbd", {"substeps": 4})])
 def test_a_sea_level_balloon_at_frame_rate_inflates_to_the_closed_form_radius(
@@ -295,6 +298,7 @@ def test_a_sea_level_balloon_at_frame_rate_inflates_to_the_closed_form_radius(
         assert np.abs(radius - r_star).max() < 1e-3 * inflation
 
 
+@pytest.mark.slow
 def test_backward_euler_takes_the_issues_balloon_at_any_step(f64, inflated):
     """Issue 44's balloon (set_pressure(800) at sea level): explicit, backward Euler blew
     up in its first steps at dt = 1/120 and 1/600; implicit, it loses energy at both."""
@@ -310,6 +314,7 @@ def test_backward_euler_takes_the_issues_balloon_at_any_step(f64, inflated):
         assert np.all(np.diff(energies) <= 1e-12) and energies[0] < start
 
 
+@pytest.mark.slow
 def test_vbd_and_projective_converge_to_the_backward_euler_step(f64, inflated):
     """One step of 1/60 from a perturbed, moving balloon: VBD (the gas a Jacobi term with
     blocks bounding its rank-one part) and projective dynamics (the gas's rank-one

@@ -53,6 +53,7 @@ def _cloth():
     return scene
 
 
+@pytest.mark.slow_cases("vbd")
 @pytest.mark.parametrize("integrator", ["vbd", "xpbd"])
 def test_a_live_option_change_equals_a_new_integrator(f32, integrator):
     """Changing iterations through set_integrator_options keeps the kernels and gives,

@@ -35,6 +35,7 @@ def rich_scene():
     return scene
 
 
+@pytest.mark.slow
 def test_save_load_continue_is_bit_identical(f64, tmp_path):
     """Velocity Verlet, whose cached end-of-step forces the checkpoint keeps too (the
     symplectic Euler continuation of a saved run is the format-1 test's)."""
@@ -52,6 +53,7 @@ def test_save_load_continue_is_bit_identical(f64, tmp_path):
     assert sim.energy() == loaded.energy()
 
 
+@pytest.mark.slow
 def test_a_checkpoint_of_format_version_1_still_loads_and_continues(f64):
     """tests/data/checkpoint_v1.npz was written by the tcloth before scene features were
     described once (format version 1: wind, attraction, strain limit and self-collision
@@ -180,6 +182,7 @@ def hanging_cloth():
     return tcloth.app.script.load_script(os.path.join(ROOT, "scenes", "hanging_cloth.py"))[0].build()
 
 
+@pytest.mark.slow_cases("rk4-1.6", "forward_euler-0.39", "symplectic_euler-1.2", "verlet-1.2")
 @pytest.mark.parametrize("integrator,dt_over_limit", [
     ("forward_euler", 0.39), ("symplectic_euler", 1.2), ("symplectic_euler", 3.0),
     ("verlet", 1.2), ("rk4", 1.6)])
@@ -234,6 +237,7 @@ def valid_scenes(draw):
     return scene
 
 
+@pytest.mark.slow
 def test_random_valid_scenes_only_ever_raise_instability():
     """Random valid scenes under the explicit integrators at random dt: every run either
     ends finite, within the position and velocity bounds, with a finite energy, or raises

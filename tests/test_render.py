@@ -214,6 +214,25 @@ def run_cli(*args, cwd=ROOT):
 SCENES = sorted(glob.glob(os.path.join(ROOT, "scenes", "*.py")))
 
 
+@pytest.mark.slow_cases(
+    "cloth_on_box.py",
+    "cloth_on_sphere.py",
+    "cloth_pile.py",
+    "curtain.py",
+    "drape.py",
+    "fold.py",
+    "negative_examples.py",
+    "tablecloth.py",
+    "table.py",
+    "turntable.py",
+    "breathing.py",
+    "incline.py",
+    "strain_limiting.py",
+    "sphere_through_cloth.py",
+    "flag.py",
+    "tearing.py",
+    "garment.py",
+)
 @pytest.mark.parametrize("script", SCENES, ids=[os.path.basename(s) for s in SCENES])
 def test_every_scene_script_renders_headless(script, tmp_path):
     """Each shipped scene renders its first 30 frames (a second of video) as it ships:
@@ -317,6 +336,7 @@ CONFIGLESS = ("import tcloth\n"
               "    return scene\n")
 
 
+@pytest.mark.slow
 def test_a_script_without_config_gets_a_stable_real_time_step(f32, tmp_path):
     """The README's cloth as a script with no CONFIG (a fixed dt = 1e-3 is too large for
     it): the step from its springs is below symplectic Euler's limit, a frame is
@@ -336,6 +356,7 @@ def test_a_script_without_config_gets_a_stable_real_time_step(f32, tmp_path):
         tcloth.Simulator(scene, "symplectic_euler", dt=1e-3, split=False).step(400)
 
 
+@pytest.mark.slow
 def test_cli_set_passes_build_parameters_and_names_unknown_ones(tmp_path):
     script = tmp_path / "bare.py"
     script.write_text(CONFIGLESS)
@@ -394,6 +415,7 @@ def test_cloth_resting_on_a_collider_hides_its_rim(f32):
     assert (inside < r.tri_count).mean() > 0.99 and not (inside >= COLLIDER_ID).any()
 
 
+@pytest.mark.slow
 def test_a_cloth_over_a_cloth_resting_on_a_collider_stays_in_front(f32):
     """Two flat cloths on a box: the lower rests on it, the upper 1.2 cm higher, beyond
     the renderer's reach of a collider. Drawing cloth that rests on a collider nearer
@@ -492,6 +514,7 @@ def wrapped_cloth(kind, rest, thickness=0.005, rows=7, cols=8):
     return scene
 
 
+@pytest.mark.slow_cases("capsule", "box")
 @pytest.mark.parametrize("kind", ["box", "capsule", "sphere"])
 def test_no_collider_shows_through_cloth_resting_on_it(f32, kind):
     """A coarse cloth wrapped all round a rod, a capsule or a sphere, its particles at the

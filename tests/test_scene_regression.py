@@ -37,6 +37,23 @@ def test_the_snapshot_holds_every_scene(stored):
     assert set(LOADED) <= set(scene_names())
 
 
+@pytest.mark.slow_cases(
+    "cloth_pile",
+    "drape",
+    "fold",
+    "tablecloth",
+    "table",
+    "turntable",
+    "breathing",
+    "cloth_on_box",
+    "negative_examples",
+    "curtain",
+    "strain_limiting",
+    "cloth_on_sphere",
+    "incline",
+    "tearing",
+    "garment",
+)
 @pytest.mark.parametrize("name", scene_names())
 def test_every_scene_script_matches_its_snapshot_after_0_1_s(stored, name):
     x = run_scene(name)

@@ -106,6 +106,7 @@ def two_layers(self_collision, res=10, thickness=0.01):
     return scene, low, top
 
 
+@pytest.mark.slow
 def test_top_cloth_rests_a_thickness_above_the_lower_one(f64):
     """With self-collision the top cloth's particles (above the lower cloth's quads) come to
     rest a thickness above it; without, both cloths lie in the same layer on the plane."""
@@ -153,6 +154,7 @@ def colliding_cloths(res=8, speed=2.0):
     return scene, moved, x, v
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("integrator,dt,options", [
     ("symplectic_euler", 1e-4, {}),
     # solved tightly: backward Euler conserves momentum where grad E = 0
@@ -176,6 +178,7 @@ def test_cloths_thrown_at_each_other_never_cross_and_keep_momentum(f64, integrat
     np.testing.assert_allclose(sim.momentum()[0], p0, atol=1e-9 * scale)
 
 
+@pytest.mark.slow
 def test_without_self_collision_the_thrown_cloths_pass_through():
     """The crossing count sees the failure that self-collision prevents."""
     tcloth.init(precision="f64")
@@ -187,6 +190,7 @@ def test_without_self_collision_the_thrown_cloths_pass_through():
     assert crossings(sim.positions(), topo["edges"], topo["triangles"]) > 0
 
 
+@pytest.mark.slow
 def test_flat_hanging_cloth_moves_identically_with_and_without(f64):
     """Neighbours close by construction never repel: a cloth that never touches itself
     moves bit for bit as without self-collision."""
@@ -228,6 +232,7 @@ def test_contact_energy_matches_a_numpy_brute_force(f64):
     np.testing.assert_allclose(e, numpy_energy(scene, x, 0.03, 500.0), rtol=1e-10)
 
 
+@pytest.mark.slow
 def test_contact_force_is_minus_the_energy_gradient(f64):
     scene, x = crumpled(1)
     forces = []
@@ -256,6 +261,7 @@ def test_bad_self_collision_input_names_the_argument():
         tcloth.Simulator(scene)
 
 
+@pytest.mark.slow
 def test_folding_cloth_never_crosses_itself():
     """scenes/fold.py at 16 x 16 with its own integrator and dt: no cloth edge crosses a
     cloth triangle at any sampled frame while it folds onto itself (float32, the
@@ -278,6 +284,7 @@ def test_folding_cloth_never_crosses_itself():
     assert hits == [0] * 10
 
 
+@pytest.mark.slow
 def test_checkpoint_with_self_collision_continues_the_run(tmp_path):
     """Saved while two cloths touch, a checkpoint continues bit for bit: it keeps where the
     proximity list was built, and the loaded simulator rebuilds the same list there."""
@@ -297,6 +304,7 @@ def test_checkpoint_with_self_collision_continues_the_run(tmp_path):
     assert np.array_equal(loaded.positions(), sim.positions())
 
 
+@pytest.mark.slow
 def test_kept_candidate_list_misses_no_contact(f64):
     """Between rebuilds the contact stage's list is reused while no two particles can have
     moved relative to each other by more than the skin. While a cloth folds onto itself,
@@ -409,6 +417,7 @@ def test_the_list_holds_each_pair_within_reach_once_and_skips_only_far_rows(f64)
     assert skipped[0] > 0.3 * count and skipped[-1] < skipped[0], (skipped, count)
 
 
+@pytest.mark.slow
 def test_displacement_test_matches_numpy_on_one_thread_and_on_several():
     """The rebuild test's reduction (blocks of particles, then the blocks) gives what NumPy
     gives from the positions: twice the largest distance of a displacement since the last

@@ -31,6 +31,11 @@ def oscillator(t, r0, mu, ks, kd):
     return r0 * np.exp(-zeta * w0 * t) * (np.cos(wd * t) + zeta * w0 / wd * np.sin(wd * t))
 
 
+@pytest.mark.slow_cases(
+    "backward_euler-0.0001-0.01",
+    "projective-0.0001-0.01",
+    "vbd-0.0001-0.06",
+)
 @pytest.mark.parametrize("integrator, dt, tol", [
     ("symplectic_euler", 1e-4, 3e-3), ("rk4", 1e-3, 1e-5), ("backward_euler", 1e-4, 1e-2),
     ("projective", 1e-4, 1e-2), ("xpbd", 1e-4, 1e-2), ("vbd", 1e-4, 6e-2)])
@@ -199,6 +204,7 @@ def test_a_welded_seam_shares_its_particles(tmp_path):
     assert len(sim.welded()) == 0
 
 
+@pytest.mark.slow_cases("projective-0.016666666666666666")
 @pytest.mark.parametrize("integrator, dt", [("symplectic_euler", 2e-4), ("projective", 1 / 60)])
 def test_a_seam_closes_through_the_contact_thickness(f32, integrator, dt):
     """With self-collision on, a seam closes to a twentieth of the contact thickness in a
@@ -216,6 +222,7 @@ def test_a_seam_closes_through_the_contact_thickness(f32, integrator, dt):
     assert gap.max() < 0.05 * scene.self_collision["thickness"], gap.max()
 
 
+@pytest.mark.slow
 def test_the_garment_has_no_self_crossings_at_any_frame(f32):
     """scenes/garment.py at a coarse resolution: at no frame does an edge pass through a
     triangle (tools/crossings.py) but where they touch by construction at a seam (an

@@ -66,6 +66,7 @@ def test_set_state_validates_and_round_trips(f64):
         sim.step(-1)
 
 
+@pytest.mark.slow
 def test_reset_replays_a_fresh_run_and_takes_a_new_dt(f64):
     scene = tcloth.Scene()
     scene.add_cloth(resolution=(4, 4), size=(0.3, 0.3), center=(0, 0.2, 0))
@@ -127,6 +128,7 @@ def built(sim):
     return [type(t).__name__ for t in sim.integrator.forces.terms], sim._limiter is not None
 
 
+@pytest.mark.slow
 def test_absent_features_are_neither_built_nor_launched(f64, monkeypatch):
     plain = tcloth.Scene()
     plain.add_cloth(resolution=(4, 4), flexion=None)
@@ -156,6 +158,7 @@ def test_absent_features_are_neither_built_nor_launched(f64, monkeypatch):
     assert names.count("_launch") == 6
 
 
+@pytest.mark.slow
 def test_a_batch_is_one_launch_for_every_substep(f64, monkeypatch):
     """step(n) of an explicit integrator: one launch for the n substeps (each checked for
     its particles' kinetic and gravitational energy inside it), then the check of the
@@ -173,6 +176,7 @@ def test_a_batch_is_one_launch_for_every_substep(f64, monkeypatch):
         assert sim.num_steps == 60
 
 
+@pytest.mark.slow_cases("f32")
 @pytest.mark.parametrize("precision", ["f32", "f64"])
 def test_state_copies_equal_the_fields(precision):
     """positions(), velocities() and forces() (one copy kernel each) give the fields'

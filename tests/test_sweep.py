@@ -106,6 +106,7 @@ dt = 2.5e-4
 """
 
 
+@pytest.mark.slow
 def test_pool_gives_the_serial_table(tmp_path):
     """Two worker processes on a Dask LocalCluster against one process: the same verdicts,
     first bad steps and errors (to float32 rounding); a case that is unstable is unstable
@@ -132,6 +133,7 @@ def _finished(out):
     return {p.name: p.stat().st_mtime_ns for p in folder.iterdir()} if folder.exists() else {}
 
 
+@pytest.mark.slow
 def test_killed_worker_loses_nothing_and_rerun_completes(tmp_path):
     """A case whose build ends its worker process (os._exit) is recorded as such, the
     other cases finish and stay on disk untouched; the rerun runs only what is missing."""
@@ -155,6 +157,7 @@ def test_killed_worker_loses_nothing_and_rerun_completes(tmp_path):
     assert all(r["status"] == "ok" for r in rows)
 
 
+@pytest.mark.slow
 def test_interrupted_sweep_resumes_computing_each_case_once(tmp_path):
     """SIGINT in the middle of a serial sweep: exit 4 with the resume hint, the finished
     cases kept; the rerun computes only the others, and rerunning again computes none."""
@@ -177,6 +180,7 @@ def test_interrupted_sweep_resumes_computing_each_case_once(tmp_path):
                           equal_nan=True) and a["stable"] == b["stable"]
 
 
+@pytest.mark.slow
 def test_ctrl_c_on_a_pool_sweep_prints_its_line_and_exits_4(tmp_path):
     """Ctrl-C in a terminal signals the whole process group: the Dask pool's processes
     ignore it (dying of it, they would make the sweep print Dask's tracebacks or wait for

@@ -294,6 +294,7 @@ def test_the_wind_blows_on_the_triangles_that_hold(f64):
     np.testing.assert_allclose(sim.forces()[free], expected[free], rtol=1e-9, atol=1e-9)
 
 
+@pytest.mark.slow_cases("projective")
 @pytest.mark.parametrize("integrator", ["symplectic_euler", "projective"])
 def test_a_hinge_across_a_tear_bends_no_more(f64, integrator):
     """Hinge bending (c = sqrt(B/A) K a hinge, energy |sum c_i x_i|^2 / 2) on a torn cloth:
@@ -439,6 +440,7 @@ def test_a_torn_cloths_forces_are_its_intact_springs(f64, grid_stencil):
     np.testing.assert_allclose(sim.forces()[free], expected[free], rtol=1e-9, atol=1e-9)
 
 
+@pytest.mark.slow_cases("verlet")
 @pytest.mark.parametrize("integrator", ["symplectic_euler", "verlet"])
 def test_a_batch_tears_as_single_steps_do_bit_for_bit(f64, integrator):
     """Batches (``sim/batch.py``) break springs inside their kernel: the same springs at

@@ -443,6 +443,7 @@ def test_checkpoints_keep_a_mesh_cloths_uvs():
 BPY_PYTHON = "/work/bpyvenv/bin/python"
 
 
+@pytest.mark.slow
 def test_blender_imports_the_stage_with_the_simulated_positions(tmp_path):
     """tools/check_usd_blender.py: Blender's own USD importer (bpy), headless; each cloth
     has the simulator's vertex count and, at frames 0 and N, its positions within 1e-5 m

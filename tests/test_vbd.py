@@ -30,6 +30,7 @@ def swinging(n, k=1e3, kd=0.5):
     return scene, warm.positions(), warm.velocities()
 
 
+@pytest.mark.slow
 def test_vbd_converges_to_the_backward_euler_step(f64):
     """16 x 16 cloth, dt = 1/60: the distance to the tightly solved backward Euler step
     falls as the iterations grow (plain block descent, and Chebyshev from 16), and is
@@ -56,6 +57,7 @@ def test_vbd_converges_to_the_backward_euler_step(f64):
     assert np.array_equal(vbd.positions()[scene().pinned], x0[scene().pinned])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("friction", [0.0, 0.3])
 def test_each_vertex_gradient_and_block_match_finite_differences(f64, friction):
     """g_i and H_i of VBD's local Newton step against central differences of backward
@@ -172,6 +174,7 @@ def test_each_vertex_self_contact_is_evaluated_afresh_and_matches_finite_differe
     assert touching >= 10
 
 
+@pytest.mark.slow
 def test_vbd_reads_the_contact_list_the_stage_made_again_larger(f64):
     """The stage replaces its candidate list with a larger one where a search outgrew
     it; VBD's sweeps, compiled for the first list, compile again for the new one (the
@@ -208,6 +211,7 @@ def projection(scene, x, p):
     return out
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("k", [1e4, 1e6])
 def test_vbd_is_stable_on_stiff_cloth_at_one_step_per_frame(f64, k):
     """The implicit tests' stiff cloth (k_s up to 1e6, pinned at two corners) at dt =
@@ -354,6 +358,7 @@ def test_vbd_reaches_the_hanging_chain_closed_form(f64):
     assert np.abs(sim.positions()[:, [0, 2]]).max() < 1e-9
 
 
+@pytest.mark.slow
 def test_a_checkpoint_keeps_the_adaptive_guess(f64, tmp_path):
     """The adaptive guess reads the last step's net force from the state: a saved and
     loaded simulator continues bit for bit (the first step after a plain set_state takes

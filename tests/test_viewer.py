@@ -29,6 +29,7 @@ def window_missing():
     return None
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(window_missing() is not None, reason=str(window_missing()))
 def test_window_shows_the_cloth_where_the_offscreen_renderer_does(tmp_path):
     """30 frames in the window under Xvfb, then its image: the cloth covers the same
@@ -61,6 +62,7 @@ def test_window_shows_the_cloth_where_the_offscreen_renderer_does(tmp_path):
     assert overlap > 0.95, overlap
 
 
+@pytest.mark.slow_cases("box")
 @pytest.mark.parametrize("kind", ["box", "capsule", "sphere"])
 def test_the_window_draws_resting_cloth_out_of_its_collider(kind):
     """The window draws each collider's mesh, whose vertices lie on its surface (so the

@@ -25,6 +25,7 @@ def swinging(n, k=1e3):
     return scene, warm.positions(), warm.velocities()
 
 
+@pytest.mark.slow
 def test_xpbd_converges_near_the_backward_euler_step(f64):
     """16 x 16 undamped cloth, one step of 1/60: the distance to backward Euler's step
     falls as iterations grow and levels off at XPBD's own fixed point, within 2 % of the
@@ -48,6 +49,7 @@ def test_xpbd_converges_near_the_backward_euler_step(f64):
     assert gaps[3] < 0.02 * moved, (gaps, moved)
 
 
+@pytest.mark.slow
 def test_xpbd_substeps_converge_at_first_order(f64):
     """One iteration per substep (Small Steps): 0.05 s of a swinging 8 x 8 cloth against
     RK4 at 1e-5 s: the order falls to 1, the error halving with the substep at 5e-5 s
@@ -80,6 +82,7 @@ def test_xpbd_conserves_the_momentum_of_a_free_cloth(f64):
     assert drift < 1e-12 * (m * np.abs(v)).sum()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("k", [1e4, 1e6])
 def test_xpbd_is_stable_on_stiff_cloth_at_one_step_per_frame(f64, k):
     """The stiff cloth (k_s up to 1e6, damped, pinned at two corners) at dt = 1/60 for a
