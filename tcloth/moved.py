@@ -1,4 +1,4 @@
-"""Where the modules of tcloth's first layout went (issue 45's rooms by layer).
+"""Where the modules of tcloth's first layout went (its rooms by layer).
 
 ``import tcloth.simulator`` and ``from tcloth.budget import EnergyBudget`` keep working:
 an old name gives the module at its new place (the same module object, so monkeypatching

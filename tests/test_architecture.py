@@ -144,7 +144,7 @@ def test_every_top_level_module_sits_in_a_room():
 
 
 def test_old_module_paths_give_the_moved_modules():
-    """The first layout's module names still import (issue 45's rooms), as the very module
+    """The first layout's module names still import (its rooms by layer), as the very module
     at its new place, saying where it went."""
     import importlib
     import sys

@@ -1,4 +1,4 @@
-"""The command line means what it says (issue 44, items 3 and 6): --dt sets the step and
+"""The command line means what it says: --dt sets the step and
 the steps a frame follow it, bad timing values are refused in one line naming the option,
 `tcloth list` shows whole sentences; and the smaller promises: add_cloth's default pins
 with a fabric, contact_stats() after reset(), Fabric's checks, a scene's bad build

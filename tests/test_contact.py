@@ -523,7 +523,7 @@ def test_a_cloth_slides_over_another_at_one_step_per_frame(f32, integrator, kept
     both cloths their momentum. The separating planes take the layers' normal where the
     motion does not cross it (``contact/normals.py``); with the closest points' direction
     always, the two grids' parallel edges braked it to 0.33 (XPBD) and 0.18 m/s
-    (projective) (``docs/contact.md``, issue 46's part 6)."""
+    (projective) (``docs/contact.md``)."""
     scene, _, upper, v = sliding_scene((12, 0.6, 0.15), (6, 0.2, 0.01))
     sim = tcloth.Simulator(scene, integrator, dt=1.0 / 60.0)
     sim.set_state(velocities=v)

@@ -1,4 +1,4 @@
-"""tools/crossings.py against a triangle-mesh obstacle (issue 47's independent count):
+"""tools/crossings.py against a triangle-mesh obstacle (an independent count):
 ``count_obstacle_crossings`` (cloth edges through obstacle triangles, obstacle edges
 through cloth triangles) and ``count_inside`` (points strictly inside a closed obstacle),
 each checked against a brute force of its own kind: every pair's signed volumes, and the

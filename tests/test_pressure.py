@@ -300,7 +300,7 @@ def test_a_sea_level_balloon_at_frame_rate_inflates_to_the_closed_form_radius(
 
 @pytest.mark.slow
 def test_backward_euler_takes_the_issues_balloon_at_any_step(f64, inflated):
-    """Issue 44's balloon (set_pressure(800) at sea level): explicit, backward Euler blew
+    """A balloon (set_pressure(800) at sea level): explicit, backward Euler blew
     up in its first steps at dt = 1/120 and 1/600; implicit, it loses energy at both."""
     scene = inflated[0]
     sim = tcloth.Simulator(scene, "backward_euler", dt=1 / 120)

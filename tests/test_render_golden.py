@@ -1,4 +1,4 @@
-"""The renderer draws every shipped scene as it did before issue 82 rebuilt it: the
+"""The renderer draws every shipped scene as the ray-casting renderer before it did: the
 pictures in tests/data/render_golden.npz were drawn by that renderer (of every scene at
 two moments, ``tools/render_golden.py``), and today's of the same states match them
 within a tolerance. Rasterised edges, triangles' depths and lighting a pixel once where

@@ -1,4 +1,4 @@
-"""OpenUSD out and in (issue 48), read back through usd-core's own ``pxr`` and checked by its
+"""OpenUSD out and in, read back through usd-core's own ``pxr`` and checked by its
 validators: the stage's points at frames 0, k and N are the simulator's (float32), its
 topology, texture coordinates and pinned flags the cloths', its extents hold the points,
 its colliders' transforms their motion; a mesh that pxr writes becomes the cloth the same

@@ -1,11 +1,11 @@
-"""Issue 46's sliding case: a small cloth slides over a large one without friction, and
+"""The sliding case: a small cloth slides over a large one without friction, and
 should keep its speed.
 
 A 0.3 m, 8 x 8 cloth of 20 g, dropped from 9 mm above a 1.2 m, 24 x 24 cloth of 0.3 kg
 that lies on a frictionless floor, moves along it at 1 m/s; self-collision of 6 mm
 without friction, gravity, 0.5 s. Nothing takes horizontal momentum from the two cloths
 but the floor, which is frictionless, so the upper cloth should keep 1 m/s and the lower
-stay at rest (issue 46, part 6: within 1 % with each frame-rate solver).
+stay at rest (the target: within 1 % with each frame-rate solver).
 
 Usage: python tools/bench_sliding.py [--runs symplectic_euler:1e-4,projective:1/60,...]
                                      [--seconds 0.5] [--trace]

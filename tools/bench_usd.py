@@ -1,4 +1,4 @@
-"""What the USD export adds to a render (issue 48: at most 10 %): ``tcloth render SCRIPT
+"""What the USD export adds to a render (the target: at most 10 %): ``tcloth render SCRIPT
 --frames N`` with and without ``--usd``, each a process of its own as a user runs it,
 taken in turn (plain, with USD, plain, ...) so that both see the same machine. Prints
 greppable lines:

@@ -1,4 +1,4 @@
-"""The guard's projection against a closed form (issue 46, ``docs/contact.md``): two equal
+"""The guard's projection against a closed form (``docs/contact.md``): two equal
 flat grids one above the other, thrown at each other so that one free-flight step takes
 them wholly through each other, the contact stage run once on that motion.
 

@@ -7,7 +7,7 @@ stored, and the picture is drawn of the state ``posed`` rebuilds from them (the 
 colliders where they are at that time), at WIDTH x HEIGHT with supersampling 2 and the
 scene's camera and render options. The test draws the same states again and compares.
 
-Made with the renderer the others are compared against (the one before issue 82's):
+Made with the renderer the others are compared against (the ray-casting one it replaced):
 
     PYTHONPATH=<a checkout of that renderer> python tools/render_golden.py
 

@@ -1,6 +1,5 @@
-"""Where a frame-rate step's time goes, by part (issue 46: "where a step's time goes, by
-part, before and after, in the doc; the cost per vertex-step beside OGC's published CPU
-figure").
+"""Where a frame-rate step's time goes, by part, and the cost per vertex-step beside OGC's
+published CPU figure.
 
 The fold of ``bench_self_collision.py --implicit`` (the saved 40 x 40 state resampled to
 n x n, self-collision on) runs ``--steps`` steps at one step per frame with each of

@@ -1,4 +1,4 @@
-"""Self-contact inside projective dynamics' step (issue 46): the contact stage's separating
+"""Self-contact inside projective dynamics' step: the contact stage's separating
 planes (``ContactStage.begin_solve``, ``contact/guard.py``) as one-sided constraints of the
 step's minimisation.
 

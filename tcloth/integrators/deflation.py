@@ -1,5 +1,5 @@
 """A second level for projective dynamics' conjugate gradients with the contact planes in
-its matrix (``contact_planes.py``, issue 46): the active vertex pairs' directions deflated.
+its matrix (``contact_planes.py``): the active vertex pairs' directions deflated.
 
 Each active pair k pushes along u_k = (n_k on its vertex a, -n_k on b), with a weight up
 to ten times A's diagonal. The V-cycle that preconditions CG (``multigrid.MultigridPCG``)
