@@ -1,5 +1,10 @@
 """Simulator: a Scene turned into a Model, two States and an integrator."""
+from __future__ import annotations
+
+from typing import Any, Optional, Sequence
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 from . import checkpoint
 from .batch import Batches
@@ -86,10 +91,12 @@ class Simulator(LiveParameters):
     switches are settings, so a checkpoint saved afterwards continues the changed run.
     """
 
-    def __init__(self, scene, integrator="symplectic_euler", dt=1e-3, grid_stencil=True,
-                 position_bound=1e6, velocity_bound=1e8, strain_bound=1.0, energy_bound=True,
-                 strain_limiting=True, colliders_off=(), grab=False, batch=True, split=True,
-                 compile_ahead=None, **options):
+    def __init__(self, scene: Scene, integrator: str = "symplectic_euler", dt: float = 1e-3,
+                 grid_stencil: bool = True, position_bound: float = 1e6,
+                 velocity_bound: float = 1e8, strain_bound: Optional[float] = 1.0,
+                 energy_bound: bool = True, strain_limiting: bool = True,
+                 colliders_off: Sequence[int] = (), grab: bool = False, batch: bool = True,
+                 split: bool = True, compile_ahead: Optional[bool] = None, **options: Any):
         if not isinstance(scene, Scene):
             raise SceneError(f"scene must be a tcloth.Scene (got {type(scene).__name__})")
         integrator_class = _integrator_class(integrator)
@@ -143,7 +150,7 @@ class Simulator(LiveParameters):
         self._contact.warm_up([step], a.x, a.t, self.dt)
 
     @property
-    def scene(self):
+    def scene(self) -> Scene:
         return self.model.scene
 
     @property
@@ -152,14 +159,14 @@ class Simulator(LiveParameters):
         return self._states[0]
 
     @property
-    def time(self):
+    def time(self) -> float:
         """Simulated time, s (dt may have changed along the way: ``set_dt``)."""
         return self._time_base + (self.num_steps - self._step_base) * self.dt
 
     def _check(self):
         runtime.check_generation(self._generation)
 
-    def step(self, n=1):
+    def step(self, n: int = 1) -> None:
         """Advance n steps of dt. A step that fails the instability test is taken again
         as 2, 4, ... shorter steps (``split``, ``split.py``); past the finest split it
         raises InstabilityError, keeping the last good state. Where ``fusion()`` is None
@@ -217,7 +224,7 @@ class Simulator(LiveParameters):
             self.state.t = t0 + dt
         return None
 
-    def step_stats(self):
+    def step_stats(self) -> dict:
         """dict of how the steps were split (``split.py``): split_steps (steps that took
         several pieces), pieces (how many they took), retries (failed attempts taken again
         finer), finest (the most pieces a step took), pieces_now (the split the next step
@@ -225,7 +232,7 @@ class Simulator(LiveParameters):
         self._check()
         return self._splitter.stats()
 
-    def fusion(self):
+    def fusion(self) -> Optional[str]:
         """None where ``step(n)`` runs its n substeps in one kernel launch (``batch.py``),
         else the reason why it launches kernels for every substep (one line)."""
         self._check()
@@ -255,7 +262,7 @@ class Simulator(LiveParameters):
             why = self._limiter.batch_obstacle()
         return why or (self._tearing and self._tearing.batch_obstacle())
 
-    def time_at(self, steps):
+    def time_at(self, steps: int) -> float:
         """The time after ``steps`` steps in all (at the current dt since its last change)."""
         return self._time_base + (steps - self._step_base) * self.dt
 
@@ -277,23 +284,24 @@ class Simulator(LiveParameters):
                             runtime.to_numpy(state.v), self.time,
                             self.settings["colliders_off"])
 
-    def positions(self):
+    def positions(self) -> np.ndarray:
         """(N,3) NumPy copy of the positions, m."""
         self._check()
         return runtime.to_numpy(self.state.x)
 
-    def velocities(self):
+    def velocities(self) -> np.ndarray:
         """(N,3) NumPy copy of the velocities, m/s."""
         self._check()
         return runtime.to_numpy(self.state.v)
 
-    def forces(self):
+    def forces(self) -> np.ndarray:
         """(N,3) total force on each particle at the current state, N."""
         self._check()
         self.integrator.forces_at(self.state)
         return runtime.to_numpy(self.state.f)
 
-    def set_state(self, positions=None, velocities=None):
+    def set_state(self, positions: Optional[ArrayLike] = None,
+                  velocities: Optional[ArrayLike] = None) -> None:
         """Overwrite positions and/or velocities ((N,3) each)."""
         self._check()
         n = self.model.particle_count
@@ -316,7 +324,7 @@ class Simulator(LiveParameters):
         if self._contact is not None:
             self._contact.refresh(self.state.x)
 
-    def reset(self, dt=None):
+    def reset(self, dt: Optional[float] = None) -> None:
         """Back to the scene's initial positions and velocities at t = 0, optionally with a
         new time step dt (s, > 0): the same compiled simulator runs again (studies over dt
         need no recompilation)."""
@@ -337,7 +345,7 @@ class Simulator(LiveParameters):
         self.set_state(self.scene.positions, self.scene.velocities)
 
     # -- live changes ------------------------------------------------------------------------
-    def set_integrator(self, integrator, **options):
+    def set_integrator(self, integrator: str, **options: Any) -> None:
         """Continue with another integrator (and options) from the current state, on the
         same model (its kernels compile on first use)."""
         self._check()
@@ -346,7 +354,7 @@ class Simulator(LiveParameters):
         self._batches.forget()
         self._fusion = None
 
-    def set_integrator_options(self, **changes):
+    def set_integrator_options(self, **changes: Any) -> None:
         """Change the integrator's live options (``Integrator.set_options``: e.g. VBD's,
         XPBD's and projective's iterations) from the next step on, keeping its compiled
         kernels; the batches, which compile options in, compile again."""
@@ -355,26 +363,27 @@ class Simulator(LiveParameters):
         self._batches.forget()
         self._fusion = None
 
-    def set_dt(self, dt):
+    def set_dt(self, dt: float) -> None:
         """Continue with time step dt (s, > 0); the time so far is kept."""
         self._check()
         dt = as_scalar("dt", dt, minimum=0.0, strict=True)
         self._time_base, self._step_base = self.time, self.num_steps
         self.dt = dt
 
-    def set_strain_limiting(self, enabled):
+    def set_strain_limiting(self, enabled: bool) -> None:
         """Apply the scene's strain limit after each step (True) or not."""
         self.settings["strain_limiting"] = bool(enabled)
         self._fusion = None
 
-    def set_batching(self, enabled):
+    def set_batching(self, enabled: bool) -> None:
         """Let ``step(n)`` run its substeps in one kernel launch where it can (True), or
         launch each step's kernels from Python (False: the contact stage then sees every
         step, as a gradient's runs need)."""
         self.settings["batch"] = bool(enabled)
         self._fusion = None
 
-    def grab(self, particle, target, stiffness=None, damping=None):
+    def grab(self, particle: int, target: ArrayLike, stiffness: Optional[float] = None,
+             damping: Optional[float] = None) -> None:
         """Pull particle ``particle`` towards ``target`` (3,) m with a zero-rest-length
         spring (``terms/grab.py``) until ``release``; the simulator must be made with
         grab=True. stiffness (N/m) defaults to the mean structural spring stiffness (the
@@ -396,7 +405,7 @@ class Simulator(LiveParameters):
         self.integrator.invalidate()
         self._rebase()
 
-    def release(self):
+    def release(self) -> None:
         """Let go of the grabbed particle (nothing happens when none is held)."""
         self._check()
         if self.model.grab is not None:
@@ -405,34 +414,34 @@ class Simulator(LiveParameters):
             self._rebase()
 
     @property
-    def grabbed(self):
+    def grabbed(self) -> Optional[dict]:
         """None, or dict(particle, target, stiffness, damping) of the grab spring."""
         self._check()
         return None if self.model.grab is None else self.model.grab.held()
 
-    def save(self, path):
+    def save(self, path: str) -> None:
         """Write scene, settings and state to ``path`` (.npz), atomically."""
         self._check()
         checkpoint.save(self, path)
 
     @classmethod
-    def load(cls, path):
+    def load(cls, path: str) -> Simulator:
         """A Simulator continuing exactly where the saved one stopped (bit for bit on the
         CPU where the kernels are deterministic: grid stencils and scenes below
         SERIAL_BELOW particles). The current precision must match the checkpoint's."""
         return checkpoint.load(cls, path)
 
-    def energy(self):
+    def energy(self) -> dict:
         """dict of energies, J: kinetic, spring, gravity, contact, total."""
         self._check()
         return self.diagnostics.energy(self.state)
 
-    def momentum(self):
+    def momentum(self) -> tuple:
         """(linear (3,), angular about the origin (3,))."""
         self._check()
         return self.diagnostics.momentum(self.state)
 
-    def contact_stats(self):
+    def contact_stats(self) -> dict:
         """dict of the contact stage's statistics (``contact.stage.STATS`` says what each
         key counts; {} in a scene without self-collision or colliders) and the active
         self-contacts ("point_triangle", "edge_edge") and collider contacts ("collider":
@@ -443,20 +452,19 @@ class Simulator(LiveParameters):
         return {**self._contact.contact_stats(), **self.self_contacts(),
                 "collider": self.diagnostics.collider_contacts(self.state)}
 
-    def self_contacts(self):
+    def self_contacts(self) -> dict:
         """{"point_triangle": n, "edge_edge": m}: the self-contacts closer than the
         thickness at the current state (both 0 without ``Scene.set_self_collision``)."""
         self._check()
         return self.diagnostics.self_contacts(self.state)
 
-    def welded(self):
+    def welded(self) -> np.ndarray:
         """(W, 2) the pairs (a, b) of welded seams that have met so far, now one particle
         each (``Scene.sew(..., weld=True)``, ``welds.py``)."""
         self._check()
-        return np.zeros((0, 2), np.int64) if self._welds is None else \
-            self._welds.welded_pairs()
+        return np.zeros((0, 2), np.int64) if self._welds is None else self._welds.welded_pairs()
 
-    def triangles(self):
+    def triangles(self) -> np.ndarray:
         """(T, 3) the cloths' triangles with each welded pair's second particle replaced by
         its first: the merged mesh (``Scene.triangles`` before any weld)."""
         tri = self.scene.triangles
@@ -467,18 +475,18 @@ class Simulator(LiveParameters):
         one[welded[:, 1]] = welded[:, 0]
         return one[tri]
 
-    def max_strain(self):
+    def max_strain(self) -> float:
         """Max over springs of (length - rest) / rest (springs that broke left out)."""
         self._check()
         return self.diagnostics.max_strain(self.state)
 
-    def torn(self):
+    def torn(self) -> np.ndarray:
         """(B,) int64: the scene spring ids that broke so far (``Scene.set_tearing``), in
         the order they did; empty without tearing."""
         self._check()
         return (np.zeros(0, np.int64) if self._tearing is None else self._tearing.torn())
 
-    def surface(self):
+    def surface(self) -> np.ndarray:
         """(T,) bool over ``scene.triangles``: the cloth triangles that hold (all of them
         without tearing; a torn one has a broken spring along an edge)."""
         self._check()
@@ -487,6 +495,6 @@ class Simulator(LiveParameters):
         return self._tearing.surface()
 
     @property
-    def surface_version(self):
+    def surface_version(self) -> int:
         """A number that changes whenever ``surface()`` may have (a spring broke)."""
         return 0 if self._tearing is None else self._tearing.version
