@@ -52,17 +52,39 @@ class Shading:
 
     @ti.kernel
     def _shade(self, x: ti.template(), time: ti.f32):
-        """Each pixel's colour (module docstring), gamma 2 (square root) to bytes."""
+        """Each pixel's colour (module docstring), gamma 2 (square root) to bytes. What
+        each sample sees (its id, ray and point) is read once and kept for the pixel."""
         ss = ti.static(self.ss)
         for r, c in self.image:
-            seen = self._one_surface(r, c, time)
-            runs = ss * ss            # a shading of each sample, or one of them all
-            if seen:
-                runs = 1
+            at = [(r * ss + s // ss, c * ss + s % ss) for s in ti.static(range(ss * ss))]
+            ids = [raycast.key_id(self.screen.depth[a]) for a in ti.static(at)]
+            rays = [self.screen.ray(*a)[1] for a in ti.static(at)]
+            points = [self._point(*a) for a in ti.static(at)]
+            seen = self._one_surface(ids, rays, points, time)
             colour = ti.math.vec3(0.0)
-            for run in range(runs):
-                colour += self._shaded(x, r, c, run, ss * ss // runs, seen == 2, time)
-            colour *= ti.select(seen, 1.0, ti.static(1.0 / (ss * ss)))
+            if seen:
+                # one surface: lit once at the samples' mean point, seen along the middle ray
+                o, ray = self.screen.ray(r * ss + 0.5 * (ss - 1), c * ss + 0.5 * (ss - 1))
+                d = ray.normalized()
+                p = ti.math.vec3(0.0)
+                for s in ti.static(range(ss * ss)):
+                    p += points[s]
+                p *= 1.0 / (ss * ss)
+                normal = ti.math.vec3(0.0)
+                if seen == 2:
+                    for s in ti.static(range(ss * ss)):
+                        normal += _facing(self._facet(self._triangle(ids[s]), o, rays[s]),
+                                          rays[s])
+                colour = self._shaded(x, ids[0], o, d, p, points, seen == 2, normal, time)
+            else:
+                for s in range(ss * ss):
+                    row, col = r * ss + s // ss, c * ss + s % ss
+                    o, ray = self.screen.ray(row, col)
+                    q = self._point(row, col)
+                    colour += self._shaded(x, raycast.key_id(self.screen.depth[row, col]), o,
+                                           ray.normalized(), q, [q], False,
+                                           ti.math.vec3(0.0), time)
+                colour *= 1.0 / (ss * ss)
             v = ti.sqrt(ti.math.clamp(colour, 0.0, 1.0))
             self.image[r, c] = ti.cast(v * 255.0 + 0.5, ti.u8)
 
@@ -82,25 +104,21 @@ class Shading:
         return self.faces[j].dot(ray) < 0.0
 
     @ti.func
-    def _one_surface(self, r, c, time):
-        """What the samples of pixel (r, c) see: 1 one primitive (a collider's normals
-        within SMOOTH of each other: not across a box's edge), 2 triangles of one smooth
-        surface (``_smooth``), 0 anything else."""
-        ss = ti.static(self.ss)
-        k0 = raycast.key_id(self.screen.depth[r * ss, c * ss])
-        _, ray0 = self.screen.ray(r * ss, c * ss)
+    def _one_surface(self, ids: ti.template(), rays: ti.template(), points: ti.template(),
+                     time):
+        """What the samples of a pixel (their ``ids``, ``rays`` and ``points``) see: 1 one
+        primitive (a collider's normals within SMOOTH of each other: not across a box's
+        edge), 2 triangles of one smooth surface (``_smooth``), 0 anything else."""
+        k0 = ids[0]
         collider = COLLIDER_ID <= k0 < MESH_ID and not self._squared(k0)
         n0 = ti.math.vec3(0.0)
         seen = 1
-        for s in range(ss * ss):
-            row, col = r * ss + s // ss, c * ss + s % ss
-            k = raycast.key_id(self.screen.depth[row, col])
-            if seen and k != k0:
-                _, ray = self.screen.ray(row, col)
-                seen = 2 if self._smooth(k, k0, ray, ray0) else 0
+        for s in ti.static(range(len(ids))):
+            if seen and ids[s] != k0:
+                seen = 2 if self._smooth(ids[s], k0, rays[s], rays[0]) else 0
             elif seen and collider:
-                n = self._collider_normal(k0 - COLLIDER_ID, self._point(row, col), time)
-                if s == 0:
+                n = self._collider_normal(k0 - COLLIDER_ID, points[s], time)
+                if ti.static(s == 0):
                     n0 = n
                 elif n.dot(n0) <= SMOOTH:
                     seen = 0
@@ -121,30 +139,17 @@ class Shading:
         return smooth
 
     @ti.func
-    def _shaded(self, x, r, c, run, count, several, time):
-        """The colour of ``count`` samples of pixel (r, c) from sample run * count on (one,
-        or all of them seeing one surface): the colour of what they see at their mean
-        point (the squares' averaged over them) seen along their middle ray, lit there
-        with the shadow map read at each of them (``several`` triangles: the normal the
-        mean of theirs at the samples)."""
-        ss = ti.static(self.ss)
-        first = run * count
-        k = raycast.key_id(self.screen.depth[r * ss + first // ss, c * ss + first % ss])
-        middle = ti.select(count > 1, 0.5 * (ss - 1), 0.0)
-        o, ray = self.screen.ray(r * ss + first // ss + middle, c * ss + first % ss + middle)
-        d = ray.normalized()
+    def _shaded(self, x, k, o, d, p, points: ti.template(), several, normal, time):
+        """The colour of what id k is where the unit ray o + t d meets it at p, the mean of
+        ``points`` (a pixel's samples on it, or one of them): its colour there (the
+        squares' averaged over the points), lit there with the shadow map read at each
+        point (``several`` triangles: lit with ``normal``, the sum of theirs at the
+        samples)."""
         colour = _sky(d)
         if k != SKY_ID:
-            p = ti.math.vec3(0.0)
-            for s in range(first, first + count):
-                p += self._point(r * ss + s // ss, c * ss + s % ss)
-            p *= 1.0 / count
             base, n = self._surface(x, k, o, d, p, time)
             if several:
-                n = ti.math.vec3(0.0)
-                for s in range(ss * ss):
-                    n += self._triangle_normal(r * ss + s // ss, c * ss + s % ss)
-                n = n.normalized()
+                n = normal.normalized()
             n = _facing(n, d)
             lit = ti.max(n.dot(self._light()), 0.0)
             squared, shadowed = self._squared(k), False
@@ -153,26 +158,18 @@ class Shading:
             bias = self._bias(lit)
             squares, through = ti.math.vec3(0.0), 0.0
             if squared or shadowed:
-                for s in range(first, first + count):
-                    q = self._point(r * ss + s // ss, c * ss + s % ss)
+                for s in ti.static(range(len(points))):
                     if squared:
-                        squares += self._square(q, n)
+                        squares += self._square(points[s], n)
                     if ti.static(self.shadows):
                         if shadowed:
-                            through += self._unshadowed(q, bias)
+                            through += self._unshadowed(points[s], bias)
             if squared:
-                base = self._fade(squares * (1.0 / count), (p - o).norm())
+                base = self._fade(squares * ti.static(1.0 / len(points)), (p - o).norm())
             if shadowed:
-                lit *= through * (1.0 / count)
+                lit *= through * ti.static(1.0 / len(points))
             colour = self._shine(n, d, base, lit)
         return colour
-
-    @ti.func
-    def _triangle_normal(self, row, col):
-        """The shading normal, facing the ray, where sample (row, col) hits a triangle."""
-        o, ray = self.screen.ray(row, col)
-        j = self._triangle(raycast.key_id(self.screen.depth[row, col]))
-        return _facing(self._facet(j, o, ray), ray)
 
     @ti.func
     def _point(self, row, col):
