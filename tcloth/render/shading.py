@@ -145,29 +145,23 @@ class Shading:
         squares' averaged over the points), lit there with the shadow map read at each
         point (``several`` triangles: lit with ``normal``, the sum of theirs at the
         samples)."""
-        colour = _sky(d)
-        if k != SKY_ID:
-            base, n = self._surface(x, k, o, d, p, time)
+        colour = ti.math.vec3(0.0)
+        if k == SKY_ID:
+            colour = _sky(d)
+        else:
+            base, n = self._surface(x, k, o, d, p, several, time)
             if several:
                 n = normal.normalized()
             n = _facing(n, d)
             lit = ti.max(n.dot(self._light()), 0.0)
-            squared, shadowed = self._squared(k), False
-            if ti.static(self.shadows):
-                shadowed = lit > 0.0
-            bias = self._bias(lit)
-            squares, through = ti.math.vec3(0.0), 0.0
-            if squared or shadowed:
+            if self._squared(k):
+                squares = ti.math.vec3(0.0)
                 for s in ti.static(range(len(points))):
-                    if squared:
-                        squares += self._square(points[s], n)
-                    if ti.static(self.shadows):
-                        if shadowed:
-                            through += self._unshadowed(points[s], bias)
-            if squared:
+                    squares += self._square(points[s], n)
                 base = self._fade(squares * ti.static(1.0 / len(points)), (p - o).norm())
-            if shadowed:
-                lit *= through * ti.static(1.0 / len(points))
+            if ti.static(self.shadows):
+                if lit > 0.0:
+                    lit *= self._through(points, self._bias(lit)) * ti.static(1.0 / len(points))
             colour = self._shine(n, d, base, lit)
         return colour
 
@@ -183,14 +177,16 @@ class Shading:
         return k == GROUND_ID or (COLLIDER_ID <= k < MESH_ID and self._checkered(k - COLLIDER_ID))
 
     @ti.func
-    def _surface(self, x, k, o, d, p, time):
+    def _surface(self, x, k, o, d, p, several, time):
         """(colour, unit normal) of surface id k (not the sky) at p, seen along the unit
-        ray o + t d; the squared ones' colour is the caller's."""
+        ray o + t d; the squared ones' colour is the caller's; no triangle's normal where
+        ``several`` (the caller's)."""
         base = ti.math.vec3(COLLIDER_COLOUR)
         n = ti.math.vec3(0.0, 1.0, 0.0)
         j = self._triangle(k)
         if j >= 0:
-            n = self._facet(j, o, d)
+            if not several:
+                n = self._facet(j, o, d)
             base = self.palette[self.surface[j], 0 if self._front(j, d) else 1]
         elif k < COLLIDER_ID:
             n = (p - bead(x, self.sphere_ends, self.sphere_t, k - self.tri_count)).normalized()
@@ -235,12 +231,38 @@ class Shading:
         return texel * (1.5 + 2.0 * ti.sqrt(1.0 - cos_l * cos_l) / ti.max(cos_l, 0.2))
 
     @ti.func
+    def _through(self, points: ti.template(), bias):
+        """The sum of ``_unshadowed`` over ``points``, a pixel's samples on one surface: read
+        once where all their 2 x 2 texels are off the map, or in one tile no nearer the
+        light than the farthest of them (the same sum: each would find that)."""
+        at = [self.shadow.project(q) for q in ti.static(points)]
+        lo, hi = at[0], at[0]
+        for i in ti.static(range(1, len(points))):
+            lo, hi = ti.min(lo, at[i]), ti.max(hi, at[i])
+        r0, c0 = ti.cast(ti.floor(lo[1] - 0.5), ti.i32), ti.cast(ti.floor(lo[0] - 0.5), ti.i32)
+        r1, c1 = ti.cast(ti.floor(hi[1] - 0.5), ti.i32), ti.cast(ti.floor(hi[0] - 0.5), ti.i32)
+        total = 0.0
+        if (r1 < -1 or c1 < -1 or r0 >= SHADOW_MAP or c0 >= SHADOW_MAP
+                or (r0 >= 0 and c0 >= 0 and r1 < SHADOW_MAP and c1 < SHADOW_MAP
+                    and r0 // TILE == r1 // TILE and c0 // TILE == c1 // TILE
+                    and self.shadow.nearest[r0 // TILE, c0 // TILE] >= hi[2] - bias)):
+            total = 1.0 * ti.static(len(points))
+        else:
+            for i in ti.static(range(len(points))):
+                total += self._unshadowed_at(at[i], bias)
+        return total
+
+    @ti.func
     def _unshadowed(self, p, bias):
+        """``_unshadowed_at`` p's place in the shadow map."""
+        return self._unshadowed_at(self.shadow.project(p), bias)
+
+    @ti.func
+    def _unshadowed_at(self, s, bias):
         """The fraction of the shadow map's 2 x 2 texels around p that do not block the
         light (``_open``), weighted bilinearly by p's position between their centres (a
         percentage-closer filter whose shadow edges are smooth ramps rather than
-        texel-sized steps)."""
-        s = self.shadow.project(p)
+        texel-sized steps); s: p's (column, row, depth) in the shadow map."""
         gy, gx = s[1] - 0.5, s[0] - 0.5          # texel centres are at integer + 0.5
         ry, rx = ti.floor(gy), ti.floor(gx)
         fy, fx = gy - ry, gx - rx
