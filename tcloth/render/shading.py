@@ -52,17 +52,39 @@ class Shading:
 
     @ti.kernel
     def _shade(self, x: ti.template(), time: ti.f32):
-        """Each pixel's colour (module docstring), gamma 2 (square root) to bytes."""
+        """Each pixel's colour (module docstring), gamma 2 (square root) to bytes. What
+        each sample sees (its id, ray and point) is read once and kept for the pixel."""
         ss = ti.static(self.ss)
         for r, c in self.image:
-            seen = self._one_surface(r, c, time)
-            runs = ss * ss            # a shading of each sample, or one of them all
-            if seen:
-                runs = 1
+            at = [(r * ss + s // ss, c * ss + s % ss) for s in ti.static(range(ss * ss))]
+            ids = [raycast.key_id(self.screen.depth[a]) for a in ti.static(at)]
+            rays = [self.screen.ray(*a)[1] for a in ti.static(at)]
+            points = [self._point(*a) for a in ti.static(at)]
+            seen = self._one_surface(ids, rays, points, time)
             colour = ti.math.vec3(0.0)
-            for run in range(runs):
-                colour += self._shaded(x, r, c, run, ss * ss // runs, seen == 2, time)
-            colour *= ti.select(seen, 1.0, ti.static(1.0 / (ss * ss)))
+            if seen:
+                # one surface: lit once at the samples' mean point, seen along the middle ray
+                o, ray = self.screen.ray(r * ss + 0.5 * (ss - 1), c * ss + 0.5 * (ss - 1))
+                d = ray.normalized()
+                p = ti.math.vec3(0.0)
+                for s in ti.static(range(ss * ss)):
+                    p += points[s]
+                p *= 1.0 / (ss * ss)
+                normal = ti.math.vec3(0.0)
+                if seen == 2:
+                    for s in ti.static(range(ss * ss)):
+                        normal += _facing(self._facet(self._triangle(ids[s]), o, rays[s]),
+                                          rays[s])
+                colour = self._shaded(x, ids[0], o, d, p, points, seen == 2, normal, time)
+            else:
+                for s in range(ss * ss):
+                    row, col = r * ss + s // ss, c * ss + s % ss
+                    o, ray = self.screen.ray(row, col)
+                    q = self._point(row, col)
+                    colour += self._shaded(x, raycast.key_id(self.screen.depth[row, col]), o,
+                                           ray.normalized(), q, [q], False,
+                                           ti.math.vec3(0.0), time)
+                colour *= 1.0 / (ss * ss)
             v = ti.sqrt(ti.math.clamp(colour, 0.0, 1.0))
             self.image[r, c] = ti.cast(v * 255.0 + 0.5, ti.u8)
 
@@ -82,25 +104,21 @@ class Shading:
         return self.faces[j].dot(ray) < 0.0
 
     @ti.func
-    def _one_surface(self, r, c, time):
-        """What the samples of pixel (r, c) see: 1 one primitive (a collider's normals
-        within SMOOTH of each other: not across a box's edge), 2 triangles of one smooth
-        surface (``_smooth``), 0 anything else."""
-        ss = ti.static(self.ss)
-        k0 = raycast.key_id(self.screen.depth[r * ss, c * ss])
-        _, ray0 = self.screen.ray(r * ss, c * ss)
+    def _one_surface(self, ids: ti.template(), rays: ti.template(), points: ti.template(),
+                     time):
+        """What the samples of a pixel (their ``ids``, ``rays`` and ``points``) see: 1 one
+        primitive (a collider's normals within SMOOTH of each other: not across a box's
+        edge), 2 triangles of one smooth surface (``_smooth``), 0 anything else."""
+        k0 = ids[0]
         collider = COLLIDER_ID <= k0 < MESH_ID and not self._squared(k0)
         n0 = ti.math.vec3(0.0)
         seen = 1
-        for s in range(ss * ss):
-            row, col = r * ss + s // ss, c * ss + s % ss
-            k = raycast.key_id(self.screen.depth[row, col])
-            if seen and k != k0:
-                _, ray = self.screen.ray(row, col)
-                seen = 2 if self._smooth(k, k0, ray, ray0) else 0
+        for s in ti.static(range(len(ids))):
+            if seen and ids[s] != k0:
+                seen = 2 if self._smooth(ids[s], k0, rays[s], rays[0]) else 0
             elif seen and collider:
-                n = self._collider_normal(k0 - COLLIDER_ID, self._point(row, col), time)
-                if s == 0:
+                n = self._collider_normal(k0 - COLLIDER_ID, points[s], time)
+                if ti.static(s == 0):
                     n0 = n
                 elif n.dot(n0) <= SMOOTH:
                     seen = 0
@@ -121,58 +139,31 @@ class Shading:
         return smooth
 
     @ti.func
-    def _shaded(self, x, r, c, run, count, several, time):
-        """The colour of ``count`` samples of pixel (r, c) from sample run * count on (one,
-        or all of them seeing one surface): the colour of what they see at their mean
-        point (the squares' averaged over them) seen along their middle ray, lit there
-        with the shadow map read at each of them (``several`` triangles: the normal the
-        mean of theirs at the samples)."""
-        ss = ti.static(self.ss)
-        first = run * count
-        k = raycast.key_id(self.screen.depth[r * ss + first // ss, c * ss + first % ss])
-        middle = ti.select(count > 1, 0.5 * (ss - 1), 0.0)
-        o, ray = self.screen.ray(r * ss + first // ss + middle, c * ss + first % ss + middle)
-        d = ray.normalized()
-        colour = _sky(d)
-        if k != SKY_ID:
-            p = ti.math.vec3(0.0)
-            for s in range(first, first + count):
-                p += self._point(r * ss + s // ss, c * ss + s % ss)
-            p *= 1.0 / count
-            base, n = self._surface(x, k, o, d, p, time)
+    def _shaded(self, x, k, o, d, p, points: ti.template(), several, normal, time):
+        """The colour of what id k is where the unit ray o + t d meets it at p, the mean of
+        ``points`` (a pixel's samples on it, or one of them): its colour there (the
+        squares' averaged over the points), lit there with the shadow map read at each
+        point (``several`` triangles: lit with ``normal``, the sum of theirs at the
+        samples)."""
+        colour = ti.math.vec3(0.0)
+        if k == SKY_ID:
+            colour = _sky(d)
+        else:
+            base, n = self._surface(x, k, o, d, p, several, time)
             if several:
-                n = ti.math.vec3(0.0)
-                for s in range(ss * ss):
-                    n += self._triangle_normal(r * ss + s // ss, c * ss + s % ss)
-                n = n.normalized()
+                n = normal.normalized()
             n = _facing(n, d)
             lit = ti.max(n.dot(self._light()), 0.0)
-            squared, shadowed = self._squared(k), False
+            if self._squared(k):
+                squares = ti.math.vec3(0.0)
+                for s in ti.static(range(len(points))):
+                    squares += self._square(points[s], n)
+                base = self._fade(squares * ti.static(1.0 / len(points)), (p - o).norm())
             if ti.static(self.shadows):
-                shadowed = lit > 0.0
-            bias = self._bias(lit)
-            squares, through = ti.math.vec3(0.0), 0.0
-            if squared or shadowed:
-                for s in range(first, first + count):
-                    q = self._point(r * ss + s // ss, c * ss + s % ss)
-                    if squared:
-                        squares += self._square(q, n)
-                    if ti.static(self.shadows):
-                        if shadowed:
-                            through += self._unshadowed(q, bias)
-            if squared:
-                base = self._fade(squares * (1.0 / count), (p - o).norm())
-            if shadowed:
-                lit *= through * (1.0 / count)
+                if lit > 0.0:
+                    lit *= self._through(points, self._bias(lit)) * ti.static(1.0 / len(points))
             colour = self._shine(n, d, base, lit)
         return colour
-
-    @ti.func
-    def _triangle_normal(self, row, col):
-        """The shading normal, facing the ray, where sample (row, col) hits a triangle."""
-        o, ray = self.screen.ray(row, col)
-        j = self._triangle(raycast.key_id(self.screen.depth[row, col]))
-        return _facing(self._facet(j, o, ray), ray)
 
     @ti.func
     def _point(self, row, col):
@@ -186,14 +177,16 @@ class Shading:
         return k == GROUND_ID or (COLLIDER_ID <= k < MESH_ID and self._checkered(k - COLLIDER_ID))
 
     @ti.func
-    def _surface(self, x, k, o, d, p, time):
+    def _surface(self, x, k, o, d, p, several, time):
         """(colour, unit normal) of surface id k (not the sky) at p, seen along the unit
-        ray o + t d; the squared ones' colour is the caller's."""
+        ray o + t d; the squared ones' colour is the caller's; no triangle's normal where
+        ``several`` (the caller's)."""
         base = ti.math.vec3(COLLIDER_COLOUR)
         n = ti.math.vec3(0.0, 1.0, 0.0)
         j = self._triangle(k)
         if j >= 0:
-            n = self._facet(j, o, d)
+            if not several:
+                n = self._facet(j, o, d)
             base = self.palette[self.surface[j], 0 if self._front(j, d) else 1]
         elif k < COLLIDER_ID:
             n = (p - bead(x, self.sphere_ends, self.sphere_t, k - self.tri_count)).normalized()
@@ -238,12 +231,38 @@ class Shading:
         return texel * (1.5 + 2.0 * ti.sqrt(1.0 - cos_l * cos_l) / ti.max(cos_l, 0.2))
 
     @ti.func
+    def _through(self, points: ti.template(), bias):
+        """The sum of ``_unshadowed`` over ``points``, a pixel's samples on one surface: read
+        once where all their 2 x 2 texels are off the map, or in one tile no nearer the
+        light than the farthest of them (the same sum: each would find that)."""
+        at = [self.shadow.project(q) for q in ti.static(points)]
+        lo, hi = at[0], at[0]
+        for i in ti.static(range(1, len(points))):
+            lo, hi = ti.min(lo, at[i]), ti.max(hi, at[i])
+        r0, c0 = ti.cast(ti.floor(lo[1] - 0.5), ti.i32), ti.cast(ti.floor(lo[0] - 0.5), ti.i32)
+        r1, c1 = ti.cast(ti.floor(hi[1] - 0.5), ti.i32), ti.cast(ti.floor(hi[0] - 0.5), ti.i32)
+        total = 0.0
+        if (r1 < -1 or c1 < -1 or r0 >= SHADOW_MAP or c0 >= SHADOW_MAP
+                or (r0 >= 0 and c0 >= 0 and r1 < SHADOW_MAP and c1 < SHADOW_MAP
+                    and r0 // TILE == r1 // TILE and c0 // TILE == c1 // TILE
+                    and self.shadow.nearest[r0 // TILE, c0 // TILE] >= hi[2] - bias)):
+            total = 1.0 * ti.static(len(points))
+        else:
+            for i in ti.static(range(len(points))):
+                total += self._unshadowed_at(at[i], bias)
+        return total
+
+    @ti.func
     def _unshadowed(self, p, bias):
+        """``_unshadowed_at`` p's place in the shadow map."""
+        return self._unshadowed_at(self.shadow.project(p), bias)
+
+    @ti.func
+    def _unshadowed_at(self, s, bias):
         """The fraction of the shadow map's 2 x 2 texels around p that do not block the
         light (``_open``), weighted bilinearly by p's position between their centres (a
         percentage-closer filter whose shadow edges are smooth ramps rather than
-        texel-sized steps)."""
-        s = self.shadow.project(p)
+        texel-sized steps); s: p's (column, row, depth) in the shadow map."""
         gy, gx = s[1] - 0.5, s[0] - 0.5          # texel centres are at integer + 0.5
         ry, rx = ti.floor(gy), ti.floor(gx)
         fy, fx = gy - ry, gx - rx
