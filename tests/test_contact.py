@@ -513,8 +513,7 @@ def test_the_swept_list_holds_every_pair_that_can_meet_on_a_motion_it_holds(f64)
 
 @pytest.mark.slow
 @pytest.mark.parametrize("integrator,kept", [
-    pytest.param("xpbd", 0.99, marks=pytest.mark.xfail(
-        strict=True, reason="XPBD's substeps brake the sliding cloth: 0.41 m/s at 5 substeps")),
+    ("xpbd", 0.99),
     ("projective", 0.9)])
 def test_a_cloth_slides_over_another_at_one_step_per_frame(f32, integrator, kept):
     """A 6 x 6 cloth of 10 g thrown at 1 m/s across a 12 x 12 cloth lying on a

@@ -103,7 +103,7 @@ class Planes:
 
 @ti.kernel
 def planes(cl: ti.template(), pl: ti.template(), count: ti.i32, x0: ti.template(),
-           x1: ti.template(), thickness: float, reach: float):
+           x1: ti.template(), thickness: float, reach: float, choose: ti.template()):
     """Each candidate's unit normal and delta at the step's start x0 into ``pl.n`` and
     ``pl.delta`` (a ``Planes``), for ``project``, ``violations`` and ``truncate`` (the closest
     points cost more than the sweeps' checks). delta is 0 where it has no normal, and
@@ -113,11 +113,12 @@ def planes(cl: ti.template(), pl: ti.template(), count: ti.i32, x0: ti.template(
     cannot close by more on the motion, and such a pair stays farther apart than
     ``reach`` all along (the projection skips it; the fail-safe, whose cuts change the
     motion, does not). The normal is the one the motion x1 needs
-    (``normals.normal_margin``)."""
+    (``normals.normal_margin``; choose: True, or ``normals.PREDICTED`` where x1 is a
+    solver's prediction)."""
     vertex_normals(cl.table, x0, cl.table.normals)
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
-        _plane(cl, pl, c, x0, x1, thickness, reach, True)
+        _plane(cl, pl, c, x0, x1, thickness, reach, choose)
 
 
 @ti.kernel

@@ -48,6 +48,7 @@ from .. import runtime
 from . import guard, projection
 from .batching import BatchSteps
 from .broad import BroadPhase
+from .normals import PREDICTED
 from .obstacle import ObstaclePairs
 from .swept import SweptSearch, search_step
 from .warm import WarmUp
@@ -142,7 +143,7 @@ class ContactStage(BatchSteps, WarmUp):
         self.stats = {key: 0 for key in STATS}
         self.stats["seconds"] = 0.0
         self.solve_list = None      # the list a solve reads (``begin_solve``), or None
-        self.solve_near = False     # whether that list is a near search (``begin_solve``)
+        self.solve_near = self.solve_surface = False    # ``begin_solve``'s options
         self._planes = {}           # the guard's ``Planes`` beside each list, by its owner
         self.obstacle = None
         if self.colliders is not None and self.colliders.meshes is not None \
@@ -166,7 +167,7 @@ class ContactStage(BatchSteps, WarmUp):
             self.broad.build(x, self.skin)
 
     # -- contact inside a solve ---------------------------------------------------------------
-    def begin_solve(self, x0, x_pred, near=False):
+    def begin_solve(self, x0, x_pred, near=False, keep_surface=False):
         """The candidates a solver's iterations keep apart on a step from x0 whose
         iterates are predicted to end near x_pred: every pair that can come within the
         thickness on a motion from x0 whose ends lie within SOLVE_MARGIN thicknesses of
@@ -177,8 +178,10 @@ class ContactStage(BatchSteps, WarmUp):
         (``guard.planes``: a pair keeps n . (x_a - x_b) >= delta). Returns (list, its
         planes, rows) as ``guard.keep_apart`` takes them; ``follow_solve`` keeps them
         covering the iterates, and ``end_step`` checks the step with them where they
-        still hold it."""
-        self.solve_near = near
+        still hold it. keep_surface: the planes take the surfaces' normal also where
+        the prediction crosses both (``normals.PREDICTED``)."""
+        self.solve_near, self.solve_surface = near, keep_surface
+        choose = PREDICTED if keep_surface else True
         if self.broad.covers(x0, x_pred):
             cl, count = self.broad.candidates, self.broad.count
         else:
@@ -186,7 +189,7 @@ class ContactStage(BatchSteps, WarmUp):
             margin = (NEAR_SOLVE_MARGIN if near else SOLVE_MARGIN) * self.thickness
             count = search_step(self.swept, x0, x_pred, self.thickness, margin, near)
             cl = self.swept.candidates
-        guard.planes(cl, self.planes_of(cl), count, x0, x_pred, self.thickness, FAR)
+        guard.planes(cl, self.planes_of(cl), count, x0, x_pred, self.thickness, FAR, choose)
         self.solve_list = (cl, count)
         return cl, self.planes_of(cl), count
 
@@ -200,7 +203,7 @@ class ContactStage(BatchSteps, WarmUp):
         if held and choose:
             guard.choose_again(cl, self.planes_of(cl), count, x0, x, self.thickness)
         return ((cl, self.planes_of(cl), count) if held
-                else self.begin_solve(x0, x, self.solve_near))
+                else self.begin_solve(x0, x, self.solve_near, self.solve_surface))
 
     def truncate_solve(self, x0, x_pred, v):
         """The predicted motion of the last ``begin_solve``, from x0 to x_pred, cut short
@@ -329,7 +332,7 @@ class ContactStage(BatchSteps, WarmUp):
         cl, count, covered = self._step_candidates(x0, x1, near=True)
         if cut or guard.violations(cl, self.planes_of(cl), count, x1):
             if covered:     # the rounds and the fail-safe take every row's plane
-                guard.planes(cl, self.planes_of(cl), count, x0, x1, self.thickness, FAR)
+                guard.planes(cl, self.planes_of(cl), count, x0, x1, self.thickness, FAR, True)
             if self.x_swept is not None:     # x1 as the first sweep left it
                 self.x_swept.copy_from(x1)
             changed = cut + self._resolve(cl, count, x0, x1, v1, t0, dt)
@@ -420,7 +423,7 @@ class ContactStage(BatchSteps, WarmUp):
                 return cl, count
         elif self.swept.holds(x0, x1):
             guard.planes(cl, self.planes_of(cl), count, x0, x1, self.thickness,
-                         self.thickness)
+                         self.thickness, True)
             return cl, count
         cl, count, _ = self._step_candidates(x0, x1)
         return cl, count
@@ -459,7 +462,7 @@ class ContactStage(BatchSteps, WarmUp):
                 count = search_step(self.swept, x0, x1, self.thickness,
                                     MARGIN * self.thickness)
             cl = self.swept.candidates        # after the search, which may grow the list
-        guard.planes(cl, self.planes_of(cl), count, x0, x1, self.thickness, reach)
+        guard.planes(cl, self.planes_of(cl), count, x0, x1, self.thickness, reach, True)
         return cl, count, covered
 
     def contact_stats(self):

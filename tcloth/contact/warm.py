@@ -28,6 +28,7 @@ switch between batches of substeps and steps from Python after it was built (a l
 change).
 """
 from . import guard, projection
+from .normals import PREDICTED
 from .swept import departure, excess, search_step
 
 
@@ -92,7 +93,8 @@ class WarmUp:
         departure(points, swept.origin, swept.anchor, x0, x1)
         for cl, count in ((broad.candidates, broad.count), (swept.candidates, swept.count)):
             pl = self.planes_of(cl)
-            guard.planes(cl, pl, count, x0, x1, thickness, thickness)
+            for choose in (True, PREDICTED):
+                guard.planes(cl, pl, count, x0, x1, thickness, thickness, choose)
             guard.violations(cl, pl, count, x1)
             projection.warm(cl, pl, x1, v1, self.inv_mass, self.held, self.work, self.log)
             guard.truncate(cl, pl, 0, x0, x1, v1, self.inv_mass, self.cut,

@@ -134,7 +134,7 @@ class XPBD(Integrator):
                 if self.stage is not None and sub == 0:
                     # the step's predicted end: count times the first substep's move
                     extrapolate_into(self.dx, self.x_start, float(count), x)
-                    self.stage.begin_solve(self.x_start, self.dx)
+                    self.stage.begin_solve(self.x_start, self.dx, keep_surface=True)
                 self._solve(x, h, opt["iterations"])
             self._velocities(x, v, 1.0 / h)
             t += h
