@@ -4,7 +4,12 @@ Taichi fields).
 Units are SI throughout: metres, kilograms, seconds, newtons. A ``Scene`` validates every
 input when it is added, so that a ``Simulator`` built from it never sees bad data.
 """
+from __future__ import annotations
+
+from typing import Any, Optional, Sequence, Tuple, Union
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 from . import builders, meshcollider, seams
 from .builders import unset
@@ -14,6 +19,7 @@ from ..validate import as_per_item, as_points, as_scalar, as_vec3, fmt
 
 SPRING_KINDS = ("structural", "shear", "flexion", "custom", "seam")
 KIND_CODE = {name: code for code, name in enumerate(SPRING_KINDS)}
+Spring = Tuple[float, float]        # a spring family's (stiffness N/m, damping N s/m)
 
 
 class Scene:
@@ -36,7 +42,8 @@ class Scene:
             c + gamma * m_p (``drag_coefficients``).
     """
 
-    def __init__(self, gravity=(0.0, -9.81, 0.0), air_drag=0.0, air_damping=0.0):
+    def __init__(self, gravity: ArrayLike = (0.0, -9.81, 0.0), air_drag: float = 0.0,
+                 air_damping: float = 0.0):
         self.gravity = as_vec3("gravity", gravity)
         self.air_drag = as_scalar("air_drag", air_drag, minimum=0.0)
         self.air_damping = as_scalar("air_damping", air_damping, minimum=0.0)
@@ -51,7 +58,9 @@ class Scene:
         self.welds = []
 
     # -- particles -------------------------------------------------------------------------
-    def add_particles(self, positions, mass=1.0, velocities=None, pinned=False):
+    def add_particles(self, positions: ArrayLike, mass: ArrayLike = 1.0,
+                      velocities: Optional[ArrayLike] = None,
+                      pinned: ArrayLike = False) -> np.ndarray:
         """Add N particles.
 
         Args:
@@ -80,7 +89,9 @@ class Scene:
         return ids
 
     # -- springs ---------------------------------------------------------------------------
-    def add_springs(self, pairs, stiffness, damping=0.0, rest_length=None, kind="custom"):
+    def add_springs(self, pairs: ArrayLike, stiffness: ArrayLike, damping: ArrayLike = 0.0,
+                    rest_length: Optional[ArrayLike] = None,
+                    kind: str = "custom") -> np.ndarray:
         """Add M springs ``f_ij = -k_s (|x_ij| - l0) d_ij - k_d (v_ij . d_ij) d_ij``.
 
         Args:
@@ -149,7 +160,8 @@ class Scene:
         self.num_springs += m
         return sids
 
-    def sew(self, a, b, stiffness, damping=0.0, weld=False, weld_distance=None):
+    def sew(self, a: ArrayLike, b: ArrayLike, stiffness: float, damping: float = 0.0,
+            weld: bool = False, weld_distance: Optional[float] = None) -> np.ndarray:
         """Sew particle a[i] to particle b[i]: seam springs of rest length 0 (kind "seam",
         force -k_s x_ij - k_d (v_ij . d) d) that pull each pair together; self-contact
         treats a pair as one particle, so a seam closes through the contact thickness
@@ -170,7 +182,7 @@ class Scene:
         """
         return seams.sew(self, a, b, stiffness, damping, weld, weld_distance)
 
-    def set_masses(self, masses):
+    def set_masses(self, masses: ArrayLike) -> None:
         """Every particle's mass (N,), kg, > 0 (a number: the same for all). What the scene
         gives per mass or as a ratio of critical follows it (the air damping, the
         membrane's and the colliders' damping); the springs' k_d (N s/m) stay."""
@@ -178,7 +190,8 @@ class Scene:
         ends = np.cumsum([len(part) for part in self._m])[:-1]
         self._m = list(np.split(masses, ends))
 
-    def set_spring_parameters(self, kind, stiffness=None, damping=None):
+    def set_spring_parameters(self, kind: str, stiffness: Optional[ArrayLike] = None,
+                              damping: Optional[ArrayLike] = None) -> None:
         """Set the stiffness k_s (N/m, >= 0) and/or damping k_d (N s/m, >= 0) of every spring
         of one kind, and the cloths' family parameters with them (None: unchanged)."""
         if kind not in KIND_CODE:
@@ -201,7 +214,7 @@ class Scene:
                 cloth.params[kind] = (values.get("stiffness", old[0]),
                                       values.get("damping", old[1]))
 
-    def mean_stiffness(self, kind=None):
+    def mean_stiffness(self, kind: Optional[str] = None) -> Optional[float]:
         """The mean k_s (N/m) of the springs of one kind (None: of all springs), or None
         when there are none."""
         springs = self.springs
@@ -210,10 +223,14 @@ class Scene:
         return float(ks.mean()) if len(ks) else None
 
     # -- builders --------------------------------------------------------------------------
-    def add_cloth(self, resolution=(32, 32), size=(1.0, 1.0), center=(0.0, 1.0, 0.0),
-                  plane="xz", mass=unset(0.2), structural=unset((1000.0, 0.05)),
-                  shear=unset((200.0, 0.02)), flexion=unset((50.0, 0.01)), pinned=None,
-                  rotation=None, fabric=None):
+    def add_cloth(self, resolution: Tuple[int, int] = (32, 32),
+                  size: Tuple[float, float] = (1.0, 1.0), center: ArrayLike = (0.0, 1.0, 0.0),
+                  plane: str = "xz", mass: float = unset(0.2),
+                  structural: Optional[Spring] = unset((1000.0, 0.05)),
+                  shear: Optional[Spring] = unset((200.0, 0.02)),
+                  flexion: Optional[Spring] = unset((50.0, 0.01)),
+                  pinned: Optional[Sequence] = None, rotation: Optional[ArrayLike] = None,
+                  fabric: Union[str, Any, None] = None) -> builders.Cloth:
         """Add a Provot cloth: particles on a regular nx x ny grid.
 
         Args:
@@ -237,10 +254,14 @@ class Scene:
         return builders.add_cloth(self, resolution, size, center, plane, mass, structural,
                                   shear, flexion, pinned, rotation, fabric)
 
-    def add_mesh_cloth(self, vertices, faces=None, mass=unset(0.2),
-                       structural=unset((1000.0, 0.05)), shear=unset(None),
-                       flexion=unset((50.0, 0.01)), pinned=(), fabric=None, uvs=None,
-                       prim=None):
+    def add_mesh_cloth(self, vertices: Union[ArrayLike, str], faces: Optional[ArrayLike] = None,
+                       mass: float = unset(0.2),
+                       structural: Optional[Spring] = unset((1000.0, 0.05)),
+                       shear: Optional[Spring] = unset(None),
+                       flexion: Optional[Spring] = unset((50.0, 0.01)),
+                       pinned: ArrayLike = (), fabric: Union[str, Any, None] = None,
+                       uvs: Optional[ArrayLike] = None,
+                       prim: Optional[str] = None) -> builders.MeshCloth:
         """Add a cloth made from a mesh: a particle at each vertex, springs from the faces.
 
         Springs: structural on every face edge; shear across both diagonals of each quad
@@ -279,7 +300,9 @@ class Scene:
         return builders.add_mesh_cloth(self, vertices, faces, mass, structural, shear,
                                        flexion, pinned, fabric, uvs, prim)
 
-    def add_rope(self, start, end, segments, mass, stiffness, damping=0.0, pinned=("start",)):
+    def add_rope(self, start: ArrayLike, end: ArrayLike, segments: int, mass: float,
+                 stiffness: float, damping: float = 0.0,
+                 pinned: Sequence = ("start",)) -> builders.Rope:
         """Add a straight rope of ``segments`` springs from ``start`` to ``end``.
 
         Args:
@@ -329,8 +352,10 @@ class Scene:
                                               velocity, angular_velocity, keyframes, deform,
                                               deform_fps, prim, sdf)
 
-    def add_collider(self, kind, shape, friction=0.0, velocity=(0.0, 0.0, 0.0),
-                     thickness=0.005, stiffness=1000.0, damping=0.5, stick_velocity=1e-3):
+    def add_collider(self, kind: str, shape: dict, friction: float = 0.0,
+                     velocity: ArrayLike = (0.0, 0.0, 0.0), thickness: float = 0.005,
+                     stiffness: float = 1000.0, damping: float = 0.5,
+                     stick_velocity: float = 1e-3) -> dict:
         """Add a collider of shape ``kind`` whose own values, ``shape`` (a dict keyed as
         the collider dict stores them), its builder has checked; the builders
         ``add_sphere``, ``add_plane``, ``add_box``, ``add_cylinder`` and ``add_capsule``
@@ -354,32 +379,32 @@ class Scene:
         return np.concatenate(parts) if parts else np.zeros(shape, dtype=dtype)
 
     @property
-    def positions(self):
+    def positions(self) -> np.ndarray:
         """(N,3) initial positions, m."""
         return self._cat(self._x, (0, 3), np.float64)
 
     @property
-    def velocities(self):
+    def velocities(self) -> np.ndarray:
         """(N,3) initial velocities, m/s."""
         return self._cat(self._v, (0, 3), np.float64)
 
     @property
-    def masses(self):
+    def masses(self) -> np.ndarray:
         """(N,) masses, kg."""
         return self._cat(self._m, (0,), np.float64)
 
-    def drag_coefficients(self):
+    def drag_coefficients(self) -> np.ndarray:
         """(N,) each particle's viscous drag coefficient c + gamma m_p (N s/m) from
         ``air_drag`` c and ``air_damping`` gamma."""
         return self.air_drag + self.air_damping * self.masses
 
     @property
-    def pinned(self):
+    def pinned(self) -> np.ndarray:
         """(N,) bool: True where the particle has inverse mass 0."""
         return self._cat(self._pin, (0,), bool)
 
     @property
-    def springs(self):
+    def springs(self) -> dict:
         """dict of arrays over all M springs: pairs (M,2), stiffness, damping, rest_length,
         kind (codes into SPRING_KINDS)."""
         return {"pairs": self._cat(self._pairs, (0, 2), np.int64),
@@ -389,11 +414,11 @@ class Scene:
                 "kind": self._cat(self._kind, (0,), np.int32)}
 
     @property
-    def triangles(self):
+    def triangles(self) -> np.ndarray:
         """(T,3) particle ids of every cloth triangle, cloth by cloth."""
         return self._cat([c.triangles for c in self.cloths], (0, 3), np.int64)
 
-    def spring_counts(self):
+    def spring_counts(self) -> dict:
         """dict kind -> number of springs of that kind."""
         kinds = self.springs["kind"]
         return {name: int((kinds == code).sum()) for name, code in KIND_CODE.items()}
