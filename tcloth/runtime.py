@@ -3,6 +3,8 @@
 ``init`` may be called again; every call starts a new *generation*, and objects that
 hold Taichi fields from an earlier generation refuse to run (``StaleSimulatorError``).
 """
+from typing import Any, Optional
+
 import os
 import warnings
 
@@ -39,7 +41,8 @@ class _Runtime:
     serial_below = SERIAL_BELOW
 
 
-def init(arch="cpu", precision="f32", serial_below=None, **kwargs):
+def init(arch: str = "cpu", precision: str = "f32", serial_below: Optional[int] = None,
+         **kwargs: Any) -> None:
     """(Re-)initialise Taichi for tcloth.
 
     Args:

@@ -14,6 +14,8 @@ the order of the threads. The shading pass reads the winning id and depth at eac
 and box-filters the samples of each pixel into it. The same scene gives the same image,
 bit for bit, every run.
 """
+from typing import TYPE_CHECKING, Any, Optional
+
 import contextlib
 import math
 import time as clock
@@ -31,6 +33,9 @@ from .framing import ground_and_checker
 from .raster import Target, View
 from .shading import MESH_ID, SHADOW_MAP, Shading
 from ..geometry.shapes import shape_of
+
+if TYPE_CHECKING:
+    from ..sim.simulator import Simulator
 
 LIGHT_DIR = (0.35, 0.85, 0.4)
 UNBOUNDED = 1e9      # m: the bounding radius of a plane
@@ -313,7 +318,9 @@ class Renderer(Shading):
 _RENDERERS = weakref.WeakKeyDictionary()
 
 
-def render(sim, width=640, height=480, camera=None, supersample=2, **options):
+def render(sim: "Simulator", width: int = 640, height: int = 480,
+           camera: Optional[dict] = None, supersample: int = 2,
+           **options: Any) -> np.ndarray:
     """(H,W,3) uint8 image of ``sim``'s current state; no display needed.
 
     The Renderer is kept on the simulator and reused while the arguments stay the same.

@@ -26,6 +26,10 @@ the last frame written. Points are float32.
 Nothing partial is left looking complete: the stage is kept in memory and written to
 ``NAME.partial.EXT`` when it is closed, then renamed.
 """
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Optional, Sequence
+
 import os
 import shutil
 import tempfile
@@ -42,6 +46,9 @@ from ..version import __version__
 from .drawables import COLLIDER_COLOUR, PARTICLE_COLOUR, cloth_palette, particle_spheres
 from .framing import ground_and_checker
 from .video import check_writable, record
+
+if TYPE_CHECKING:
+    from ..sim.simulator import Simulator
 
 PLANE_HALF = 3.0    # a plane collider is a square of side 2 PLANE_HALF times the extent
 
@@ -143,8 +150,10 @@ class UsdWriter:
         self.parts = []
 
 
-def record_usd(sim, path, frames=120, steps_per_frame=None, fps=30, progress=True,
-               cloth_colours=None, particle_radius=None):
+def record_usd(sim: Simulator, path: str, frames: int = 120,
+               steps_per_frame: Optional[int] = None, fps: float = 30, progress: bool = True,
+               cloth_colours: Optional[Sequence] = None,
+               particle_radius: Optional[float] = None) -> None:
     """Simulate ``frames`` frames into one OpenUSD stage at ``path``, as ``tcloth.record``
     renders them (the first frame is the current state; a progress bar on stderr).
 

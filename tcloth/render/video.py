@@ -5,6 +5,10 @@ a PNG folder to ``NAME.partial/``, renamed to the final name only once every fra
 Frames are encoded on a thread of their own (``_Writer``), beside the simulation and the
 rendering of the next ones.
 """
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any, Optional, Sequence
+
 import os
 import queue
 import shutil
@@ -20,8 +24,11 @@ from ..errors import InstabilityError, SceneError
 from .mesh import export_mesh
 from .render import renderer_for
 
+if TYPE_CHECKING:
+    from ..sim.simulator import Simulator
 
-def write_png(path, image):
+
+def write_png(path: str, image: np.ndarray) -> None:
     """Write an (H,W,3) uint8 array as an 8-bit RGB PNG."""
     img = np.ascontiguousarray(image, dtype=np.uint8)
     h, w, _ = img.shape
@@ -232,9 +239,11 @@ class _MeshSink:
         pass
 
 
-def record(sim, path, frames=240, steps_per_frame=10, fps=30, width=640, height=480,
-           camera=None, supersample=2, quality=7, progress=True, mesh_dir=None, writers=(),
-           **render_options):
+def record(sim: Simulator, path: str, frames: int = 240, steps_per_frame: int = 10,
+           fps: float = 30, width: int = 640, height: int = 480, camera: Optional[dict] = None,
+           supersample: int = 2, quality: int = 7, progress: bool = True,
+           mesh_dir: Optional[str] = None, writers: Sequence = (),
+           **render_options: Any) -> None:
     """Simulate and render ``frames`` frames to ``path``.
 
     Args:
