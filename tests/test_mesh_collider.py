@@ -87,6 +87,51 @@ def test_distance_normal_and_surface_velocity_match_a_brute_force(f64, closed):
     assert near > 100
 
 
+def test_two_deforming_meshes_each_answer_their_own_surface_after_a_step(f64):
+    """Two deforming closed meshes (the second's vertices stored after the first's) swell
+    over a step (``ColliderTable.advance``): at the step's end each point's phi is the
+    brute-force distance to the nearest of the two swollen meshes, negative inside."""
+    v, f = icosphere(0.3, 2)
+    scene = tcloth.Scene()
+    centres = ((-0.5, 0.0, 0.0), (0.5, 0.1, 0.0))
+    for k, centre in enumerate(centres):
+        scene.add_mesh_collider((v, f), position=centre, sdf=False,
+                                deform=lambda t, k=k: v * (1.0 + (0.2 + 0.1 * k) * t))
+    table = ColliderTable(scene.colliders)
+    t0, dt = 0.5, 0.25
+    table.advance(t0, dt)
+    rng = np.random.default_rng(5)
+    x = np.concatenate([np.asarray(c) + rng.uniform(-0.45, 0.45, (150, 3)) for c in centres])
+    out = np.zeros((len(x), len(centres)))
+    for k in range(len(centres)):
+        one = np.zeros((len(x), 7))
+        collider_contacts_of(table, k, x, t0 + dt, one)
+        out[:, k] = one[:, 0]
+    for k, c in enumerate(scene.colliders):
+        world = world_vertices(c, t0 + dt)
+        a, b, cc = (world[f[:, j]] for j in range(3))
+        inside = inside_mask(x, world, f)
+        for p, phi, ins in zip(x, out[:, k], inside):
+            d = closest_on_triangles(p, a, b, cc)[1].min()
+            if d < c["reach"] - 1e-9:
+                assert phi == pytest.approx(-d if ins else d, abs=1e-9)
+
+
+@ti.kernel
+def collider_contacts_of(table: ti.template(), row: ti.i32, x: ti.types.ndarray(), t: float,
+                         out: ti.types.ndarray()):
+    """out[k] = (phi, normal, surface velocity) of point x[k] against the table's
+    collider ``row`` of its one group."""
+    for k in range(x.shape[0]):
+        p = ti.Vector([x[k, 0], x[k, 1], x[k, 2]])
+        for g in ti.static(table.groups):
+            phi, n, u = table.contact(g.shape, table.data[g.first + row], p, t)
+            out[k, 0] = phi
+            for j in ti.static(range(3)):
+                out[k, 1 + j] = n[j]
+                out[k, 4 + j] = u[j]
+
+
 def _pose(c, t):
     """(centre, rotation) of a rigid mesh collider at t, from its world vertices."""
     own = c["vertices"]

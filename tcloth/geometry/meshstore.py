@@ -93,6 +93,7 @@ class MeshStore:
             lo, hi = _boxes(v, tris)
             order, node_lo, node_hi, leaves = trimesh.bvh(lo, hi)
             self.records.append({"tris": tris[order], "order": order, "leaves": leaves,
+                                 "edges": trimesh.edge_index(tris[order]),
                                  "v": v, "vert_first": vert_first, "tri_first": tri_first,
                                  "node_first": node_first, "node_lo": node_lo,
                                  "node_hi": node_hi, "closed": bool(c["closed"]),
@@ -120,7 +121,7 @@ class MeshStore:
         for m, r in enumerate(self.records):
             table[m] = (r["tri_first"], len(r["tris"]), r["vert_first"], r["node_first"],
                         r["leaves"], r["closed"], r["deforming"])
-            face, edge, vertex = trimesh.pseudo_normals(r["v"], r["tris"])
+            face, edge, vertex = trimesh.pseudo_normals(r["v"], r["tris"], r["edges"])
             parts["v"].append(r["v"])
             parts["tris"].append(r["tris"] + r["vert_first"])
             parts["face_n"].append(face)
@@ -155,7 +156,7 @@ class MeshStore:
         b_lo, b_hi = _boxes(vb, r["tris"])
         lo, hi = np.minimum(a_lo, b_lo), np.maximum(a_hi, b_hi)
         node_lo, node_hi = trimesh.refit(np.arange(len(lo)), lo, hi, r["leaves"])
-        face, edge, vertex = trimesh.pseudo_normals(vb, r["tris"])
+        face, edge, vertex = trimesh.pseudo_normals(vb, r["tris"], r["edges"])
         _write(self.va, first, va.astype(npr))
         _write(self.vb, first, vb.astype(npr))
         _write(self.vertex_n, first, vertex.astype(npr))
@@ -419,7 +420,21 @@ def _finite(a):
 
 
 def _write(field, first, values):
-    """field[first:first + len(values)] = values."""
-    full = field.to_numpy()
-    full[first:first + len(values)] = values
-    field.from_numpy(full)
+    """field[first:first + len(values)] = values (the whole field in one copy where they
+    fill it, else a kernel writing those rows: a field's read and write back would cost
+    a deforming mesh's step more than its pseudo normals)."""
+    if first == 0 and len(values) == field.shape[0]:
+        field.from_numpy(values)
+    else:
+        _write_rows(field, first, values)
+
+
+@ti.kernel
+def _write_rows(field: ti.template(), first: ti.i32, values: ti.types.ndarray()):
+    for i in range(values.shape[0]):
+        if ti.static(field.m > 1):
+            for a, b in ti.static(ti.ndrange(field.n, field.m)):
+                field[first + i][a, b] = values[i, a, b]
+        else:
+            for a in ti.static(range(field.n)):
+                field[first + i][a] = values[i, a]

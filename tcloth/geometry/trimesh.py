@@ -60,27 +60,40 @@ def face_normals(vertices, triangles):
     return cross / np.maximum(length, 1e-300)[:, None], 0.5 * length
 
 
-def pseudo_normals(vertices, triangles):
+def edge_index(triangles):
+    """(3 F,) for each face's edge k (from corner k to corner k + 1), in face order, the id
+    of its undirected edge: the faces that share an edge share its id. Topology only, so
+    a deforming mesh computes it once."""
+    t = np.asarray(triangles, dtype=np.int64)
+    directed = np.stack([t, np.roll(t, -1, axis=1)], -1).reshape(-1, 2)
+    _, inverse = np.unique(np.sort(directed, axis=1), axis=0, return_inverse=True)
+    return inverse.ravel()
+
+
+def _sum_rows(ids, rows, count):
+    """(count, 3): rows (N, 3) summed by ids (N,)."""
+    return np.stack([np.bincount(ids, rows[:, k], minlength=count) for k in range(3)], -1)
+
+
+def pseudo_normals(vertices, triangles, edges=None):
     """(face (F, 3), edge (F, 3, 3): the pseudo normal of each face's edge k, from corner
     k to corner k + 1, vertex (V, 3)), unnormalised sums (their directions are what
-    count)."""
+    count). ``edges``: ``edge_index(triangles)``, where the caller keeps it."""
     x = np.asarray(vertices, dtype=np.float64)
     t = np.asarray(triangles, dtype=np.int64)
     normal, _ = face_normals(x, t)
-    vertex = np.zeros_like(x)
+    corners, angles = [], []
     for k in range(3):
         a, b, c = x[t[:, k]], x[t[:, (k + 1) % 3]], x[t[:, (k + 2) % 3]]
         u, w = b - a, c - a
         cos = np.einsum("ij,ij->i", u, w) / np.maximum(
             np.linalg.norm(u, axis=1) * np.linalg.norm(w, axis=1), 1e-300)
-        np.add.at(vertex, t[:, k], np.arccos(np.clip(cos, -1.0, 1.0))[:, None] * normal)
-    directed = np.stack([t, np.roll(t, -1, axis=1)], -1).reshape(-1, 2)
-    key = np.sort(directed, axis=1)
-    _, inverse = np.unique(key, axis=0, return_inverse=True)
-    inverse = inverse.ravel()
-    sums = np.zeros((inverse.max(initial=-1) + 1, 3))
-    np.add.at(sums, inverse, np.repeat(normal, 3, axis=0))
-    return normal, sums[inverse].reshape(len(t), 3, 3), vertex
+        corners.append(t[:, k])
+        angles.append(np.arccos(np.clip(cos, -1.0, 1.0))[:, None] * normal)
+    vertex = _sum_rows(np.concatenate(corners), np.concatenate(angles), len(x))
+    edges = edge_index(t) if edges is None else edges
+    sums = _sum_rows(edges, np.repeat(normal, 3, axis=0), int(edges.max(initial=-1)) + 1)
+    return normal, sums[edges].reshape(len(t), 3, 3), vertex
 
 
 def _morton(centres):
