@@ -42,22 +42,29 @@ median over the repeats: ``scenes.<scene>.<tree>.<figure>: <value>``, tree the f
 name (before/after on one loaded machine: the trees alternate, so a change of load falls
 on both).
 
+With ``--config KEY=VALUE`` (repeatable) every scene runs with that CONFIG key replaced,
+e.g. ``--scenes fold --config integrator=projective --config dt=1/60`` (how a scene's
+docstring compares its defaults with another integrator).
+
 Usage: python tools/bench_scenes.py [--scenes table,turntable] [--frames N] [--out DIR]
-                                    [--trees /work/main,. --repeats 3]
+                                    [--trees /work/main,. --repeats 3] [--config KEY=VALUE]
 """
 import argparse
+import ast
 import glob
 import json
 import os
 import subprocess
 import sys
+import re
 import time
+from fractions import Fraction
 from types import SimpleNamespace
 
 import numpy as np
 
 import tcloth
-from tcloth.app.script import build_scene, load_script, timing
+from tcloth.app.script import DEFAULTS, build_scene, load_script, timing
 from tcloth.scene.meshcollider import world_vertices
 from tcloth.scene.scene import KIND_CODE
 from bench_contact import signed_distances
@@ -109,9 +116,11 @@ def crossings(scene, x0, x1, t0, t1, triangles):
     return out
 
 
-def run(path, frames):
-    """The figures of one scene script (module docstring)."""
+def run(path, frames, config=None):
+    """The figures of one scene script (module docstring), its CONFIG updated with
+    ``config`` (a dict of CONFIG keys) where given."""
     module, cfg = load_script(path)
+    cfg = {**cfg, **(config or {})}
     tcloth.init("cpu", cfg["precision"])
     scene = build_scene(module, path)
     dt, steps = timing(cfg, scene)
@@ -170,8 +179,12 @@ def main(argv=None):
     ap.add_argument("--trees", default=None,
                     help="work trees whose tcloth to run in turn, comma-separated")
     ap.add_argument("--repeats", type=int, default=1, help="runs of each tree (--trees)")
+    ap.add_argument("--config", action="append", default=[], metavar="KEY=VALUE",
+                    help="a CONFIG key replaced for every scene, VALUE a Python literal "
+                         "(e.g. --config integrator=xpbd --config dt=1/30; repeatable)")
     ap.add_argument("--json", action="store_true", help=argparse.SUPPRESS)   # --trees' child
     args = ap.parse_args(argv)
+    config = parse_config(args.config)
     names = (args.scenes.split(",") if args.scenes else
              sorted(os.path.splitext(os.path.basename(p))[0]
                     for p in glob.glob(os.path.join(SCENES, "*.py"))))
@@ -179,9 +192,10 @@ def main(argv=None):
     for name in names:
         path = os.path.join(SCENES, name + ".py")
         if args.trees:
-            results = side_by_side(name, args.trees.split(","), args.repeats, args.frames)
+            results = side_by_side(name, args.trees.split(","), args.repeats, args.frames,
+                                   args.config)
         else:
-            results = {None: run(path, args.frames)}
+            results = {None: run(path, args.frames, config)}
         if args.json:
             print(json.dumps(results[None]))
             return
@@ -196,7 +210,28 @@ def main(argv=None):
         write_csv(os.path.join(args.out, "scenes.csv"), rows)
 
 
-def side_by_side(name, trees, repeats, frames):
+def parse_config(items):
+    """{CONFIG key: value} from ``--config KEY=VALUE`` items (VALUE a Python literal, a
+    fraction such as 1/30, or a bare name such as xpbd, taken as a string); a malformed
+    item is refused with its text."""
+    config = {}
+    for item in items:
+        key, sep, text = item.partition("=")
+        if not sep or key not in DEFAULTS:
+            raise SystemExit(f"--config {item!r}: expected KEY=VALUE with KEY one of "
+                             f"{', '.join(DEFAULTS)}")
+        if re.fullmatch(r"[A-Za-z_]\w*", text) and text not in ("None", "True", "False"):
+            config[key] = text
+            continue
+        try:
+            config[key] = (float(Fraction(text)) if re.fullmatch(r"\d+/\d+", text)
+                           else ast.literal_eval(text))
+        except (ValueError, SyntaxError, ZeroDivisionError):
+            raise SystemExit(f"--config {item!r}: {text!r} is not a Python literal") from None
+    return config
+
+
+def side_by_side(name, trees, repeats, frames, config_items=()):
     """{tree's folder name: {figure: median over ``repeats``}} of scene ``name`` run with
     each tree's tcloth in turn (module docstring)."""
     runs = {os.path.basename(os.path.abspath(tree)): [] for tree in trees}
@@ -206,6 +241,7 @@ def side_by_side(name, trees, repeats, frames):
             command = [sys.executable, os.path.abspath(__file__), "--scenes", name, "--json"]
             if frames:
                 command += ["--frames", str(frames)]
+            command += [f"--config={item}" for item in config_items]
             out = subprocess.run(command, env=env, check=True, capture_output=True,
                                  text=True).stdout
             runs[os.path.basename(os.path.abspath(tree))].append(
