@@ -1,4 +1,10 @@
-"""A square cloth falls onto a sphere resting on the ground and drapes over it."""
+"""A square cloth falls onto a sphere resting on the ground and drapes over it.
+
+Defaults: symplectic Euler at dt = 1/4000 s, 133 steps a 1/30 s frame, at 0.94 of
+Gershgorin's bound with the sphere's penalty stiffness counted
+(``tcloth.scene.stability.gershgorin_dt``): the lecture's integrator and penalty contact,
+in real time on two cores (0.70 wall s per simulated s:
+``python tools/bench_scenes.py --scenes cloth_on_sphere``)."""
 import tcloth
 
 CONFIG = {

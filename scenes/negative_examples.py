@@ -1,10 +1,19 @@
-"""Lecture 4's negative examples: full Provot cloth, no bend springs, no shear and no bend springs, each dropped on a sphere."""
+"""Lecture 4's negative examples: full Provot cloth, no bend springs, no shear and no bend springs, each dropped on a sphere.
+
+Defaults: XPBD with its automatic substeps at one step per 1/30 s frame, which shows the
+lecture's point (without bend springs the cloth creases sharply, without shear springs
+too it clings to the sphere like a skin) as symplectic Euler at 1/4000 does, at half its
+cost: 0.8 wall s per simulated s on two cores where symplectic Euler took 1.5
+(``python tools/bench_scenes.py --scenes negative_examples``; ``--config
+integrator=symplectic_euler --config dt=1/4000 --config steps_per_frame=133`` for the
+other). The folding is chaotic: after 1 s, against symplectic Euler at dt = 1e-4 s,
+XPBD's particles lie 20 mm RMS away and symplectic Euler's own at 1/4000 18 mm."""
 import tcloth
 
 CONFIG = {
-    "integrator": "symplectic_euler",
-    "dt": 2.5e-4,
-    "steps_per_frame": 133,
+    "integrator": "xpbd",
+    "dt": 1 / 30,
+    "steps_per_frame": 1,
     "frames": 120,
     "camera": {"eye": (0.0, 2.2, 3.6), "target": (0.0, 0.35, 0.0), "fov": 45.0},
 }

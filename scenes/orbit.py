@@ -1,4 +1,9 @@
-"""A three-body system under inverse-square attraction: a heavy star and two planets on near-circular orbits."""
+"""A three-body system under inverse-square attraction: a heavy star and two planets on near-circular orbits.
+
+Defaults: velocity Verlet at dt = 1/1000 s, 20 steps a 1/30 s frame: symplectic and second
+order, so the orbits' energy stays bounded over many periods instead of drifting as
+forward Euler's does; 0.05 wall s per simulated s
+(``python tools/bench_scenes.py --scenes orbit``)."""
 import numpy as np
 
 import tcloth

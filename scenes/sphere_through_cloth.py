@@ -1,4 +1,9 @@
-"""A sphere moving at constant velocity pushes through a cloth hanging from its top edge."""
+"""A sphere moving at constant velocity pushes through a cloth hanging from its top edge.
+
+Defaults: symplectic Euler at dt = 1/4000 s, 133 steps a 1/30 s frame, at 0.78 of
+Gershgorin's bound (``tcloth.scene.stability.gershgorin_dt``): a step moves the sphere
+0.1 mm, so its contact is resolved within each step, in real time on two cores (0.51
+wall s per simulated s: ``python tools/bench_scenes.py --scenes sphere_through_cloth``)."""
 import tcloth
 
 CONFIG = {

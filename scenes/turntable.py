@@ -2,7 +2,12 @@
 
 The turntable is a mesh collider made here with NumPy: a profile (a foot, a column and a
 platter 0.8 m across) revolved about y, spinning at ``spin`` rad/s (``angular_velocity``).
-Friction (0.8) carries the cloth round; its overhanging corners trail and swing out."""
+Friction (0.8) carries the cloth round; its overhanging corners trail and swing out.
+
+Defaults: XPBD at one step per 1/60 s frame with its automatic substeps: the spinning
+mesh is a distance field queried inside each substep, and friction carries the cloth
+round in real time on two cores (0.39 wall s per simulated s:
+``python tools/bench_scenes.py --scenes turntable``)."""
 import numpy as np
 
 import tcloth
