@@ -251,8 +251,24 @@ def test_cli_list_describes_scenes():
     assert header.split()[:3] == ["script", "integrator", "dt"] and len(rows) == len(SCENES)
     # each scene's integrator, dt and particles as its script builds them
     table = [row for row in rows if row.startswith("table.py")][0].split()
-    assert table[1:5] == ["projective", "1/60", "1", str(load_script(
-        os.path.join(ROOT, "scenes", "table.py"))[0].build().num_particles)]
+    module, cfg = load_script(os.path.join(ROOT, "scenes", "table.py"))
+    assert table[1] == cfg["integrator"] and table[4] == str(module.build().num_particles)
+    assert table[3] == str(cfg["steps_per_frame"])
+
+
+@pytest.mark.parametrize("script", SCENES, ids=[os.path.basename(s) for s in SCENES])
+def test_each_scene_argues_its_defaults(script):
+    """A scene's docstring has a paragraph that begins "Defaults:" and names the
+    integrator its CONFIG steps with, so that its choice of integrator and step is argued
+    where the scene is."""
+    module, cfg = load_script(script)
+    paragraphs = [" ".join(p.split()) for p in module.__doc__.split("\n\n")]
+    defaults = [p for p in paragraphs if p.startswith("Defaults:")]
+    assert len(defaults) == 1, paragraphs
+    name = {"symplectic_euler": "symplectic Euler", "backward_euler": "backward Euler",
+            "verlet": "Verlet", "projective": "projective dynamics", "xpbd": "XPBD",
+            "vbd": "VBD"}[cfg["integrator"]]
+    assert name in defaults[0], defaults[0]
 
 
 def test_cli_errors_are_clear_with_exit_code_2(tmp_path):
