@@ -26,14 +26,14 @@ from thrown_mesh import CLOTH, INTEGRATORS, OBSTACLES, box_mesh, thrown  # noqa:
 
 
 @ti.kernel
-def collider_contacts(table: ti.template(), x: ti.types.ndarray(), t: float,
+def collider_contacts(table: ti.template(), row: ti.i32, x: ti.types.ndarray(), t: float,
                       out: ti.types.ndarray()):
-    """out[k] = (phi, normal, surface velocity) of point x[k] against the table's one
-    collider at time t (``ColliderTable.contact``)."""
+    """out[k] = (phi, normal, surface velocity) of point x[k] against collider ``row`` of
+    the table's one group at time t (``ColliderTable.contact``)."""
     for k in range(x.shape[0]):
         p = ti.Vector([x[k, 0], x[k, 1], x[k, 2]])
         for g in ti.static(table.groups):
-            phi, n, u = table.contact(g.shape, table.data[g.first], p, t)
+            phi, n, u = table.contact(g.shape, table.data[g.first + row], p, t)
             out[k, 0] = phi
             for j in ti.static(range(3)):
                 out[k, 1 + j] = n[j]
@@ -66,7 +66,7 @@ def test_distance_normal_and_surface_velocity_match_a_brute_force(f64, closed):
     rng = np.random.default_rng(3)
     x = world.mean(axis=0) + rng.uniform(-0.55, 0.55, (300, 3))
     out = np.zeros((len(x), 7))
-    collider_contacts(table, x, t, out)
+    collider_contacts(table, 0, x, t, out)
     a, b, cc = (world[c["faces"][:, k]] for k in range(3))
     inside = inside_mask(x, world, c["faces"]) if closed else np.zeros(len(x), bool)
     near = 0
@@ -105,7 +105,7 @@ def test_two_deforming_meshes_each_answer_their_own_surface_after_a_step(f64):
     out = np.zeros((len(x), len(centres)))
     for k in range(len(centres)):
         one = np.zeros((len(x), 7))
-        collider_contacts_of(table, k, x, t0 + dt, one)
+        collider_contacts(table, k, x, t0 + dt, one)
         out[:, k] = one[:, 0]
     for k, c in enumerate(scene.colliders):
         world = world_vertices(c, t0 + dt)
@@ -115,21 +115,6 @@ def test_two_deforming_meshes_each_answer_their_own_surface_after_a_step(f64):
             d = closest_on_triangles(p, a, b, cc)[1].min()
             if d < c["reach"] - 1e-9:
                 assert phi == pytest.approx(-d if ins else d, abs=1e-9)
-
-
-@ti.kernel
-def collider_contacts_of(table: ti.template(), row: ti.i32, x: ti.types.ndarray(), t: float,
-                         out: ti.types.ndarray()):
-    """out[k] = (phi, normal, surface velocity) of point x[k] against the table's
-    collider ``row`` of its one group."""
-    for k in range(x.shape[0]):
-        p = ti.Vector([x[k, 0], x[k, 1], x[k, 2]])
-        for g in ti.static(table.groups):
-            phi, n, u = table.contact(g.shape, table.data[g.first + row], p, t)
-            out[k, 0] = phi
-            for j in ti.static(range(3)):
-                out[k, 1 + j] = n[j]
-                out[k, 4 + j] = u[j]
 
 
 def _pose(c, t):
@@ -362,7 +347,7 @@ def test_bad_meshes_are_refused_with_the_file_face_or_vertex_named(f32, tmp_path
     with pytest.warns(UserWarning, match="crosses itself"):
         table = ColliderTable(crossing.colliders)
     out = np.zeros((1, 7))
-    collider_contacts(table, np.array([[0.1, 0.0, 0.0]]), 0.0, out)     # inside both: unsigned
+    collider_contacts(table, 0, np.array([[0.1, 0.0, 0.0]]), 0.0, out)     # inside both: unsigned
     assert out[0, 0] > 0.0
 
 
@@ -397,7 +382,7 @@ def test_faces_in_one_plane_are_no_self_crossing(f32):
         warnings.simplefilter("error")
         table = ColliderTable(scene.colliders)
     out = np.zeros((1, 7))
-    collider_contacts(table, np.array([[0.0, 0.2, 0.0]]), 0.0, out)     # in the column: inside
+    collider_contacts(table, 0, np.array([[0.0, 0.2, 0.0]]), 0.0, out)     # in the column: inside
     assert out[0, 0] < 0.0
 
 

@@ -76,7 +76,7 @@ def test_a_field_s_distance_and_normal_match_the_exact_mesh(f64, mesh):
     inside = inside_mask(x, world, faces)
     exact[inside], direction[inside] = -exact[inside], -direction[inside]
     out = np.zeros((len(x), 7))
-    collider_contacts(table, x, t, out)
+    collider_contacts(table, 0, x, t, out)
     near = np.abs(exact) < band
     assert near.sum() > 500
     tolerance = (0.1 if mesh == "sphere" else 0.25) * CELL
