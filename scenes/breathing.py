@@ -8,12 +8,12 @@ sphere; the blanket covers the chest and leaves the body's ends out.
 
 Defaults: projective dynamics at one step per 1/60 s frame with 5 iterations a step, not
 its default 10: resting at 2 s the most stretched structural spring is 2.4 % long, 2.2 %
-with 10 iterations (peaks over the landing 4.6 % and 3.3 %), at 0.56 of the cost
-(``python tools/bench_scenes.py --scenes breathing``, and ``--config
+with 10 iterations (peaks over the landing 4.6 % and 3.3 %), at 0.66 of the cost
+(resting, 0.47) (``python tools/bench_scenes.py --scenes breathing``, and ``--config
 options={'iterations':10}``). The body deforms, so it is met through the certified mesh
 pairs rather than a distance field (which would be baked again every step), its
-hierarchy refit and its pseudo normals recomputed each step. Not yet real time: 2.2
-wall s per simulated s on two cores."""
+hierarchy refit and its pseudo normals recomputed each step. Not yet real time: 2.5 wall
+s per simulated s on two cores."""
 import numpy as np
 
 import tcloth

@@ -4,11 +4,12 @@ The mesh, scenes/assets/curtain.obj, is a jittered grid with each quad split alo
 diagonal, so no two triangles are alike.
 
 Defaults: XPBD with its automatic substeps at one step per 1/30 s frame, chosen for real
-time: 0.2 wall s per simulated s on two cores, where backward Euler at 1/240 took
-2.8 (``python tools/bench_scenes.py --scenes curtain``). After 1 s, against symplectic
-Euler at dt = 1e-4 s (the reference), its particles lie 8.8 mm RMS away (of a 1.4 m
-curtain), backward Euler's at 1/240 5.4 mm and at 1/60 14.5 mm: XPBD's substeps keep
-the billowing that backward Euler's large steps damp away, at a twelfth of its cost."""
+time: 0.20 wall s per simulated s on two cores, where backward Euler at 1/240 took 4.0
+in the same run (``python tools/bench_scenes.py --scenes curtain``). After 1 s, against
+symplectic Euler at dt = 1e-4 s (the reference), its particles lie 8.8 mm RMS away (of a
+1.4 m curtain), backward Euler's at 1/240 5.4 mm and at 1/60 14.5 mm: XPBD's substeps
+keep the billowing that backward Euler's large steps damp away, at a twentieth of its
+cost."""
 import os
 
 import numpy as np

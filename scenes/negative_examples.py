@@ -3,13 +3,13 @@
 Defaults: XPBD at one step per 1/30 s frame, 3 iterations a substep, which shows the
 lecture's point (without bend springs the cloth creases sharply, without shear springs
 too it clings to the sphere like a skin) as symplectic Euler at 1/4000 does, at half its
-cost: 0.8 wall s per simulated s on two cores where symplectic Euler took 1.5
-(``python tools/bench_scenes.py --scenes negative_examples``; ``--config
+cost: 0.78 wall s per simulated s on two cores where symplectic Euler took 1.4 (``python
+tools/bench_scenes.py --scenes negative_examples``; ``--config
 integrator=symplectic_euler --config dt=1/4000 --config steps_per_frame=133 --config
-options={}`` for the other). Resting at 2 s its most stretched structural spring is
-4.1 % long, symplectic Euler's 2.5 % (XPBD's default 10 iterations a substep: 8.3 %).
-The folding is chaotic: after 1 s, against symplectic Euler at dt = 1e-4 s, XPBD's
-particles lie about 20 mm RMS away and symplectic Euler's own at 1/4000 18 mm."""
+options={}`` for the other). Resting at 2 s its most stretched structural spring is 4.1
+% long, symplectic Euler's 2.5 % (XPBD's default 10 iterations a substep: 8.3 %). The
+folding is chaotic: after 1 s, against symplectic Euler at dt = 1e-4 s, XPBD's particles
+lie about 20 mm RMS away and symplectic Euler's own at 1/4000 18 mm."""
 import tcloth
 
 CONFIG = {

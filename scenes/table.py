@@ -4,17 +4,17 @@ The table, scenes/assets/table.obj (tools/make_table_obj.py writes it), is a mes
 a 1.2 x 0.8 m top at 0.75 m with a lip 1.5 cm high round its edge, on four legs. The cloth,
 1.6 x 1.2 m, overhangs each side by 20 cm.
 
-Defaults: XPBD at one step per 1/30 s frame, 3 iterations a substep (37
-automatic substeps). Against symplectic Euler at dt = 2e-4 s (the reference), after
-1.5 s its particles lie 6.1 mm RMS away, projective dynamics' at one step per 1/60 s
-(the earlier default) 20.5 mm, XPBD's with its default 10 iterations 12.7 mm; resting at
-2 s, its most stretched structural spring is 4.3 % long, the reference's 2.4 %,
-projective's 2.1 % and XPBD's with 10 iterations 8.8 % (fewer substeps of more
-iterations converge less). It costs less than half of projective dynamics: 1.3 wall s
-per simulated s on two cores where projective took 3.0 (``python tools/bench_scenes.py
---scenes table``; ``--config integrator=projective --config dt=1/60 --config
-options={}`` for the other). The table is a distance field (docs/mesh_colliders.md),
-queried inside every substep."""
+Defaults: XPBD at one step per 1/30 s frame, 3 iterations a substep (37 automatic
+substeps). Against symplectic Euler at dt = 2e-4 s (the reference), after 1.5 s its
+particles lie 6.1 mm RMS away, projective dynamics' at one step per 1/60 s (the earlier
+default) 20.5 mm, XPBD's with its default 10 iterations 12.7 mm; resting at 2 s, its
+most stretched structural spring is 4.3 % long, the reference's 2.4 %, projective's 2.1
+% and XPBD's with 10 iterations 8.8 % (fewer substeps of more iterations converge less).
+It costs about half of projective dynamics: 1.6 wall s per simulated s on two cores
+where projective took 3.0 in the same run (``python tools/bench_scenes.py --scenes
+table``; ``--config integrator=projective --config dt=1/60 --config options={}`` for the
+other). The table is a distance field (docs/mesh_colliders.md), queried inside every
+substep."""
 import os
 import sys
 
