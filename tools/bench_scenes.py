@@ -50,13 +50,12 @@ Usage: python tools/bench_scenes.py [--scenes table,turntable] [--frames N] [--o
                                     [--trees /work/main,. --repeats 3] [--config KEY=VALUE]
 """
 import argparse
-import ast
 import glob
 import json
 import os
+import re
 import subprocess
 import sys
-import re
 import time
 from fractions import Fraction
 from types import SimpleNamespace
@@ -64,7 +63,8 @@ from types import SimpleNamespace
 import numpy as np
 
 import tcloth
-from tcloth.app.script import DEFAULTS, build_scene, load_script, timing
+from tcloth.app.script import (DEFAULTS, build_scene, literal, load_script, timing,
+                               with_options)
 from tcloth.scene.meshcollider import world_vertices
 from tcloth.scene.scene import KIND_CODE
 from bench_contact import signed_distances
@@ -118,9 +118,11 @@ def crossings(scene, x0, x1, t0, t1, triangles):
 
 def run(path, frames, config=None):
     """The figures of one scene script (module docstring), its CONFIG updated with
-    ``config`` (a dict of CONFIG keys) where given."""
+    ``config`` (a dict of CONFIG keys) where given, as the command line's options update
+    it (``with_options``: a dt without steps_per_frame fills a frame with its steps)."""
     module, cfg = load_script(path)
-    cfg = {**cfg, **(config or {})}
+    cfg = with_options(cfg, path, {key: (f"--config {key}", value)
+                                   for key, value in (config or {}).items()})
     tcloth.init("cpu", cfg["precision"])
     scene = build_scene(module, path)
     dt, steps = timing(cfg, scene)
@@ -211,23 +213,17 @@ def main(argv=None):
 
 
 def parse_config(items):
-    """{CONFIG key: value} from ``--config KEY=VALUE`` items (VALUE a Python literal, a
-    fraction such as 1/30, or a bare name such as xpbd, taken as a string); a malformed
-    item is refused with its text."""
+    """{CONFIG key: value} from ``--config KEY=VALUE`` items: VALUE a fraction such as
+    1/30, else as ``--set`` reads it (``script.literal``: a Python literal, or else a
+    string such as xpbd); an item with no known KEY is refused with its text."""
     config = {}
     for item in items:
         key, sep, text = item.partition("=")
         if not sep or key not in DEFAULTS:
             raise SystemExit(f"--config {item!r}: expected KEY=VALUE with KEY one of "
                              f"{', '.join(DEFAULTS)}")
-        if re.fullmatch(r"[A-Za-z_]\w*", text) and text not in ("None", "True", "False"):
-            config[key] = text
-            continue
-        try:
-            config[key] = (float(Fraction(text)) if re.fullmatch(r"\d+/\d+", text)
-                           else ast.literal_eval(text))
-        except (ValueError, SyntaxError, ZeroDivisionError):
-            raise SystemExit(f"--config {item!r}: {text!r} is not a Python literal") from None
+        config[key] = (float(Fraction(text)) if re.fullmatch(r"\d+/[1-9]\d*", text)
+                       else literal(text))
     return config
 
 

@@ -70,6 +70,16 @@ def build_parameters(module):
             if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)}
 
 
+def literal(text):
+    """A ``--set`` (or a benchmark's ``--config``) VALUE: a Python literal (a number,
+    [64, 64], "text", True), or else the text itself, a string."""
+    text = text.strip()
+    try:
+        return ast.literal_eval(text)
+    except (ValueError, SyntaxError):
+        return text
+
+
 def parse_settings(module, path, settings):
     """{name: value} from ``--set NAME=VALUE`` strings: each NAME a build() parameter of the
     script, each VALUE a Python literal (a number, [64, 64], "text", True) or else a
@@ -84,11 +94,7 @@ def parse_settings(module, path, settings):
         if name not in known:
             raise ScriptError(f"--set {name}: scene script {path!r} has no build parameter "
                               f"{name!r} (its parameters: {', '.join(known) or 'none'})")
-        try:
-            value = ast.literal_eval(text.strip())
-        except (ValueError, SyntaxError):
-            value = text.strip()
-        params[name] = value
+        params[name] = literal(text)
     return params
 
 

@@ -419,18 +419,10 @@ def _finite(a):
     return np.clip(a, -1e30, 1e30)
 
 
-def _write(field, first, values):
-    """field[first:first + len(values)] = values (the whole field in one copy where they
-    fill it, else a kernel writing those rows: a field's read and write back would cost
-    a deforming mesh's step more than its pseudo normals)."""
-    if first == 0 and len(values) == field.shape[0]:
-        field.from_numpy(values)
-    else:
-        _write_rows(field, first, values)
-
-
 @ti.kernel
-def _write_rows(field: ti.template(), first: ti.i32, values: ti.types.ndarray()):
+def _write(field: ti.template(), first: ti.i32, values: ti.types.ndarray()):
+    """field[first:first + len(values)] = values, those rows only (a deforming mesh's, each
+    step: a whole field read and written back cost its step more than its normals)."""
     for i in range(values.shape[0]):
         if ti.static(field.m > 1):
             for a, b in ti.static(ti.ndrange(field.n, field.m)):
