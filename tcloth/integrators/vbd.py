@@ -389,33 +389,36 @@ class VBD(VertexLocal, ForceCache, Integrator):
         return g, block, clearance
 
     def _sweep(self, x, h, t):
-        self._sweep_kernel(x, h, t, self._layout())
+        """One iteration: a Newton step on each free vertex, colour after colour, the
+        vertices of a colour in parallel (a launch per colour of one kernel, which takes
+        the colour's range as data and so compiles once, not once per colour); then the
+        steps deferred to a line search, in order."""
+        layout = self._layout()
+        for c in range(self.colours):
+            self._colour_kernel(x, h, t, self.colour_start[c], self.colour_start[c + 1],
+                                layout)
+        if self.vertex_terms:
+            self._deferred_kernel(x, h, t, layout)
 
     def _layout(self):
         """The vertex terms' ``layout``s: a sweep compiles again where one changed."""
         return tuple(term.layout() for term in self.vertex_terms)
 
     @ti.kernel
-    def _sweep_kernel(self, x: ti.template(), h: float, t: float, layout: ti.template()):
-        self.sweep(x, h, t)
+    def _colour_kernel(self, x: ti.template(), h: float, t: float, begin: ti.i32,
+                       end: ti.i32, layout: ti.template()):
+        for k in range(begin, end):
+            self._update(self.order[k], x, h, t)
 
-    @ti.func
-    def sweep(self, x, h, t):
-        """One iteration: a Newton step on each free vertex, colour after colour, the
-        vertices of a colour in parallel (one launch: the colours' loops are unrolled,
-        each a top-level loop); then the steps deferred to a line search, in order."""
-        for c in ti.static(range(self.colours)):
-            for k in range(ti.static(self.colour_start[c]), ti.static(self.colour_start[c + 1])):
-                self._update(self.order[k], x, h, t)
-        if ti.static(bool(self.vertex_terms)):
-            self.deferred_pass(x, h, t)
+    @ti.kernel
+    def _deferred_kernel(self, x: ti.template(), h: float, t: float, layout: ti.template()):
+        self.deferred_pass(x, h, t)
 
     @ti.func
     def sweep_in_order(self, x, h, t):
-        """``sweep`` inside a batch, where it runs on one thread: the vertices one after
+        """``_sweep`` inside a batch, where it runs on one thread: the vertices one after
         another in colour order (the order is sorted by colour), the same updates in the
-        same order as the colour passes, with the update's code inlined once instead of
-        once per colour (a scene's compilation is then as long for every colouring)."""
+        same order as the colour passes."""
         for k in range(ti.static(self.colour_start[-1])):
             self._update(self.order[k], x, h, t)
 
