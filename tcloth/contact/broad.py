@@ -108,17 +108,16 @@ def spread(broad, ref, x, y, both: ti.template()):
 
 
 @ti.kernel
-def _rebuild(broad: ti.template(), search: ti.template(), cl: ti.template(),
-             x: ti.template()) -> ti.types.vector(2, ti.i32):
-    """Bin the particles and edge midpoints at x and list the candidate contacts within
-    the reach; x_ref = x. Returns ``Search.run``'s (rows found, the most a block of
-    queries found)."""
+def _rebuild(broad: ti.template(), search: ti.template(),
+             cl: ti.template()) -> ti.types.vector(2, ti.i32):
+    """Bin the particles and edge midpoints at x_ref and list the candidate contacts
+    within the reach. Returns ``Search.run``'s (rows found, the most a block of queries
+    found)."""
     P, E, T = ti.static(cl.table.point_count, cl.table.edge_count, cl.table.triangle_count)
+    x = ti.static(broad.x_ref)
     ti.loop_config(serialize=ti.static(serial_count(P)))
     for i in range(P):
-        p = cl.table.points[i]
-        broad.x_ref[p] = x[p]
-        search.points.pos[i] = x[p]
+        search.points.pos[i] = x[cl.table.points[i]]
     longest = 0.0
     ti.loop_config(serialize=ti.static(serial_count(E)))
     for e in range(E):
@@ -248,10 +247,12 @@ class BroadPhase(CandidateSearch):
     def build(self, x, skin):
         """List the pairs within thickness + skin at x."""
         self.reach[None] = float(self.table.settings["thickness"] + skin)
-        count = self.fit(lambda: _rebuild(self, self.search, self.candidates, x))
+        # the search reads the copy x_ref, whichever field x is: it compiles once
+        self.x_ref.copy_from(x)
+        count = self.fit(lambda: _rebuild(self, self.search, self.candidates))
         if self.ref_gap.shape[0] != self.candidates.capacity:
             self.ref_gap = ti.field(runtime.real(), shape=self.candidates.capacity)
-        _ref_gaps(self.candidates, count, x, self.ref_gap)
+        _ref_gaps(self.candidates, count, self.x_ref, self.ref_gap)
         self.skin = float(skin)
         self.rows[None], self.skin_now[None] = count, self.skin
         self.rebuilds += 1

@@ -212,5 +212,6 @@ def search_step(swept, x0, x1, thickness, margin, near=False):
     swept.margin = margin
     swept.reach[None] = thickness + 2.0 * margin
     swept.filtered[None] = int(near)
-    return swept.fit(lambda: sweep_search(swept.search, swept.candidates, x0, x1, thickness,
-                                          margin, cell))
+    # the search reads the copies, whichever fields x0 and x1 are: it compiles once
+    return swept.fit(lambda: sweep_search(swept.search, swept.candidates, swept.origin,
+                                          swept.anchor, thickness, margin, cell))
