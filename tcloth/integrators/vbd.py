@@ -389,10 +389,8 @@ class VBD(VertexLocal, ForceCache, Integrator):
         return g, block, clearance
 
     def _sweep(self, x, h, t):
-        """One iteration: a Newton step on each free vertex, colour after colour, the
-        vertices of a colour in parallel (a launch per colour of one kernel, which takes
-        the colour's range as data and so compiles once, not once per colour); then the
-        steps deferred to a line search, in order."""
+        """One iteration: each free vertex's Newton step, a launch per colour (one kernel,
+        compiled once: the range is data); then the steps deferred to a line search."""
         layout = self._layout()
         for c in range(self.colours):
             self._colour_kernel(x, h, t, self.colour_start[c], self.colour_start[c + 1],
