@@ -22,6 +22,12 @@ os.environ.setdefault("TI_OFFLINE_CACHE_MAX_SIZE_OF_FILES", str(2_000_000_000))
 # (tests/test_compile_once.py, which checks both). Inherited by the command-line runs
 # the tests start.
 os.environ.setdefault("TCLOTH_COMPILE_AHEAD", "0")
+# Taichi compiles the tests' kernels with its control-flow-graph optimisation off
+# (tcloth.init(quick_compile=...)): the same numbers bit for bit
+# (tests/test_compile_once.py), about half the compile time of a scene with contact, and
+# the suite's time is mostly compiling. The every-scene render test runs the command line
+# as it ships.
+os.environ.setdefault("TCLOTH_QUICK_COMPILE", "1")
 
 
 def pytest_collection_modifyitems(config, items):

@@ -142,8 +142,7 @@ def test_weft_stretch_is_the_fabric_weft_stiffness():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("kind,cells", [("grid", 10), ("grid", 20), ("mesh", 20),
-                                        ("mesh", 30)])
+@pytest.mark.parametrize("kind,cells", [("grid", 20), ("mesh", 20)])
 def test_cantilever_follows_the_elastica(kind, cells):
     """Peirce's cantilever: the strip's static tip chord angle is the inextensible
     elastica's for alpha = w L^3 / B within 2 degrees at alpha = 2, 8 and 16."""

@@ -240,11 +240,12 @@ def test_a_particle_on_a_sloped_mesh_obeys_coulomb_s_bound(f64):
             assert slid == pytest.approx(expected, rel=0.03)
 
 
-# every integrator, each on one of the plate and the still, spinning and breathing sphere
-# in turn (each obstacle twice); each case compiles a simulator (40-120 s on two cores):
-# the slow set. ``tools/thrown_mesh.py`` runs every integrator on every obstacle.
+# every integrator but forward Euler (the lecture's, never used at a scene's step), each on
+# one of the plate and the still, spinning and breathing sphere in turn; each case compiles
+# a simulator (40-120 s on two cores): the slow set. ``tools/thrown_mesh.py`` runs every
+# integrator on every obstacle.
 CASES = [pytest.param(integrator, *OBSTACLES[k % len(OBSTACLES)], marks=pytest.mark.slow)
-         for k, integrator in enumerate(INTEGRATORS)]
+         for k, integrator in enumerate(INTEGRATORS) if integrator != "forward_euler"]
 
 
 @pytest.mark.parametrize("integrator,collider,motion", CASES)
