@@ -175,6 +175,28 @@ def test_no_function_is_over_80_lines():
     assert not long, long
 
 
+def _discards(function):
+    """The lines where ``function`` assigns to ``_`` (an unpacked value it drops)."""
+    return [node.lineno for node in ast.walk(function) if isinstance(node, ast.Assign)
+            for target in node.targets
+            for name in (target.elts if isinstance(target, ast.Tuple) else [target])
+            if isinstance(name, ast.Name) and name.id == "_"]
+
+
+def test_no_taichi_function_drops_two_values_into_one_name():
+    """Taichi gives ``_`` the type of its first value in a function; a second value of
+    another type (a matrix after a scalar) is stored into that slot, which only Taichi's
+    optimisation removes: with it off (``quick_compile``) LLVM aborts the process. Dropped
+    values get names of their own."""
+    twice = {f"{path}:{node.name}": lines for path in modules().values()
+             for node in ast.walk(ast.parse(open(path).read()))
+             if isinstance(node, ast.FunctionDef)
+             and any(d in ast.unparse(node.decorator_list[0]) for d in ("ti.func", "ti.kernel")
+                     if node.decorator_list)
+             and len(lines := _discards(node)) > 1}
+    assert not twice, twice
+
+
 def test_every_term_feature_is_registered():
     """``features.FEATURES`` holds each term's feature (the same object), in the terms'
     order, then the strain limit and tearing: the model builds, refreshes and saves a

@@ -40,7 +40,7 @@ def field_paths(table, g: ti.template(), p, x0, x1, v1, t0, dt, held, back_off):
             a = r0.transpose() @ (x0[p] - c0)
             rel = r1.transpose() @ (x1[p] - c1) - a
             length = rel.norm()
-            phi0, _, banded = table.sdf.sample(f, a)
+            phi0, _n0, banded = table.sdf.sample(f, a)
             stop = -1.0
             if length > 0.0 and (banded or length > phi0):
                 d = rel / length
@@ -48,7 +48,7 @@ def field_paths(table, g: ti.template(), p, x0, x1, v1, t0, dt, held, back_off):
                 if hit < length:
                     stop = _stop_before(table.sdf, f, a, d, phi0, col.thickness, hit, back_off)
             if stop < 0.0:
-                phi1, _, _ = table.sdf.sample(f, a + rel)
+                phi1, _n1, _banded1 = table.sdf.sample(f, a + rel)
                 if phi1 < ti.min(phi0, 0.0):
                     stop = 0.0
             if stop >= 0.0:
@@ -82,7 +82,7 @@ def _ride(sdf, f, col, r1, c1, q, p, t1, x1, v1, held):
     velocity into the surface relative to the surface's there removed; ``held`` gets the
     surface's normal."""
     x1[p] = r1 @ q + c1
-    _, n, u, _ = sdf.contact(col, f, x1[p], t1)
+    _phi, n, u, _banded = sdf.contact(col, f, x1[p], t1)
     vn = (v1[p] - u).dot(n)
     if vn < 0.0:
         v1[p] -= vn * n

@@ -458,7 +458,7 @@ def sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held, log: ti.template(
                                     stop = _offset_stop(table, g.shape, col, start, d, phi0,
                                                         hit, t0)
                                     entry = start + stop * d
-                                    _, n = table.distance(g.shape, col, entry, t0)
+                                    _phi, n = table.distance(g.shape, col, entry, t0)
                                     _stop(p, entry, n, u, dt, x1, v1, held)
                                     entered = True
                                     if ti.static(keep):
@@ -469,7 +469,7 @@ def sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held, log: ti.template(
                                 # resolves (a start on the surface within rounding), or
                                 # one that started inside and goes deeper: the particle
                                 # stays where it was
-                                phi1, _ = table.distance(g.shape, col, x1[p], t0 + dt)
+                                phi1, _n1 = table.distance(g.shape, col, x1[p], t0 + dt)
                                 if phi1 < ti.min(phi0, 0.0):
                                     _stop(p, start, n0, u, dt, x1, v1, held)
                                     entered = True

@@ -96,7 +96,7 @@ class Hold:
         against 0.36 without the hold); the bound moves it no farther than its planes ask
         (as projective dynamics' diagonal), and backward Euler's line search keeps its
         Newton steps descending."""
-        _, _, active = self._parts(p, x)
+        _gap, _n, active = self._parts(p, x)
         return self.weight[p] * active * ti.Matrix.identity(float, 3)
 
     @ti.func

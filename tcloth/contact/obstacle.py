@@ -349,7 +349,7 @@ def _planes(o: ti.template(), rows: ti.template(), count: ti.i32, x0: ti.templat
             # nor where the gap at either end, closing at most ``closing`` over the
             # step, keeps it above the target all along: d(s) >= max(d0 - closing s,
             # d1 - closing (1 - s)) >= (d0 + d1 - closing) / 2
-            g1, _ = _gap(ids, kind, x0, x1, o.xo0, o.xo1, 1.0)
+            g1, _d1 = _gap(ids, kind, x0, x1, o.xo0, o.xo1, 1.0)
             if d0 + g1.norm() - closing > 2.0 * reach:
                 s = 1.0
         for _ in range(ADVANCES):

@@ -233,7 +233,7 @@ def _near_blocks(sdf: ti.template(), store: ti.template(), k: ti.i32, m: ti.i32,
     for b in range(near.shape[0]):
         index = ti.Vector([b // (dims[1] * dims[2]), (b // dims[2]) % dims[1], b % dims[2]])
         centre = sdf.origin[k] + sdf.cell[k] * BLOCK * (ti.cast(index, float) + 0.5)
-        _, _, _, tri, _ = store.signed(m, centre, 0.0, reach)
+        _phi, _n, _u, tri, _w = store.signed(m, centre, 0.0, reach)
         near[b] = 1 if tri >= 0 else 0
 
 
@@ -246,5 +246,5 @@ def _bake_nodes(sdf: ti.template(), store: ti.template(), k: ti.i32, m: ti.i32,
         local = ti.Vector([n // (BLOCK + 1) ** 2, (n // (BLOCK + 1)) % (BLOCK + 1),
                            n % (BLOCK + 1)])
         q = sdf.origin[k] + sdf.cell[k] * ti.cast(sdf.slot_block[s] * BLOCK + local, float)
-        phi, _, _, _, _ = store.signed(m, q, 0.0, reach)
+        phi, _n, _u, _tri, _w = store.signed(m, q, 0.0, reach)
         sdf.pool[s, n] = phi

@@ -372,7 +372,7 @@ class StepAdjoint:
         force from the step's start as ``begin_step`` takes it."""
         x1p, h, fall = ctx
         free = self.model.inv_mass[p] > 0.0
-        _, g, _ = step_contact(col, self._gap(col, x, p, phi, n, x1p, h, fall), n, x1p,
+        _e, g, _block = step_contact(col, self._gap(col, x, p, phi, n, x1p, h, fall), n, x1p,
                                x[p], h, self.mass[p], lagged_normal_force(col, phi, free), n,
                                False)
         return g
@@ -453,7 +453,7 @@ class StepAdjoint:
     def _gradient(self, h: float, rows: ti.template()):
         for p in range(self.x.shape[0]):
             t = self.clock[0]
-            _, _, g = self.gravity.incremental(p, self.x1, self.x, h, t)
+            g = self.gravity.incremental(p, self.x1, self.x, h, t)[2]
             if ti.static(self.has_colliders):
                 if self.model.inv_mass[p] > 0.0:
                     fall = h * h * self.gravity.gravity().norm()
@@ -463,7 +463,7 @@ class StepAdjoint:
             self.out[p] = g + self.mass[p] / (h * h) * (self.x1[p] - self.x[p] - h * self.v[p])
         for s in range(self.count):
             i, j = self.pairs[s][0], self.pairs[s][1]
-            _, gi = incremental(self.x1[i], self.x1[j], self.x[i], self.x[j],
+            _ei, gi = incremental(self.x1[i], self.x1[j], self.x[i], self.x[j],
                                 direction(self.x[i], self.x[j]), self.ks[s], self.kd[s],
                                 self.rest[s], h)
             self.out[i] += gi
@@ -474,7 +474,7 @@ class StepAdjoint:
             for e in range(self.triangle_count):
                 fu, fv = self.membrane.frame(e, self.x1)
                 f0u, f0v = self.membrane.frame(e, self.x)
-                _, gu, gv = self.membrane.incremental(fu, fv, f0u, f0v, self.membrane_c[e],
+                _em, gu, gv = self.membrane.incremental(fu, fv, f0u, f0v, self.membrane_c[e],
                                                       self.clock[2])
                 self._gather_triangle(e, gu, gv, 1.0)
         if ti.static(self.self_contact):
@@ -483,8 +483,8 @@ class StepAdjoint:
                     # the penalty at the end, the damping and friction with the normal
                     # force, normal and weights of the step's start (``SelfContact``)
                     fn0, n0, alpha0 = lagged(rows, c, self.x)
-                    ids, alpha, _, grad = penalty_gradient(rows, c, self.x1)
-                    _, g_d, _ = dissipation(rows, ids, fn0, n0, alpha0, self.x1, self.x, h,
+                    ids, alpha, _ep, grad = penalty_gradient(rows, c, self.x1)
+                    _ed, g_d, _block_d = dissipation(rows, ids, fn0, n0, alpha0, self.x1, self.x, h,
                                             False)
                     for j in ti.static(range(4)):
                         self.out[ids[j]] += alpha[j] * grad + alpha0[j] * g_d

@@ -70,9 +70,9 @@ class ProjectionAdjoint:
                 n = surface_normal(kind, p, self.sides[e, 0], self.sides[e, 1], n)
             impulse = ti.Vector.zero(float, 3)
             if self.velocity[e]:
-                _, impulse = projection_impulse(prm, g, n, w, v_rel, True)
+                _pass, impulse = projection_impulse(prm, g, n, w, v_rel, True)
             else:
-                _, impulse = projection_impulse(prm, g, n, w, v_rel, False)
+                _pass, impulse = projection_impulse(prm, g, n, w, v_rel, False)
             s = ti.cast(self.velocity[e], float)
             for j in ti.static(range(4)):
                 change = self.inv[e, j] * alpha[j] * impulse

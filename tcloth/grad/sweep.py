@@ -97,11 +97,11 @@ class SweepAdjoint:
                 end = start
                 if self.kind[c] == PATH:
                     r = self.x1[p] - start
-                    phi0, _ = self._distance(k, start)
+                    phi0, _n0 = self._distance(k, start)
                     target = ti.max(ti.min(self.table.data[k].thickness, phi0), BACK_OFF)
                     phi, n = self._distance(k, start + self.tau[c] * r)
                     end = start + (self.tau[c] - (phi - target) / n.dot(r)) * r
-                _, n = self._distance(k, end)
+                _phi, n = self._distance(k, end)
                 v = self.v1[p]
                 vn = v.dot(n)
                 if vn < 0.0:
@@ -153,9 +153,9 @@ class TruncationAdjoint:
             if c < self.count[None]:
                 p, ids, slot = self.particle[c], self.ids[c], self.slot[c]
                 kind, choice = logged_kind(self.kind[c])
-                n, _, _ = chosen_margin(ids, kind, choice, self.x0, self.thickness[0],
+                n, _margin, _delta = chosen_margin(ids, kind, choice, self.x0, self.thickness[0],
                                         self.normals)
-                _, plane, first = dividing_plane(ids, kind, n, self.x0, self.x1)
+                _side, plane, first = dividing_plane(ids, kind, n, self.x0, self.x1)
                 side = 1.0 if slot < first else -1.0
                 t = stop_fraction(self.x0, self.x1, n, plane, side, p)
                 self.x_out[c] = self.x0[p] + t * (self.x1[p] - self.x0[p])

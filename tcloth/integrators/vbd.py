@@ -357,8 +357,7 @@ class VBD(VertexLocal, ForceCache, Integrator):
         g = self.mass[p] / (h * h) * (x[p] - self.potential.x_hat[p])
         clearance = 1e30
         for term in ti.static(self.potential.particle_terms):
-            _, _, g_t = term.incremental(p, x, self.potential.x0, h, t)
-            g += g_t
+            g += term.incremental(p, x, self.potential.x0, h, t)[2]
         if ti.static(self.potential.has_lagged):
             g -= self.potential.f_lag[p]
         if ti.static(bool(self.pair_terms)):
@@ -380,12 +379,13 @@ class VBD(VertexLocal, ForceCache, Integrator):
             for a in range(self.adj_start[p], self.adj_start[p + 1]):
                 s, q = self.adj[a][0], self.adj[a][1]
                 sign = 1.0 if self.pairs[s][0] == p else -1.0
-                _, g_s = spring_term.incremental(x[p], x[q], self.potential.x0[p], self.potential.x0[q], sign * d0[s],
-                                                 self.ks[s], self.kd[s], self.rest[s], h)
-                g += g_s
-                _, projected = spring_term.hessian_blocks(x[p], x[q], self.ks[s], self.kd[s],
-                                                          self.rest[s], d0[s], h)
-                block += projected
+                # the second of each pair (one name for the first would be a scalar's
+                # and a matrix's: Taichi stores a matrix into a scalar's slot)
+                g += spring_term.incremental(x[p], x[q], self.potential.x0[p], self.potential.x0[q],
+                                             sign * d0[s], self.ks[s], self.kd[s], self.rest[s],
+                                             h)[1]
+                block += spring_term.hessian_blocks(x[p], x[q], self.ks[s], self.kd[s],
+                                                    self.rest[s], d0[s], h)[1]
         return g, block, clearance
 
     def _sweep(self, x, h, t):

@@ -259,5 +259,5 @@ def _distance(table: ti.template(), shape: ti.template(), col, a, b, c, u, v, ti
     """Signed distance (float32) from collider ``col`` of the point of weights
     (1 - u - v, u, v) of triangle (a, b, c), searched no farther than ``beyond`` past its
     thickness (``ColliderTable.contact``)."""
-    phi, _, _ = table.contact(shape, col, (1.0 - u - v) * a + u * b + v * c, time, beyond)
+    phi, _n, _u = table.contact(shape, col, (1.0 - u - v) * a + u * b + v * c, time, beyond)
     return ti.cast(phi, ti.f32)

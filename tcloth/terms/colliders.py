@@ -316,7 +316,7 @@ class Colliders(Term):
 
     @ti.func
     def _block_body(self, col, c, gap, n, ctx):
-        _, _, block = self._incremental_parts(col, c, gap, n, ctx)
+        _e, _g, block = self._incremental_parts(col, c, gap, n, ctx)
         return block
 
     @ti.func

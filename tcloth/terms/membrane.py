@@ -171,8 +171,8 @@ class Membrane(Term, ColouredConstraints):
     @ti.func
     def elastic(self, fu, fv, c):
         """(energy, g_u, g_v): W at f_u, f_v and its gradient."""
-        eu, gu, _ = _stretch(fu, c[0], False)
-        ev, gv, _ = _stretch(fv, c[1], False)
+        eu, gu, _hu = _stretch(fu, c[0], False)
+        ev, gv, _hv = _stretch(fv, c[1], False)
         s = fu.dot(fv)
         return eu + ev + 0.5 * c[2] * s * s, gu + c[2] * s * fv, gv + c[2] * s * fu
 
@@ -180,8 +180,8 @@ class Membrane(Term, ColouredConstraints):
     def hessian(self, fu, fv, c, exact: ti.template()):
         """W's Hessian in (f_u, f_v), blocks (uu, uv, vv): exact, or projected (the
         stretches' transverse parts clamped at 0, the shear's G (f_u . f_v) I dropped)."""
-        _, _, huu = _stretch(fu, c[0], exact)
-        _, _, hvv = _stretch(fv, c[1], exact)
+        _eu, _gu, huu = _stretch(fu, c[0], exact)
+        _ev, _gv, hvv = _stretch(fv, c[1], exact)
         uv = c[2] * fv.outer_product(fu)
         if ti.static(exact):
             uv += c[2] * fu.dot(fv) * ti.Matrix.identity(float, 3)
@@ -226,7 +226,7 @@ class Membrane(Term, ColouredConstraints):
         ti.loop_config(serialize=ti.static(serial(self.tris)))
         for e in range(self.tris.shape[0]):
             fu, fv = self.frame(e, x)
-            w, _, _ = self.elastic(fu, fv, self.c[e])
+            w, _gu, _gv = self.elastic(fu, fv, self.c[e])
             out[0] += ti.cast(w, out.dtype)
             ti.atomic_max(out[1], ti.cast(ti.max(fu.norm(), fv.norm()) - 1.0, out.dtype))
         return ti.Vector([ti.cast(out[0], ti.f64), ti.cast(out[1], ti.f64)])

@@ -200,7 +200,7 @@ def _blocks(cl: ti.template(), lag: ti.template(), count: ti.i32, x: ti.template
         if cl.repels[c] and d < prm[0]:
             n = unit_normal(g, d)
             penalty = prm[1] * n.outer_product(n)
-        _, _, block = row_dissipation(cl, lag, c, x, x0, h, False)
+        _e, _g, block = row_dissipation(cl, lag, c, x, x0, h, False)
         alpha0 = lag.alpha0[c]
         lag.alpha[c] = alpha
         lag.penalty[c] = penalty
