@@ -185,7 +185,7 @@ def test_vbd_batches_without_colliders_or_self_contact(f32):
     assert "colliders" in sim.fusion()
 
 
-@pytest.mark.slow_cases("False")
+@pytest.mark.slow
 @pytest.mark.parametrize("self_collision", [False, True])
 def test_a_bad_step_inside_a_batch_is_named_and_the_state_before_it_kept(f64,
                                                                          self_collision):

@@ -34,7 +34,7 @@ def landing(batch, compile_ahead):
     return tcloth.runtime.compilations() - before, sim.positions(), first, sim.contact_stats()
 
 
-@pytest.mark.slow_cases("False")
+@pytest.mark.slow
 @pytest.mark.parametrize("batch", [True, False])
 def test_two_cloths_landing_compile_nothing_after_the_first_frame(batch):
     """The lower cloth lands in the sixth frame, the upper one on it: the cloths' own

@@ -435,6 +435,7 @@ def test_contact_stats_count_what_the_stage_did(f32):
     assert contact_lines({}) == []
 
 
+@pytest.mark.slow
 def test_the_swept_list_holds_every_pair_that_can_meet_on_a_motion_it_holds(f64):
     """A near swept search (``contact/swept.py``) lists each point-triangle and edge-edge
     pair once whose swept boxes meet and whose gap at the searched start less the longest

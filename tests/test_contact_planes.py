@@ -98,6 +98,7 @@ def least_separation(ids, kind, x, n):
     return min(n @ (x[ids[a]] - x[ids[b]]) for a, b in PAIRS.get(kind, EDGE_PAIRS))
 
 
+@pytest.mark.slow
 def test_planes_between_two_layers_let_one_slide_over_the_other(f64):
     """Two flat cloths 9 mm apart (thickness 6 mm), the upper one shifted by half a
     spacing and moving 16.7 mm along the layers. Each candidate across them takes the

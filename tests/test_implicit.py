@@ -443,6 +443,7 @@ def test_projective_keeps_particles_out_of_colliders(f64):
     assert np.abs(runs[0] - runs[1]).max() < 1e-3      # each solve to cg_tol = 1e-3
 
 
+@pytest.mark.slow
 def test_projective_converges_where_a_cloth_lands_on_a_collider(f64):
     """A cloth thrown down at 1 m/s onto a damped plane at dt 2e-3: the step in which it
     lands has a fixed point (the contact force is continuous where contact begins), so

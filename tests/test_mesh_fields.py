@@ -155,6 +155,7 @@ def test_a_cloth_drapes_on_a_sphere_field_within_a_millimetre_of_the_analytic_on
     assert np.linalg.norm(field - analytic, axis=1).max() < 1e-3
 
 
+@pytest.mark.slow
 def test_a_turning_field_carries_a_resting_particle_round_with_its_surface(f64):
     """A particle resting on a platter (a closed disc mesh of radius 0.3, baked as a
     field) that turns at 2 rad/s, friction 0.8, moving with the surface: friction holds

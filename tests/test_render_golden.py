@@ -65,6 +65,7 @@ def test_the_drawn_scenes_are_shipped_scenes(golden):
     assert all(name + ".images" in golden for name in DRAWN)
 
 
+@pytest.mark.slow
 def test_the_comparison_sees_a_change(f32, golden):
     """Without shadows, or a moment later, the same scene is not within the tolerance."""
     name = "cloth_on_sphere"

@@ -66,6 +66,7 @@ def test_past_the_finest_split_the_step_raises_and_keeps_its_start(f64):
         tcloth.Simulator(scene, split=0)
 
 
+@pytest.mark.slow
 def test_xpbd_at_one_substep_lands_a_cloth_by_splitting_the_landing(f64):
     """XPBD at one substep of ten iterations cannot stop a cloth landing at 1/60: its
     springs take more energy than the fall gave, and without splits the landing's step
@@ -86,6 +87,7 @@ def test_xpbd_at_one_substep_lands_a_cloth_by_splitting_the_landing(f64):
     assert sim.step_stats()["split_steps"] > 0
 
 
+@pytest.mark.slow
 def test_a_spring_holding_no_more_than_the_weight_may_pass_the_strain_bound(f64):
     """A 10 g particle hanging from a pinned one on a spring of 0.05 m and 1 N/m stretches
     by m g / k = 9.8 cm, strain 1.96 at rest (closed form): its tension never exceeds

@@ -268,6 +268,7 @@ def test_vbd_keeps_the_momentum_of_a_free_cloth_as_it_converges(f64):
     assert drift[2] < 1e-12
 
 
+@pytest.mark.slow
 def test_a_cloth_on_a_frictionless_floor_keeps_its_momentum(f32):
     """Nothing pushes along a frictionless floor, so a cloth lying on it at rest stays at
     rest and one sliding over it keeps its speed, with VBD's defaults (Chebyshev's mix
