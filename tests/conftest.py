@@ -25,7 +25,7 @@ os.environ.setdefault("TCLOTH_COMPILE_AHEAD", "0")
 # Taichi compiles the tests' kernels with its control-flow-graph optimisation off
 # (tcloth.init(quick_compile=...)): the same numbers bit for bit
 # (tests/test_compile_once.py), about half the compile time of a scene with contact, and
-# the suite's time is mostly compiling. The every-scene render test runs the command line
+# the suite's time is mostly compiling. The quick set's scene renders run the command line
 # as it ships.
 os.environ.setdefault("TCLOTH_QUICK_COMPILE", "1")
 
