@@ -204,14 +204,14 @@ def search_step(swept, x0, x1, thickness, margin, near=False):
     """Fill ``swept.candidates`` (a ``SweptSearch``) with the step's swept-box candidates,
     boxes grown by ``margin`` (m) besides, less those that cannot meet where ``near``
     (module docstring); returns their number (also ``swept.count``)."""
-    table = swept.table
-    path = float(longest_path(table.points, x0, x1))
-    cell = max(float(longest_edge(table, x0)), thickness + 2.0 * margin, path / 3.0, 1e-9)
+    # the search reads copies, whichever fields x0 and x1 are: its kernels compile once
     swept.origin.copy_from(x0)
     swept.anchor.copy_from(x1)
+    x0, x1, table = swept.origin, swept.anchor, swept.table
+    path = float(longest_path(table.points, x0, x1))
+    cell = max(float(longest_edge(table, x0)), thickness + 2.0 * margin, path / 3.0, 1e-9)
     swept.margin = margin
     swept.reach[None] = thickness + 2.0 * margin
     swept.filtered[None] = int(near)
-    # the search reads the copies, whichever fields x0 and x1 are: it compiles once
     return swept.fit(lambda: sweep_search(swept.search, swept.candidates, swept.origin,
                                           swept.anchor, thickness, margin, cell))
