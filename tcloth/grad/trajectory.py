@@ -425,7 +425,7 @@ class Trajectory(StepAdjoints):
                 f"{self._forward_residual:.3g}): the gradient is the converged steps' "
                 "linearised where the iterations stopped, not the run's; more iterations, "
                 "a smaller dt (the iterations stall on a step that is not convex: "
-                "tools/step_convexity.py) or backward Euler "
+                "Projective.step_residual's Jacobian shows it) or backward Euler "
                 "(Result.unconverged_steps)", GradientWarning,
                 stacklevel=3)
 

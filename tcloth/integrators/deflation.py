@@ -13,9 +13,9 @@ is A-DEF2 of Tang, Nabben, Vuik and Erlangga ("Comparison of two-level precondit
 derived from deflation, domain decomposition and multigrid methods", J. Sci. Comput. 39,
 2009): it solves the pairs' subspace exactly at every iteration and leaves the V-cycle B
 the rest. From that start its iterates are, in exact arithmetic, those of the balancing
-preconditioner Q r + (I - QA) B (I - AQ) r, which ``tools/planes_preconditioner.py``
-measured at 16 and 21 CG iterations a solve against the V-cycle's 36 and 40
-(``docs/contact.md``). A B r is needed only along U, so only at the pairs' vertices
+preconditioner Q r + (I - QA) B (I - AQ) r, which took 16 and 21 CG iterations a solve
+on the fold's global solves against the V-cycle's 36 and 40 (a NumPy re-solve of them;
+``docs/contact.md``). A B r is needed only along U, so only at the pairs' vertices
 (their stencils, not a whole product), and an iteration costs little more than before.
 
 E is taken again for each active set (``prepare``, after every gather): A's springs

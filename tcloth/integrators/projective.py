@@ -293,7 +293,7 @@ class Projective(Integrator):
         """The force residual g (module docstring) of the step just taken, at positions x
         ((n, 3) NumPy) with the velocities (x - x0) / h: the step's equation, 0 at its
         solution (the friction and projections after the iterations aside). For studies
-        of the step (``tools/step_convexity.py`` forms its Jacobian from it)."""
+        of the step (its Jacobian, by central differences, says whether the step is convex)."""
         if self._h is None or "residual" not in self.stats:
             raise SceneError("step_residual reads the step just taken: take a step first")
         xs, vs, g = self._probe
