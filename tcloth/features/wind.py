@@ -80,7 +80,9 @@ class WindFeature(Feature):
 
         Args:
             velocity: (3,) mean wind, m/s.
-            drag, lift, tangential: coefficients >= 0, kg/m^3.
+            drag: coefficient >= 0, kg/m^3.
+            lift: coefficient >= 0, kg/m^3.
+            tangential: coefficient >= 0, kg/m^3.
             gust: None; a dict(amplitude=(3,), frequency=Hz, phase=rad) adding
                 amplitude * sin(2 pi frequency t + phase) in the kernel; or a callable
                 t -> (3,) wind velocity evaluated once per force evaluation (velocity is

@@ -10,7 +10,10 @@ class Camera:
     """A perspective camera looking from ``eye`` at ``target``.
 
     Args:
-        eye, target: (3,) metres. up: (3,) world up. fov: vertical field of view, degrees.
+        eye: (3,) metres, where the camera is.
+        target: (3,) metres, the point it looks at.
+        up: (3,) world up.
+        fov: vertical field of view, degrees.
     """
 
     def __init__(self, eye, target, up=(0.0, 1.0, 0.0), fov=40.0):

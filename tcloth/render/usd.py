@@ -77,9 +77,11 @@ class UsdWriter:
     may too.
 
     Args:
-        sim: the Simulator. path: .usda (text), .usdc or .usd (binary) or .usdz (a
-            package). fps: frames per second of the time codes (the video's).
-        cloth_colours, particle_radius: as the renderer takes them (its defaults).
+        sim: the Simulator.
+        path: .usda (text), .usdc or .usd (binary) or .usdz (a package).
+        fps: frames per second of the time codes (the video's).
+        cloth_colours: as the renderer takes it (its default).
+        particle_radius: as the renderer takes it (its default).
     """
     label = "USD"
 

@@ -43,7 +43,8 @@ class Fabric:
         bending: bending rigidity per width, N m >= 0: a number or (warp, weft) (grid
             cloths; a mesh cloth takes one number).
         damping: the springs' and the membrane's damping as a ratio of critical, >= 0.
-        name, source: what it is and where its numbers were measured (presets).
+        name: what it is (presets).
+        source: where its numbers were measured (presets).
     """
     density: float
     stretch: object

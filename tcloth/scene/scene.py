@@ -168,9 +168,11 @@ class Scene:
         (docs/sewing.md).
 
         Args:
-            a, b: (K,) particle ids, a[i] sewn to b[i] (e.g. a panel's outline edges,
+            a: (K,) particle ids, a[i] sewn to b[i] (e.g. a panel's outline edges,
                 ``tcloth.panel``; one of them reversed where the edges run opposite ways).
-            stiffness k_s (N/m), damping k_d (N s/m): scalar or (K,), >= 0.
+            b: (K,) particle ids, as ``a``.
+            stiffness: k_s (N/m), scalar or (K,), >= 0.
+            damping: k_d (N s/m), scalar or (K,), >= 0.
             weld: True merges each pair into one particle when it first comes within
                 ``weld_distance``: from then on the two move as one, of their summed mass
                 (``Simulator.welded()``, ``Simulator.triangles()``: the cloths' triangles
@@ -238,9 +240,11 @@ class Scene:
             center: grid centre. plane: "xz" (i along +x, j along +z, horizontal) or
                 "xy" (i along +x, j along -y: row 0 is the top edge; hangs vertically).
             mass: total cloth mass (kg), spread evenly over the particles (default 0.2).
-            structural, shear, flexion: (k_s, k_d) per family or None (absent).
-                structural = 4-neighbours, shear = diagonals, flexion = 2 apart
-                (defaults (1000, 0.05), (200, 0.02), (50, 0.01)).
+            structural: (k_s, k_d) of the springs between 4-neighbours, or None (absent);
+                default (1000, 0.05).
+            shear: (k_s, k_d) of the diagonal springs, or None; default (200, 0.02).
+            flexion: (k_s, k_d) of the springs between particles 2 apart, or None;
+                default (50, 0.01).
             pinned: list of (i, j) grid coordinates; None pins (0, 0) and (nx-1, 0).
             rotation: None, or a 3x3 rotation matrix turning the grid about its centre.
             fabric: a ``tcloth.Fabric`` or a preset's name (``tcloth.scene.fabric.PRESETS``)
@@ -276,9 +280,11 @@ class Scene:
             vertices: (V,3) metres, or the path of an OBJ file (``tcloth.load_obj``) or a
                 USD file (.usd, .usda, .usdc, .usdz: ``tcloth.load_usd``; needs the extra
                 ``usd``) with faces None; a file's texture coordinates come with it.
-                faces: a list of faces, each 3 or more vertex ids (0-based).
+            faces: a list of faces, each 3 or more vertex ids (0-based).
             mass: total kg, spread by vertex area; or (V,) kg per vertex.
-            structural, shear, flexion: (k_s, k_d) or None (absent).
+            structural: (k_s, k_d) of the edge springs, or None (absent).
+            shear: (k_s, k_d) of the quads' diagonal springs, or None (absent).
+            flexion: (k_s, k_d) of the springs across interior edges, or None (absent).
             pinned: vertex ids to pin.
             fabric: a ``tcloth.Fabric`` or a preset's name instead of mass and springs:
                 masses from its density, no springs but a triangle membrane
@@ -306,8 +312,12 @@ class Scene:
         """Add a straight rope of ``segments`` springs from ``start`` to ``end``.
 
         Args:
-            start, end: (3,) metres. segments: int >= 1. mass: total kg, spread evenly
-            over segments+1 particles. stiffness, damping: per spring (N/m, N s/m).
+            start: (3,) metres, the first particle.
+            end: (3,) metres, the last particle.
+            segments: int >= 1.
+            mass: total kg, spread evenly over segments+1 particles.
+            stiffness: per spring, N/m.
+            damping: per spring, N s/m.
             pinned: any of "start", "end".
         Returns:
             Rope.
@@ -328,12 +338,21 @@ class Scene:
                 into triangles). A closed mesh, each edge in two faces wound alike, has an
                 inside no particle may end in; an open one (a table top, a wall) is
                 two-sided.
-            position, rotation, scale: its pose at t = 0: vertices scaled (a number or
-                three), turned (3x3 rotation; None: none), moved (m).
-            friction, thickness, stiffness, damping, stick_velocity: as add_sphere.
-            One motion: velocity (m/s) and angular_velocity (rad/s, about ``position``),
-                constant; keyframes [(time, position, rotation), ...] interpolated;
-                deform, a callable t -> (V,3) vertices (the mesh's own frame, before the
+            position: with rotation and scale, its pose at t = 0: vertices scaled
+                (scale: a number or three), turned (rotation: 3x3; None: none), moved by
+                position (m).
+            rotation: see position.
+            scale: see position.
+            friction: as add_sphere.
+            thickness: as add_sphere.
+            stiffness: as add_sphere.
+            damping: as add_sphere.
+            stick_velocity: as add_sphere.
+            velocity: m/s, constant. One motion at most: velocity and angular_velocity,
+                keyframes, or deform.
+            angular_velocity: rad/s about ``position``, constant.
+            keyframes: [(time, position, rotation), ...] interpolated.
+            deform: a callable t -> (V,3) vertices (the mesh's own frame, before the
                 pose) or a (frames, V, 3) array at deform_fps.
             sdf: "auto" (default): a closed rigid mesh with no part thinner than two of
                 its cells (a cell is the thickness) is baked into a signed distance

@@ -48,13 +48,14 @@ class Simulator(LiveParameters):
         dt: time step, s, > 0.
         grid_stencil: the per-particle grid stencil for cloth springs (default), or the
             spring list (False): the same forces.
-        position_bound, velocity_bound: a step that leaves |x_k| <= position_bound (m,
-            default 1e6) or |v_k| <= velocity_bound (m/s, default 1e8) in any coordinate
+        position_bound: a step that leaves |x_k| <= position_bound (m, default 1e6)
+            or |v_k| <= velocity_bound (m/s, default 1e8) in any coordinate
             raises InstabilityError, as does any non-finite value, and a step that leaves
             the scene with more energy (kinetic, gravitational and stored: springs,
             hinges, membrane, pressure, contacts) than it can supply (``budget.py``: the
             energy at the last baseline plus what wind, moving colliders and moving pins
             can add, plus a margin of the scene's energy scale).
+        velocity_bound: see position_bound.
         strain_bound: a step that stretches a membrane triangle, or a spring that pulls
             harder than twice the scene's weight, beyond this strain (default 1.0: twice
             its rest length, beyond any woven or knitted fabric's breaking strain) fails
