@@ -1,4 +1,4 @@
-"""What tcloth.frontend saves: the time to build and first step a simulator (Taichi
+"""What tcloth.runtime.frontend saves: the time to build and first step a simulator (Taichi
 compiling its kernels) with Taichi's position texts and sources remembered, and with
 Taichi's own functions put back, side by side in fresh processes, alternating.
 
