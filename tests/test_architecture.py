@@ -101,6 +101,8 @@ def test_model_and_scene_stay_upstream():
 
 # The rooms of tcloth/ by layer, lowest first (docs/architecture.md): a module reaches,
 # directly or through others, only modules of its own layer and the layers before it.
+# ``testing`` (the references the tests and benchmarks check a simulation with) is last:
+# it may use all of tcloth, and nothing in tcloth reaches it.
 LAYERS = [
     {"errors", "runtime", "validate", "version", "moved"},
     {"geometry"},
@@ -114,6 +116,7 @@ LAYERS = [
     {"grad"},
     {"render"},
     {"viewer", "app", "__main__", "tcloth"},
+    {"testing"},
 ]
 
 
@@ -240,3 +243,22 @@ def test_the_model_keeps_each_feature_on_its_own_object(f32):
     prefixes = tuple(f"{f.name}_" for f in FEATURES) + ("limit_", "triangle")
     assert not [name for m in (model, torn_model) for name in vars(m)
                 if name.startswith(prefixes)]
+
+
+def test_tests_import_nothing_from_tools():
+    """The tests import the references they share with the benchmarks from
+    ``tcloth.testing`` and their own helpers from ``tests/support``; tools/ scripts are only
+    run as a user runs them (a subprocess), which tests the tool itself."""
+    tests = os.path.dirname(os.path.abspath(__file__))
+    found = []
+    for folder, _, files in os.walk(tests):
+        for f in sorted(files):
+            if not f.endswith(".py"):
+                continue
+            path = os.path.join(folder, f)
+            for node in ast.walk(ast.parse(open(path).read())):
+                if isinstance(node, ast.Call) and "tools" in ast.unparse(node.args) and \
+                        ast.unparse(node.func).endswith(("sys.path.insert", "sys.path.append",
+                                                         "spec_from_file_location")):
+                    found.append(f"{os.path.relpath(path, tests)}:{node.lineno}")
+    assert not found, found

@@ -17,7 +17,7 @@ import argparse
 import numpy as np
 
 import tcloth
-from bench_contact import CLOTH, guard_step
+from tcloth.testing.contact_cases import CLOTH, guard_step
 
 THICKNESS = 0.006
 GAP = 0.1

@@ -28,7 +28,7 @@ import numpy as np
 import taichi as ti
 
 import tcloth
-from bench_self_collision import fold_scene, folded_state, resample
+from tcloth.testing.folding import fold_scene, folded_state, resample
 from tcloth.app.script import load_script
 
 HERE = os.path.dirname(os.path.abspath(__file__))

@@ -28,11 +28,13 @@ import time
 import taichi as ti
 
 import tcloth
-from bench_self_collision import HERE, fold_scene, folded_state, resample, warm_up
 from benchcsv import integrator_spec
 from tcloth.app.script import load_script
 from tcloth.contact import broad, guard, stage
 from tcloth.integrators import vbd
+from tcloth.testing.folding import fold_scene, folded_state, resample, warm_up
+
+HERE = os.path.dirname(os.path.abspath(__file__))
 
 OGC_US_PER_VERTEX_STEP = 0.21 / 246e3 * 1e6
 # (label, where, attribute): where is "stage" (the simulator's contact stage), "solver"
