@@ -1,4 +1,4 @@
-"""Where the modules of tcloth's first layout went (its rooms by layer).
+"""Where tcloth's moved modules went (the first layout's, and the base layer's since).
 
 ``import tcloth.simulator`` and ``from tcloth.budget import EnergyBudget`` keep working:
 an old name gives the module at its new place (the same module object, so monkeypatching
@@ -39,6 +39,9 @@ MOVED = {
     "tcloth.cli": "tcloth.app.cli",
     "tcloth.script": "tcloth.app.script",
     "tcloth.sweep": "tcloth.app.sweep",
+    "tcloth.graph": "tcloth.geometry.graph",
+    "tcloth.frontend": "tcloth.runtime.frontend",
+    "tcloth.vulkan_probe": "tcloth.runtime.vulkan_probe",
 }
 
 

@@ -2,7 +2,7 @@
 modules form no cycle (read from the source, function-level imports included), every
 module reaches (directly or through the modules it imports) only its own layer and those
 below (LAYERS: nothing the model reaches is a term or an integrator, nothing the scene
-reaches is those or the model), the first layout's module names still import, no file is
+reaches is those or the model), moved modules' old names still import, no file is
 over 500 lines and no function over 80; and that every term's feature is registered and
 the model keeps each feature's data on its own object."""
 import ast
@@ -101,8 +101,10 @@ def test_model_and_scene_stay_upstream():
 
 # The rooms of tcloth/ by layer, lowest first (docs/architecture.md): a module reaches,
 # directly or through others, only modules of its own layer and the layers before it.
+# ``testing`` (the references the tests and benchmarks check a simulation with) is last:
+# it may use all of tcloth, and nothing in tcloth reaches it.
 LAYERS = [
-    {"errors", "runtime", "validate", "version", "graph", "vulkan_probe", "moved", "frontend"},
+    {"errors", "runtime", "validate", "version", "moved"},
     {"geometry"},
     {"scene"},
     {"contact"},
@@ -114,6 +116,7 @@ LAYERS = [
     {"grad"},
     {"render"},
     {"viewer", "app", "__main__", "tcloth"},
+    {"testing"},
 ]
 
 
@@ -144,8 +147,9 @@ def test_every_top_level_module_sits_in_a_room():
 
 
 def test_old_module_paths_give_the_moved_modules():
-    """The first layout's module names still import (its rooms by layer), as the very module
-    at its new place, saying where it went."""
+    """A moved module's old name still imports (the first layout's rooms by layer, the base
+    layer's modules moved since), as the very module at its new place, saying where it
+    went."""
     import importlib
     import sys
     import warnings
@@ -239,3 +243,22 @@ def test_the_model_keeps_each_feature_on_its_own_object(f32):
     prefixes = tuple(f"{f.name}_" for f in FEATURES) + ("limit_", "triangle")
     assert not [name for m in (model, torn_model) for name in vars(m)
                 if name.startswith(prefixes)]
+
+
+def test_tests_import_nothing_from_tools():
+    """The tests import the references they share with the benchmarks from
+    ``tcloth.testing`` and their own helpers from ``tests/support``; tools/ scripts are only
+    run as a user runs them (a subprocess), which tests the tool itself."""
+    tests = os.path.dirname(os.path.abspath(__file__))
+    found = []
+    for folder, _, files in os.walk(tests):
+        for f in sorted(files):
+            if not f.endswith(".py"):
+                continue
+            path = os.path.join(folder, f)
+            for node in ast.walk(ast.parse(open(path).read())):
+                if isinstance(node, ast.Call) and "tools" in ast.unparse(node.args) and \
+                        ast.unparse(node.func).endswith(("sys.path.insert", "sys.path.append",
+                                                         "spec_from_file_location")):
+                    found.append(f"{os.path.relpath(path, tests)}:{node.lineno}")
+    assert not found, found

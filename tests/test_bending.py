@@ -1,8 +1,6 @@
 """Hinge bending (``tcloth.terms.bending``): the energy against closed forms (a fold, a
 plate's curvature energy), its force and Hessian against finite differences, and the
 solvers (backward Euler, VBD, projective, XPBD) converging to the same step."""
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -10,11 +8,7 @@ import pytest
 import tcloth
 from tcloth.scene.builders import Cloth
 from tcloth.scene.hinges import cloth_hinges, hinge_table
-
-TOOLS = Path(__file__).resolve().parents[1] / "tools"
-_spec = importlib.util.spec_from_file_location("cantilever", TOOLS / "cantilever.py")
-cantilever = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(cantilever)
+from tcloth.testing import cantilever
 
 
 pytestmark = pytest.mark.usefixtures("f64")

@@ -1,11 +1,11 @@
 """The contact stage's guarantee (tcloth/contact/): no cloth edge crosses a cloth triangle
 between two steps and no particle ends a step inside or through a collider, whatever the
-integrator and dt. Checked with NumPy alone: tools/crossings.py (itself checked here
+integrator and dt. Checked with NumPy alone: ``tcloth.testing.crossings`` (itself checked here
 against a brute force), signed distances and slab tests of the particle paths
 (tools/bench_contact.py, whose stress set these are small versions of), the thrown
 cloths' layer order and their momentum."""
+import functools
 import os
-import sys
 
 import numpy as np
 import pytest
@@ -14,12 +14,13 @@ import tcloth
 from tcloth.contact import projection, stage as stage_module
 from tcloth.viewer import contact_lines
 
+from tcloth.testing import folding
+from tcloth.testing.colliders import signed_distances
+from tcloth.testing.contact_cases import (CLOTH, centre, falling, guard_step, order_kept,
+                                          run_case, side, sliding, thrown)
+from tcloth.testing.crossings import count_crossings, crossing_pairs, triangle_edges
+
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(HERE, "..", "tools"))
-from bench_contact import (CLOTH, centre, falling, guard_step, order_kept, run_case,  # noqa: E402
-                           side, signed_distances, thrown)
-from crossings import count_crossings, crossing_pairs, triangle_edges  # noqa: E402
-from bench_sliding import scene as sliding_scene  # noqa: E402
 
 
 # -- the independent counter -----------------------------------------------------------------
@@ -288,18 +289,17 @@ def test_displacement_bounds_keep_any_moves_inside_them_crossing_free(f64):
     mesh edges away or more (its triangles are then never excluded pairs), and moving
     every particle by its whole radius, in random directions or each toward its nearest
     such particle, crosses nothing (NumPy count)."""
-    import bench_self_collision as bsc
     from tcloth.contact.bounds import GAMMA, DisplacementBounds
     from tcloth.contact.topology import contact_topology
     from tcloth.app.script import load_script
     module = load_script(os.path.join(HERE, "..", "scenes", "fold.py"))[0]
-    x40, v40 = bsc.folded_state(module, os.path.join(HERE, "..", "tools", "data",
+    x40, v40 = folding.folded_state(module, os.path.join(HERE, "..", "tools", "data",
                                                      "fold_40x40.npz"))
     n = 24
-    scene = bsc.fold_scene(module, n)
+    scene = folding.fold_scene(module, n)
     # the saved fold resampled (no step: the stage's list is built at set_state)
     sim = tcloth.Simulator(scene, "symplectic_euler", dt=1e-4)
-    sim.set_state(positions=bsc.resample(x40, n), velocities=bsc.resample(v40, n))
+    sim.set_state(positions=folding.resample(x40, n), velocities=folding.resample(v40, n))
     x = sim.positions()
     assert count_crossings(x, scene.triangles) == 0
     bounds = DisplacementBounds(sim.model.inv_mass)
@@ -363,11 +363,10 @@ def test_the_fold_bench_counts_crossings_after_every_step(f32, monkeypatch):
     step of the run with self-collision, whatever the solver (853f19f had it count once,
     at the end, and only for the solvers with CG iterations): with XPBD, which has none,
     it counts the positions after each of three steps, and reports the worst."""
-    import bench_self_collision as bsc
     import crossings
     from tcloth.app.script import load_script
     module = load_script(os.path.join(HERE, "..", "scenes", "fold.py"))[0]
-    x40, v40 = bsc.folded_state(module, os.path.join(HERE, "..", "tools", "data",
+    x40, v40 = folding.folded_state(module, os.path.join(HERE, "..", "tools", "data",
                                                      "fold_40x40.npz"))
     seen = []
 
@@ -375,7 +374,7 @@ def test_the_fold_bench_counts_crossings_after_every_step(f32, monkeypatch):
         seen.append(np.array(positions))
         return {1: 0, 2: 5, 3: 1}[len(seen)]
     monkeypatch.setattr(crossings, "count_crossings", count)
-    out = bsc.one_second(module, x40, v40, 8, "xpbd", 1.0 / 60.0, 3.0 / 60.0, {})
+    out = folding.one_second(module, x40, v40, 8, "xpbd", 1.0 / 60.0, 3.0 / 60.0, {})
     assert len(seen) == 3 and out["crossings_max"] == 5, out
     assert not np.array_equal(seen[0], seen[1]) and not np.array_equal(seen[1], seen[2])
 
@@ -510,27 +509,55 @@ def test_the_swept_list_holds_every_pair_that_can_meet_on_a_motion_it_holds(f64)
     assert not swept.holds(*motion(x0, b))
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("integrator,kept", [
-    ("xpbd", 0.99),
-    ("projective", 0.9)])
-def test_a_cloth_slides_over_another_at_one_step_per_frame(f32, integrator, kept):
-    """A 6 x 6 cloth of 10 g thrown at 1 m/s across a 12 x 12 cloth lying on a
-    frictionless floor, 9 mm above it (self-collision of 6 mm, no friction), 10 steps at
-    1/60 (``tools/bench_sliding.py``'s case, smaller): nothing pushes along the layers, so the upper cloth should keep its speed and
-    both cloths their momentum. The separating planes take the layers' normal where the
-    motion does not cross it (``contact/normals.py``), and XPBD's also where its
-    prediction crosses both planes; with the closest points' direction always, the two
-    grids' parallel edges braked it to 0.33 (XPBD) and 0.18 m/s (projective), and
-    XPBD's substeps with the closest points' plane of a landing pair to 0.41 m/s
-    (``docs/contact.md``)."""
-    scene, _, upper, v = sliding_scene((12, 0.6, 0.15), (6, 0.2, 0.01))
+# The sliding case (``tcloth.testing.contact_cases.sliding``): nothing pushes along the
+# layers, neither the frictionless self-contact nor the frictionless floor, so the upper
+# cloth keeps its speed and the two cloths their momentum along the slide. A contact force
+# lies along the layers' normal, which the discretised cloths tilt only where they wrinkle:
+# the target is the upper cloth's mean speed within 1 % of its start (docs/contact.md,
+# tools/bench_sliding.py), and never above it.
+KEPT = 0.99
+SLOWED = "the sliding cloth is braked below 99 % of its speed (docs/contact.md, 'Open')"
+
+
+@functools.lru_cache(maxsize=None)
+def slid(integrator, small, steps):
+    """(the upper cloth's mean speed along the slide, the momentum along it, the crossings)
+    after ``steps`` steps of 1/60 s of the sliding case (``small``: a 6 x 6 cloth of 10 g
+    over a 12 x 12 one, else the benchmark's 8 x 8 of 20 g over 24 x 24)."""
+    scene, _, upper, v = sliding((12, 0.6, 0.15), (6, 0.2, 0.01)) if small else sliding()
     sim = tcloth.Simulator(scene, integrator, dt=1.0 / 60.0)
     sim.set_state(velocities=v)
-    sim.step(10)
-    assert sim.velocities()[upper.particles.ravel(), 0].mean() > kept
-    assert abs(sim.momentum()[0][0] - 0.01) < 1e-4
-    assert count_crossings(sim.positions(), scene.triangles) == 0
+    sim.step(steps)
+    return (float(sim.velocities()[upper.particles.ravel(), 0].mean()),
+            float(sim.momentum()[0][0]), count_crossings(sim.positions(), scene.triangles))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("integrator", [
+    "xpbd", pytest.param("projective", marks=pytest.mark.xfail(strict=True, reason=SLOWED))])
+def test_a_cloth_slides_over_another_at_one_step_per_frame(f32, integrator):
+    """A 6 x 6 cloth of 10 g thrown at 1 m/s across a 12 x 12 cloth lying on a
+    frictionless floor, 9 mm above it (self-collision of 6 mm, no friction), 10 steps at
+    1/60: the upper cloth keeps its speed within 1 % (KEPT). The separating planes take
+    the layers' normal where the motion does not cross it (``contact/normals.py``), and
+    XPBD's also where its prediction crosses both planes; with the closest points'
+    direction always, the two grids' parallel edges braked it to 0.33 (XPBD) and 0.18 m/s
+    (projective), and XPBD's substeps with the closest points' plane of a landing pair to
+    0.41 m/s (``docs/contact.md``). Projective still brakes it."""
+    speed, _, _ = slid(integrator, True, 10)
+    assert KEPT <= speed <= 1.0 + 1e-3
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("integrator", ["xpbd", "projective"])
+def test_a_sliding_cloth_gains_no_speed_nor_the_layers_momentum(f32, integrator):
+    """The same slide: no cloth passes through the other, the two cloths keep their
+    momentum along the slide (0.01 kg m/s: no force along it but each other's), and the
+    upper cloth goes no faster than it was thrown."""
+    speed, momentum, crossings = slid(integrator, True, 10)
+    assert speed <= 1.0 + 1e-3
+    assert abs(momentum - 0.01) < 1e-4
+    assert crossings == 0
 
 
 @pytest.mark.slow
@@ -544,7 +571,7 @@ def test_vbd_converges_to_backward_eulers_step_in_contact(f64):
     overshoot into contact and the iterations cycled: 4.8e-3 and 5.8e-3 m away, the
     momentum 1.8e-4 short at 100 iterations (``vbd_local.py``)."""
     def scene():
-        return sliding_scene((12, 0.6, 0.15), (6, 0.2, 0.01))
+        return sliding((12, 0.6, 0.15), (6, 0.2, 0.01))
     first, _, _, v = scene()
     warm = tcloth.Simulator(first, "backward_euler", dt=1.0 / 60.0)
     warm.set_state(velocities=v)
@@ -568,16 +595,23 @@ def test_vbd_converges_to_backward_eulers_step_in_contact(f64):
 
 
 @pytest.mark.slow
-def test_projectives_velocity_pass_keeps_most_of_a_sliding_cloths_speed(f32):
+@pytest.mark.xfail(strict=True, reason=SLOWED)
+def test_projectives_velocity_pass_keeps_a_sliding_cloths_speed(f32):
     """``tools/bench_sliding.py``'s case with projective dynamics, 0.5 s at 1/60: the
     self-contact projection's velocity pass removes approach along the layers' normal
     (``normals.contact_normal``), not along the closest points' direction, which between
-    offset edges tilts along the layers: the upper cloth keeps 89 % of its speed (56 %
-    with the closest points' direction) and both cloths their momentum."""
-    scene, _, upper, v = sliding_scene()
-    sim = tcloth.Simulator(scene, "projective", dt=1.0 / 60.0)
-    sim.set_state(velocities=v)
-    sim.step(30)
-    assert sim.velocities()[upper.particles.ravel(), 0].mean() > 0.85
-    assert abs(sim.momentum()[0][0] - 0.02) < 1e-4
-    assert count_crossings(sim.positions(), scene.triangles) == 0
+    offset edges tilts along the layers, so the upper cloth keeps its speed within 1 %
+    (KEPT). It keeps 89 % (56 % with the closest points' direction): resting-contact
+    jitter brakes it."""
+    speed, _, _ = slid("projective", False, 30)
+    assert KEPT <= speed <= 1.0 + 1e-3
+
+
+@pytest.mark.slow
+def test_projectives_velocity_pass_keeps_the_layers_momentum(f32):
+    """The same 0.5 s: no crossing, both cloths' momentum along the slide kept (0.02 kg m/s)
+    and the upper cloth no faster than it was thrown."""
+    speed, momentum, crossings = slid("projective", False, 30)
+    assert speed <= 1.0 + 1e-3
+    assert abs(momentum - 0.02) < 1e-4
+    assert crossings == 0

@@ -3,7 +3,6 @@ the planes' active vertex pairs, forces and matrix against a NumPy reference and
 differences, and what they change at one step per frame against the same runs without
 them (``planes=False``), side by side."""
 import os
-import sys
 
 import numpy as np
 import pytest
@@ -15,9 +14,10 @@ from tcloth.contact.search import POINT_TRIANGLE
 from tcloth.grad import Trajectory
 from tcloth.integrators import contact_planes
 
+from tcloth.testing import folding
+from tcloth.testing.contact_cases import CLOTH, run_case, thrown
+
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(HERE, "..", "tools"))
-from bench_contact import CLOTH, run_case, thrown  # noqa: E402
 
 PAIRS = {POINT_TRIANGLE: ((0, 1), (0, 2), (0, 3))}
 EDGE_PAIRS = ((0, 2), (0, 3), (1, 2), (1, 3))
@@ -227,14 +227,13 @@ def test_the_deflated_solve_solves_the_same_system_in_fewer_iterations(f64):
     each active pair's column u = (n on a, -n on b), and a global solve with it solves
     A x = b (a random b; the residual by that product) as the V-cycle alone does, in
     fewer CG iterations."""
-    import bench_self_collision as bsc
     from tcloth.app.script import load_script
     module = load_script(os.path.join(HERE, "..", "scenes", "fold.py"))[0]
-    x40, v40 = bsc.folded_state(module, os.path.join(HERE, "..", "tools", "data",
+    x40, v40 = folding.folded_state(module, os.path.join(HERE, "..", "tools", "data",
                                                      "fold_40x40.npz"))
     n = 16
-    sim = tcloth.Simulator(bsc.fold_scene(module, n), "projective", dt=1.0 / 60.0)
-    sim.set_state(positions=bsc.resample(x40, n), velocities=bsc.resample(v40, n))
+    sim = tcloth.Simulator(folding.fold_scene(module, n), "projective", dt=1.0 / 60.0)
+    sim.set_state(positions=folding.resample(x40, n), velocities=folding.resample(v40, n))
     sim.step(3)
     integrator = sim.integrator
     solver, deflation, rows = integrator.solver, integrator.deflation, integrator.planes.rows

@@ -1,18 +1,19 @@
-"""tools/elastica.py, the cantilever (Peirce, ASTM D1388) reference, against independent results:
+"""``tcloth.testing.elastica``, the cantilever (Peirce, ASTM D1388) reference, against independent results:
 linear and second-order beam theory, Peirce's formula, the strip's own inextensibility, moment
-balance and differential equation, resolution, and the inversion of the chord angle."""
-import importlib.util
+balance and differential equation, resolution, and the inversion of the chord angle; and
+tools/elastica.py, its table on the command line, run as a user runs it."""
 import math
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 from numpy.polynomial import Polynomial
 
-_PATH = Path(__file__).resolve().parents[1] / "tools" / "elastica.py"
-_SPEC = importlib.util.spec_from_file_location("elastica", _PATH)
-elastica = importlib.util.module_from_spec(_SPEC)
-_SPEC.loader.exec_module(elastica)
+from tcloth.testing import elastica
+
+TOOL = Path(__file__).resolve().parents[1] / "tools" / "elastica.py"
 
 
 def _second_order_coefficient():
@@ -121,12 +122,12 @@ def test_rejects_bad_angle(degrees):
         elastica.alpha_for_angle(degrees)
 
 
-def test_cli_prints_and_writes_csv(tmp_path, capsys):
+def test_cli_prints_and_writes_csv(tmp_path):
     path = tmp_path / "cantilever.csv"
-    elastica.main(["--alphas", "1", "4", "--csv", str(path)])
-    lines = capsys.readouterr().out.splitlines()
+    lines = subprocess.run([sys.executable, str(TOOL), "--alphas", "1", "4", "--csv", str(path)],
+                           capture_output=True, text=True, check=True).stdout.splitlines()
     assert len(lines) == 3 and "chord angle" in lines[0]
     header, *rows = path.read_text().splitlines()
-    assert header.split(",") == list(elastica.HEADER)
+    assert header.split(",") == ["alpha", "chord_angle_deg", "x_tip_over_L", "y_tip_over_L"]
     alpha, angle, x, y = map(float, rows[1].split(","))
     assert (alpha, angle, x, y) == (4.0, elastica.chord_angle(4.0), *elastica.tip(4.0))

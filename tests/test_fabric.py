@@ -1,7 +1,6 @@
 """Physical fabric (``tcloth.Fabric``): the masses, springs and bending it gives a cloth,
 checked against textile tests: uniaxial stretch against the fabric's stretch stiffness,
-and Peirce's cantilever against the inextensible elastica (tools/elastica.py)."""
-import importlib.util
+and Peirce's cantilever against the inextensible elastica (``tcloth.testing.elastica``)."""
 from pathlib import Path
 
 import numpy as np
@@ -10,18 +9,7 @@ import pytest
 import tcloth
 from tcloth.scene.fabric import PRESETS
 
-TOOLS = Path(__file__).resolve().parents[1] / "tools"
-
-
-def _tool(name):
-    spec = importlib.util.spec_from_file_location(name, TOOLS / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-cantilever = _tool("cantilever")
-elastica = _tool("elastica")
+from tcloth.testing import cantilever, elastica
 
 
 pytestmark = pytest.mark.usefixtures("f64")

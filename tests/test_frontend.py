@@ -1,4 +1,4 @@
-"""tcloth.frontend remembers Taichi's source positions and sources: the texts must be
+"""tcloth.runtime.frontend remembers Taichi's source positions and sources: the texts must be
 Taichi's own, and a compile error must still point at its line."""
 import inspect
 
@@ -8,7 +8,7 @@ import taichi as ti
 from taichi.lang.ast.ast_transformer_utils import ASTTransformerContext
 
 import tcloth
-from tcloth import frontend
+from tcloth.runtime import frontend
 
 
 def test_it_is_installed_on_this_taichi():

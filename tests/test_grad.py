@@ -337,17 +337,12 @@ def test_a_loss_written_as_a_taichi_kernel_is_differentiated_by_its_reverse_mode
 
 
 def test_the_fabric_fits_measurements_have_their_gradients():
-    """tools/fit_fabric.py's measurements of a specimen scene (grad.ChordAngle on the
+    """``tcloth.testing.specimens``' measurements of a specimen scene (grad.ChordAngle on the
     strips, grad.DrapeCoefficient inside the disc's projected rim, the bias strip's
     extension) and a measured loss against central differences of positions (NumPy: no
     simulation); the chord angle of a straight strip against its closed form."""
-    import importlib.util
-    from pathlib import Path
-    path = Path(__file__).resolve().parents[1] / "tools" / "fit_fabric.py"
-    spec = importlib.util.spec_from_file_location("fit_fabric", path)
-    fit = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(fit)
-    specimens = fit.Specimens(tcloth.scene.fabric.preset("denim"), cells=8, rings=4)
+    from tcloth.testing.specimens import Specimens
+    specimens = Specimens(tcloth.scene.fabric.preset("denim"), cells=8, rings=4)
     rng = np.random.default_rng(5)
     x = specimens.scene.positions + 0.01 * rng.standard_normal(
         (specimens.scene.num_particles, 3))

@@ -2,18 +2,12 @@
 homogeneous deformations on any triangulation, its forces against finite differences,
 equilibrium and traction, momentum, its Hessian, and the solvers (VBD, XPBD, projective)
 converging to backward Euler's step with it."""
-import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 import tcloth
-
-TOOLS = Path(__file__).resolve().parents[1] / "tools"
-_spec = importlib.util.spec_from_file_location("cantilever", TOOLS / "cantilever.py")
-cantilever = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(cantilever)
+from tcloth.testing import cantilever
 
 CU, CV, G = 300.0, 120.0, 7.0                 # N/m: warp, weft, shear
 

@@ -1,7 +1,7 @@
 """Mesh colliders (``Scene.add_mesh_collider``, docs/mesh_colliders.md), against
 independent references: a brute-force NumPy distance, the analytic sphere and box on the
 same drape, Coulomb's bound on a slope, and the NumPy counts of cloth-against-obstacle
-crossings and of particles inside (``tools/crossings.py``) after every step of a cloth
+crossings and of particles inside (``tcloth.testing.crossings``) after every step of a cloth
 thrown at 10 m/s, for every integrator."""
 import os
 import sys
@@ -19,25 +19,12 @@ from tcloth.model.collider_table import ColliderTable
 from tcloth.scene.meshcollider import world_vertices
 from tcloth.sim.checkpoint import scene_to_arrays
 
+from tcloth.testing.crossings import closest_on_triangles, inside_mask
+from tcloth.testing.thrown_mesh import CLOTH, OBSTACLES, box_mesh, thrown
+
+from support.kernels import collider_contacts
+
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(HERE, "..", "tools"))
-from crossings import closest_on_triangles, inside_mask  # noqa: E402
-from thrown_mesh import CLOTH, OBSTACLES, box_mesh, thrown  # noqa: E402
-
-
-@ti.kernel
-def collider_contacts(table: ti.template(), row: ti.i32, x: ti.types.ndarray(), t: float,
-                      out: ti.types.ndarray()):
-    """out[k] = (phi, normal, surface velocity) of point x[k] against collider ``row`` of
-    the table's one group at time t (``ColliderTable.contact``)."""
-    for k in range(x.shape[0]):
-        p = ti.Vector([x[k, 0], x[k, 1], x[k, 2]])
-        for g in ti.static(table.groups):
-            phi, n, u = table.contact(g.shape, table.data[g.first + row], p, t)
-            out[k, 0] = phi
-            for j in ti.static(range(3)):
-                out[k, 1 + j] = n[j]
-                out[k, 4 + j] = u[j]
 
 
 @pytest.mark.slow_cases("True")
@@ -258,7 +245,7 @@ def test_a_thrown_cloth_never_enters_or_crosses_a_mesh(fresh_f32, integrator, co
     counts), nothing blows up, and the cloth reached it: the frame-rate solvers at 1/60 s,
     the explicit ones at their own dt (``tools/thrown_mesh.py``, which runs the matrix at
     any dt)."""
-    r = thrown(integrator, collider, motion)         # tools/thrown_mesh.py
+    r = thrown(integrator, collider, motion)         # tcloth.testing.thrown_mesh
     assert r["error"] is None, r["error"]
     assert r["crossings"] == 0 and r["inside"] == 0, r
     assert r["closest"] < 0.05, r                   # it reached the obstacle

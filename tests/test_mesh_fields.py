@@ -17,13 +17,14 @@ from tcloth.model.collider_table import ColliderTable
 from tcloth.scene.meshcollider import rotation_about, world_vertices
 from tcloth.sim.checkpoint import scene_from_arrays, scene_to_arrays
 
+from tcloth.testing.crossings import closest_on_triangles, inside_mask
+from tcloth.testing.thrown_mesh import CLOTH, box_mesh, thrown
+
+from support.kernels import collider_contacts
+
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(HERE, "..", "tools"))
 sys.path.insert(0, os.path.join(HERE, "..", "scenes"))
-from crossings import closest_on_triangles, inside_mask  # noqa: E402
-from thrown_mesh import CLOTH, box_mesh, thrown  # noqa: E402
 from turntable import lathe  # noqa: E402
-from test_mesh_collider import collider_contacts  # noqa: E402
 
 CELL = 0.005        # the colliders' default thickness, which is a field's cell
 

@@ -1,20 +1,15 @@
-"""tools/crossings.py against a triangle-mesh obstacle (an independent count):
+"""``tcloth.testing.crossings`` against a triangle-mesh obstacle (an independent count):
 ``count_obstacle_crossings`` (cloth edges through obstacle triangles, obstacle edges
 through cloth triangles) and ``count_inside`` (points strictly inside a closed obstacle),
 each checked against a brute force of its own kind: every pair's signed volumes, and the
 generalized winding number summed over every triangle's solid angle.
-Also tools/meshes.py's sphere, which the mesh benchmark and its Newton peer share.
+Also ``tcloth.testing.meshes``'s sphere, which the mesh benchmark and its Newton peer share.
 NumPy only, no Taichi."""
-import os
-import sys
-
 import numpy as np
 
-HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(HERE, "..", "tools"))
-from crossings import (count_inside, count_obstacle_crossings, inside_mask,  # noqa: E402
-                       obstacle_crossing_pairs, triangle_edges)
-from meshes import sphere_frequency, sphere_mesh  # noqa: E402
+from tcloth.testing.crossings import (count_inside, count_obstacle_crossings, inside_mask,
+                                      obstacle_crossing_pairs, triangle_edges)
+from tcloth.testing.meshes import sphere_frequency, sphere_mesh
 
 CUBE = (np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float),
         np.array([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1],

@@ -405,7 +405,7 @@ def test_a_gpu_asked_for_and_not_given_is_said():
         assert tcloth.runtime.cpu()
     except pytest.fail.Exception:
         assert not tcloth.runtime.cpu()        # a real CUDA device: nothing to say
-    from tcloth.vulkan_probe import devices
+    from tcloth.runtime.vulkan_probe import devices
     found = devices()
     if found and all(kind == "CPU" for _, kind in found):
         with pytest.warns(tcloth.DeviceWarning, match="software driver"):

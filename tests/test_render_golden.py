@@ -5,15 +5,14 @@ within a tolerance. Rasterised edges, triangles' depths and lighting a pixel onc
 its samples see one surface (docs/rendering.md) move a few pixels by more than rounding.
 """
 import os
-import sys
 
 import numpy as np
 import pytest
 
+from tcloth.testing.golden import draw, posed
+from tcloth.testing.scripts import scene_names, script
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(HERE, "..", "tools"))
-import render_golden  # noqa: E402
 
 DATA = os.path.join(HERE, "data", "render_golden.npz")
 MEAN_LEVELS = 0.25     # the mean absolute difference over pixels and channels, of 255
@@ -44,11 +43,11 @@ def difference(a, b):
 
 def pictures(name, golden, **options):
     """Today's pictures of the stored states of scene ``name``."""
-    module, cfg = render_golden.script(name)
+    module, cfg = script(name)
     dt, sim, out = float(golden[name + ".dt"]), None, []
     for steps, x in zip(golden[name + ".steps"], golden[name + ".positions"]):
-        sim = render_golden.posed(module, dt, steps, x, sim)
-        out.append(render_golden.draw(sim, cfg, **options))
+        sim = posed(module, dt, steps, x, sim)
+        out.append(draw(sim, cfg, **options))
     return out
 
 
@@ -61,7 +60,7 @@ def test_the_drawn_scenes_draw_as_before(f32, golden, name):
 
 
 def test_the_drawn_scenes_are_shipped_scenes(golden):
-    assert set(DRAWN) <= set(render_golden.scene_names())
+    assert set(DRAWN) <= set(scene_names())
     assert all(name + ".images" in golden for name in DRAWN)
 
 

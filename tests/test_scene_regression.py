@@ -1,6 +1,6 @@
 """Every scene script's positions after 0.1 s of simulated time match those stored in
 ``tests/data/scene_positions.npz`` (``python tools/scene_snapshot.py`` writes it) within
-``scene_snapshot.TOLERANCE`` (1e-9 m): float64 on the CPU, each scene with its CONFIG
+``tcloth.testing.golden.TOLERANCE`` (1e-9 m): float64 on the CPU, each scene with its CONFIG
 integrator and dt. The stored numbers come from one CPU; another rounds a few operations
 differently (AVX-512 against AVX2, another libm), so the comparison has a tolerance, and
 ``test_the_tolerance_catches_a_spring_constant_changed_by_1e-3`` shows that it still
@@ -8,15 +8,14 @@ catches a real change. Paths that must agree bit for bit on one machine (a batch
 single steps, a checkpoint's continuation) are tested bit for bit elsewhere. Rewrite the
 snapshot only after checking that the new numbers are right, and say so in the commit."""
 import os
-import sys
 
 import numpy as np
 import pytest
 
+from tcloth.testing.golden import TOLERANCE, run_scene
+from tcloth.testing.scripts import scene_names
 
 HERE = os.path.dirname(os.path.abspath(__file__))
-sys.path.insert(0, os.path.join(HERE, "..", "tools"))
-from scene_snapshot import TOLERANCE, run_scene, scene_names  # noqa: E402
 
 # scenes whose structural springs carry load within the snapshot's 0.1 s, where a
 # stiffer spring must move the particles (curtain, sphere_through_cloth, strain_limiting

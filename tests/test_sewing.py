@@ -1,9 +1,6 @@
 """Sewing (``Scene.sew``, ``tcloth.panel``, welds, scenes/garment.py) against closed forms
 (the damped oscillator, a polygon's area) and NumPy references (the welded mesh's
 neighbours, segment-triangle crossings)."""
-import os
-import sys
-
 import numpy as np
 import pytest
 
@@ -12,10 +9,9 @@ from tcloth import SceneError
 from tcloth.contact.topology import contact_topology
 from tcloth.render.mesh import cloth_mesh
 
-from conftest import scene_module
+from tcloth.testing.crossings import count_crossings, seam_ids
 
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tools"))
-from crossings import count_crossings, seam_ids  # noqa: E402
+from conftest import scene_module
 
 SQUARE = ((0.0, 0.0), (0.2, 0.0), (0.2, 0.2), (0.0, 0.2))
 CLOTH = {"mass": 0.02, "structural": (100.0, 0.02), "flexion": (1.0, 0.001), "pinned": []}
@@ -225,7 +221,7 @@ def test_a_seam_closes_through_the_contact_thickness(f32, integrator, dt):
 @pytest.mark.slow
 def test_the_garment_has_no_self_crossings_at_any_frame(f32):
     """scenes/garment.py at a coarse resolution: at no frame does an edge pass through a
-    triangle (tools/crossings.py) but where they touch by construction at a seam (an
+    triangle (``tcloth.testing.crossings``) but where they touch by construction at a seam (an
     end of one sewn to a corner of the other); every seam welds within a second, the
     welded pairs coincide, and the merged mesh has no crossing at the end."""
     module = scene_module("garment")

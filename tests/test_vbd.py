@@ -9,7 +9,7 @@ import taichi as ti
 
 import tcloth
 from conftest import hanging_chain
-from tcloth.graph import colour_graph
+from tcloth.geometry.graph import colour_graph
 from tcloth.contact.topology import contact_topology
 
 

@@ -7,7 +7,7 @@ import pytest
 
 import tcloth
 from conftest import hanging_chain
-from tcloth.graph import colour_springs
+from tcloth.geometry.graph import colour_springs
 
 
 def cloth(k, kd=0.0, n=8, pinned=None, gravity=(0.0, -9.81, 0.0)):

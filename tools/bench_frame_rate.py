@@ -38,9 +38,9 @@ import time
 import numpy as np
 
 import tcloth
-from bench_contact import script_scene, thrown
+from tcloth.testing.contact_cases import script_scene, thrown
 from benchcsv import write_csv
-from crossings import count_crossings, triangle_edges
+from tcloth.testing.crossings import count_crossings, triangle_edges
 from tcloth.integrators.base import substep_count
 
 CAPSULE_AXIS = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])

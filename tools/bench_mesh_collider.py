@@ -4,7 +4,7 @@ A 64 x 64 cloth (1.2 m square, 0.2 kg, springs 400 / 80 / 10 N/m, none pinned) f
 from y = 1 onto a sphere of radius 0.35 centred at (0, 0.35, 0) and drapes over it, at one
 step per frame (dt = 1/60) with projective dynamics, for ``--seconds`` of simulated time:
 once on the analytic sphere (``add_sphere``), then on geodesic sphere meshes of about
-10,000 and 100,000 triangles (``tools/meshes.py``'s ``sphere_mesh``, which the Newton peer
+10,000 and 100,000 triangles (``tcloth.testing.meshes.sphere_mesh``, which the Newton peer
 builds too), the same scene otherwise, in one run. Per case: the median ms a step (the first
 step, which compiles, left out), the ratio to the analytic sphere's, the broad phase's share
 (the obstacle pairs' searches: their median wall time a step over the median step's; a
@@ -35,8 +35,8 @@ import numpy as np
 
 import tcloth
 from benchcsv import write_csv
-from crossings import count_inside, count_obstacle_crossings
-from meshes import sphere_mesh
+from tcloth.testing.crossings import count_inside, count_obstacle_crossings
+from tcloth.testing.meshes import sphere_mesh
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 RADIUS, CENTRE = 0.35, (0.0, 0.35, 0.0)

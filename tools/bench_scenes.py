@@ -67,29 +67,14 @@ from tcloth.app.script import (DEFAULTS, build_scene, literal, load_script, timi
                                with_options)
 from tcloth.scene.meshcollider import world_vertices
 from tcloth.scene.scene import KIND_CODE
-from bench_contact import signed_distances
 from benchcsv import write_csv
-from crossings import (count_crossings, count_obstacle_crossings, count_paths_through,
-                       edge_depth, inside_mask, seam_ids, triangle_edges)
+from tcloth.testing.colliders import paths_through, signed_distances
+from tcloth.testing.crossings import (count_crossings, count_obstacle_crossings, edge_depth,
+                                      inside_mask, seam_ids, triangle_edges)
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 SCENES = os.path.join(HERE, "..", "scenes")
 ANALYTIC = ("sphere", "plane", "box")        # the shapes ``signed_distances`` knows
-
-
-def pose(c, t):
-    """(centre, rotation) of a rigid mesh collider at t, from its vertices (least squares
-    of the map from its own frame to the world)."""
-    own = np.asarray(c["vertices"], dtype=np.float64)
-    m, *_ = np.linalg.lstsq(np.c_[own, np.ones(len(own))], world_vertices(c, t), rcond=None)
-    return m[3], m[:3].T
-
-
-def paths_through(c, x0, x1, t0, t1):
-    """How many particle paths x0 -> x1 (over t0 .. t1) pass through the rigid mesh
-    collider c, each path a segment in the mesh's own frame."""
-    (c0, r0), (c1, r1) = pose(c, t0), pose(c, t1)
-    return count_paths_through((x0 - c0) @ r0, (x1 - c1) @ r1, c["vertices"], c["faces"])
 
 
 def crossings(scene, x0, x1, t0, t1, triangles):

@@ -1,5 +1,5 @@
-"""The sliding case: a small cloth slides over a large one without friction, and
-should keep its speed.
+"""The sliding case (``tcloth.testing.contact_cases.sliding``): a small cloth slides over a
+large one without friction, and should keep its speed.
 
 A 0.3 m, 8 x 8 cloth of 20 g, dropped from 9 mm above a 1.2 m, 24 x 24 cloth of 0.3 kg
 that lies on a frictionless floor, moves along it at 1 m/s; self-collision of 6 mm
@@ -17,29 +17,10 @@ import argparse
 import time
 from fractions import Fraction
 
-import numpy as np
-
 import tcloth
-from bench_contact import CLOTH
+from tcloth.testing.contact_cases import sliding
 
 RUNS = "symplectic_euler:1e-4,projective:1/60,xpbd:1/60,vbd:1/60"
-
-
-def scene(lower=(24, 1.2, 0.3), upper=(8, 0.3, 0.02)):
-    """(scene, lower cloth, upper cloth, velocities at the start): the lower cloth
-    (resolution, size in m, mass in kg) lying on a frictionless floor, the upper one 9 mm
-    above it, a size of its own from the lower one's middle, moving at 1 m/s."""
-    s = tcloth.Scene(gravity=(0.0, -9.81, 0.0))
-    (n, size, mass), (m, upper_size, upper_mass) = lower, upper
-    low = s.add_cloth(resolution=(n, n), size=(size, size), center=(0.0, 0.006, 0.0),
-                      mass=mass, **CLOTH)
-    up = s.add_cloth(resolution=(m, m), size=(upper_size, upper_size),
-                     center=(-upper_size, 0.015, 0.0), mass=upper_mass, **CLOTH)
-    s.add_plane((0.0, 0.0, 0.0), (0.0, 1.0, 0.0), friction=0.0)
-    s.set_self_collision(thickness=0.006)
-    v = np.zeros((s.num_particles, 3))
-    v[up.particles.ravel(), 0] = 1.0
-    return s, low, up, v
 
 
 def report(sim, low, up):
@@ -58,7 +39,7 @@ def main():
     for run in args.runs.split(","):
         name, dt = run.split(":")
         dt = float(Fraction(dt))
-        s, low, up, v = scene()
+        s, low, up, v = sliding()
         sim = tcloth.Simulator(s, name, dt=dt)
         sim.set_state(velocities=v)
         steps = int(round(args.seconds / dt))

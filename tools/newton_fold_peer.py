@@ -82,7 +82,7 @@ import numpy as np
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
-from newton_peer import grid_colouring  # noqa: E402
+from newton_peer import grid_colouring, numpy_reference  # noqa: E402
 # tcloth's default strain_bound: (length - rest) / rest beyond it is a torn cloth
 STRAIN_BOUND = 1.0
 UNMAPPED = ("bending", "membrane", "strain_limit", "pressure", "wind", "attraction")
@@ -107,7 +107,7 @@ def export(path, n, state):
     import tcloth
     from tcloth.app.script import load_script
     from tcloth.contact.topology import resolve
-    from bench_self_collision import fold_scene, folded_state, resample
+    from tcloth.testing.folding import fold_scene, folded_state, resample
     tcloth.init(arch="cpu", precision="f32")   # folded_state steps tcloth without the file
     module = load_script(os.path.join(HERE, "..", "scenes", "fold.py"))[0]
     x40, v40 = folded_state(module, state)
@@ -248,7 +248,7 @@ def run(model, solver, steps, dt, rest=None):
 def one_mode(model, meta, data, args, contact):
     """One mode's numbers (module docstring), its step times and end positions; a
     throwaway solver's one step first."""
-    from crossings import count_crossings
+    count_crossings = numpy_reference("crossings").count_crossings
     run(model, make_solver(model, meta, args, contact), 1, args.dt)
     positions, times, strains, speeds = run(
         model, make_solver(model, meta, args, contact), args.steps, args.dt,

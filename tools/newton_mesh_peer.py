@@ -4,7 +4,7 @@ on the CPU.
 
 Run with a Python that has newton (it needs numpy >= 2, so a venv of its own is
 simplest); the benchmark calls it and reads the .npz it writes, then counts the crossings
-and the particles inside the sphere at the end with tools/crossings.py (NumPy only):
+and the particles inside the sphere at the end with tcloth.testing.crossings (NumPy only):
 ``python tools/crossings.py result.npz`` prints them too.
 
 The scene is tcloth's ``add_cloth(resolution=(64, 64), size=(1.2, 1.2), plane="xz",
@@ -12,7 +12,7 @@ center=(0, 1, 0), mass=0.2, pinned=[])`` with springs structural (400, 0.5), she
 (80, 0.25), flexion (10, 0.05) ((k_s N/m, k_d N s/m); Newton's ``add_spring`` takes the
 same k_s and an axial damping k_d in N s/m): particle (i, j) at x = i h - 0.6, y = 1,
 z = j h - 0.6, index j n + i, none pinned, gravity -9.81 along y. The obstacle is
-``tools/meshes.py``'s ``sphere_mesh(0.35, --triangles, center=(0, 0.35, 0))``, the same
+``tcloth/testing/meshes.py``'s ``sphere_mesh(0.35, --triangles, center=(0, 0.35, 0))``, the same
 triangles tcloth's benchmark collides with, a static ``add_shape_mesh`` (body -1). No
 triangle membrane or dihedral bending (Newton's cloth usually has them; here only the
 springs, as tcloth), self-contact off, the (i mod 3, j mod 3) spring colouring of
@@ -60,9 +60,9 @@ import sys
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from meshes import sphere_mesh  # noqa: E402
-from newton_peer import add_grid_springs, timed_steps  # noqa: E402
+from newton_peer import add_grid_springs, numpy_reference, timed_steps  # noqa: E402
 
+sphere_mesh = numpy_reference("meshes").sphere_mesh
 N = 64
 SIZE = 1.2
 HEIGHT = 1.0

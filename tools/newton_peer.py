@@ -17,7 +17,9 @@ Usage: python tools/newton_peer.py --solver vbd|xpbd --n 128 --iterations 10
 The first step is a warm-up (Warp compiles or loads its kernels) and is not timed.
 """
 import argparse
+import importlib.util
 import json
+import os
 import time
 
 import numpy as np
@@ -25,6 +27,18 @@ import numpy as np
 FAMILIES = {"structural": ([(1, 0), (0, 1)], 1000.0, 0.5),
             "shear": ([(1, 1), (-1, 1)], 100.0, 0.25),
             "flexion": ([(2, 0), (0, 2)], 10.0, 0.05)}
+
+
+def numpy_reference(name):
+    """The module tcloth/testing/NAME.py (one that imports NumPy alone: ``meshes``,
+    ``crossings``), read from its file: the peers run in a Python with Newton and no tcloth,
+    and importing the package would import Taichi."""
+    path = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tcloth", "testing",
+                        f"{name}.py")
+    spec = importlib.util.spec_from_file_location(f"tcloth_testing_{name}", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def build(n, mass, device):

@@ -21,7 +21,7 @@ import taichi as ti
 
 from .. import runtime
 from ..errors import SceneError
-from ..graph import csr_layout
+from ..geometry.graph import csr_layout
 from ..scene.scene import KIND_CODE
 
 # the order of SelfCollisionTable.params

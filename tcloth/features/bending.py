@@ -4,7 +4,7 @@ import numpy as np
 import taichi as ti
 
 from .. import runtime
-from ..graph import element_fields
+from ..geometry.graph import element_fields
 from ..scene.hinges import cloth_hinge_parts, cloth_hinges, hinge_weights
 from ..validate import as_warp_weft_per
 from .base import Feature, cloth_selection

@@ -4,7 +4,7 @@ import numpy as np
 
 from .. import runtime
 from ..errors import SceneError
-from ..graph import element_fields
+from ..geometry.graph import element_fields
 from ..validate import as_per_item, as_warp_weft_per
 from .base import Feature, cloth_selection
 

@@ -5,7 +5,7 @@ import numpy as np
 import taichi as ti
 
 from ..errors import SceneError
-from ..graph import incidence
+from ..geometry.graph import incidence
 from ..validate import as_scalar
 from .base import Feature
 

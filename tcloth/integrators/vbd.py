@@ -61,7 +61,7 @@ import taichi as ti
 from ..contact.bounds import DisplacementBounds
 from ..contact.guard import keep_apart
 from ..errors import SceneError
-from ..graph import colour_graph, colour_order, csr_layout
+from ..geometry.graph import colour_graph, colour_order, csr_layout
 from ..runtime import serial
 from ..terms import springs as spring_term
 from ..terms.springs import Springs

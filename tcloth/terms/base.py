@@ -66,7 +66,7 @@ name>``, which the term reads) and the checkpoint.
 import taichi as ti
 
 from .. import runtime
-from ..graph import colour_order, colour_springs
+from ..geometry.graph import colour_order, colour_springs
 from ..runtime import serial
 
 

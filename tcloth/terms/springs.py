@@ -19,7 +19,7 @@ import taichi as ti
 
 from ..model import grid as grid_layout
 from .. import runtime
-from ..graph import csr_layout
+from ..geometry.graph import csr_layout
 from ..model.grid import OWNED
 from ..runtime import cpu, serial
 from .base import ColouredConstraints, Term

@@ -9,7 +9,7 @@ elements on the device, for the features' fields (``tcloth.features``)."""
 import numpy as np
 import taichi as ti
 
-from . import runtime
+from .. import runtime
 
 
 def csr_layout(keys, n, then=None):

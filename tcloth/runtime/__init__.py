@@ -2,6 +2,9 @@
 
 ``init`` may be called again; every call starts a new *generation*, and objects that
 hold Taichi fields from an earlier generation refuse to run (``StaleSimulatorError``).
+The package also holds what the initialisation uses: the caches that make Taichi's
+frontend cheaper to run again (``frontend.py``) and the Vulkan device probe that names
+what ``arch="vulkan"`` runs on (``vulkan_probe.py``).
 """
 from typing import Any, Optional
 
@@ -12,7 +15,7 @@ import numpy as np
 import taichi as ti
 
 from . import frontend
-from .errors import DeviceWarning, SceneError, StaleSimulatorError
+from ..errors import DeviceWarning, SceneError, StaleSimulatorError
 
 frontend.install()
 

@@ -1,5 +1,6 @@
 """Obstacle meshes made with NumPy alone, so that a benchmark and its peers (e.g.
-tools/newton_mesh_peer.py) build the identical triangles.
+tools/newton_mesh_peer.py, which reads this file without importing tcloth) build the
+identical triangles. It imports nothing but NumPy.
 
 ``sphere_mesh(radius, triangles, center=(0, 0, 0))``: a geodesic sphere (an icosahedron
 whose faces are each cut into f x f triangles, the vertices pushed onto the sphere) with
