@@ -108,7 +108,7 @@ def resolve(sim, where):
     if not isinstance(where, str):
         return where
     head, *rest = where.split(".")
-    obj = sim.model.contact if head == "stage" else sim.integrator
+    obj = sim.contact if head == "stage" else sim.integrator
     for attr in rest:
         obj = getattr(obj, attr, None)
     return obj

@@ -41,7 +41,7 @@ SURFACE = 2              # a plane along the surfaces' normal: added to its kind
 # would choose, and the gradient's branch (``chosen_margin``) would not be the one
 # central differences see
 PREFER = 1e-3
-# ``normal_margin``'s choice for a solver's predicted motion (``ContactStage.begin_solve``):
+# ``normal_margin``'s choice for a solver's predicted motion (``ContactStage.search_solve``):
 # where the prediction crosses both planes (a layer landing on another), the surfaces'
 # normal. A prediction is not the motion the solver ends with: the closest points' plane
 # of a landing pair would turn the landing's correction into braking along the layers at

@@ -20,7 +20,7 @@ the state, and ``stats`` and the mesh colliders' counts are as before: nothing c
 nothing moved, nothing kept in a gradient's logs (they are off until ``record``).
 
 What this does not cover compiles later: a solver's calls with its own fields
-(``begin_solve``, ``follow_solve``, ``truncate_solve``, ``begin_hold``: they run in its
+(``search_solve``, ``follow_solve``, ``truncate_solve``, ``begin_hold``: they run in its
 first step, but a branch first taken later compiles then), a list that outgrows its capacity (``search.CandidateSearch.fit``
 doubles it, and every kernel that reads it compiles again; the capacities are chosen so
 that the shipped scenes never do: docs/contact.md, "Compile once"), and a simulator's

@@ -128,7 +128,7 @@ class Trajectory(StepAdjoints):
         self.adjoint.load()
         projection = next((term for term in getattr(self.sim.integrator, "projections", ())
                            if term.name == "self_contact"), None)
-        self.record = StepRecord(self.sim.model, projection)
+        self.record = StepRecord(self.sim.model, self.sim.contact, projection)
         self._projection = (ProjectionAdjoint(projection.table, projection.log.capacity)
                             if projection is not None else None)
         self._sweep = None          # the collider sweep's adjoint, built at its first cut

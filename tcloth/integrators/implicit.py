@@ -86,8 +86,8 @@ class BackwardEuler(Integrator):
                 "exact_hessian": None}
     live_options = frozenset({"newton_iterations", "newton_tol", "cg_tol", "cg_max_iterations"})
 
-    def __init__(self, model, **options):
-        super().__init__(model, **options)
+    def __init__(self, model, contact=None, **options):
+        super().__init__(model, contact, **options)
         exact = self.options["exact_hessian"]
         line_search = self.options["line_search"]
         if exact not in (None, True, False):
@@ -103,11 +103,11 @@ class BackwardEuler(Integrator):
                                  "couplings: use 'cg' (or 'auto')")
             solver = "cg"
         self.grid = single_grid(model, solver)
-        self.potential = IncrementalPotential(model, exact=self.exact)
+        self.potential = IncrementalPotential(model, contact, exact=self.exact)
         self.hessian = hessian.make(model, self.potential, self.exact, self.grid)
         self.x_try = ti.Vector.field(3, model.mass.dtype, shape=model.particle_count)
         # mesh colliders: the stage's planes as a penalty after the solve (``hold.py``)
-        self.stage = model.contact if self.potential.hold is not None else None
+        self.stage = contact if self.potential.hold is not None else None
         self.stats = {}
         self.unconverged = 0
         self._eps = float(np.finfo(runtime.numpy_real()).eps)

@@ -1,5 +1,5 @@
 """Self-contact inside projective dynamics' step: the contact stage's separating
-planes (``ContactStage.begin_solve``, ``contact/guard.py``) as one-sided constraints of the
+planes (``ContactStage.search_solve``, ``contact/guard.py``) as one-sided constraints of the
 step's minimisation.
 
 Each candidate pair keeps, for every vertex a of its first side and b of its second,
@@ -34,7 +34,7 @@ import taichi as ti
 
 from .. import runtime
 from ..runtime import serial
-from ..contact.normals import VERTEX_PAIRS, spans
+from .normals import VERTEX_PAIRS, spans
 
 PLANE_STIFFNESS = 10.0   # the most a vertex's constraints weigh together, over its A_pp
 # active vertex pairs a particle held at first (more grows the list: the kernels that
