@@ -53,7 +53,8 @@ from ..runtime import jacobi_apply, jacobi_zero, serial
 from ..geometry.shapes import SHAPES
 from .broad import near
 from .field_sweep import field_paths
-from .normals import LEAST_GAP, VERTEX_PAIRS, normal_margin, room, spans, vertex_normals
+from .normals import (LEAST_GAP, VERTEX_PAIRS, kept_apart, normal_margin, plane_row, room,
+                      spans, vertex_normals)
 from .search import POINT_TRIANGLE
 
 SLACK = 1e-3             # a violation below this fraction of delta is no violation
@@ -204,12 +205,10 @@ def keep_apart(cl: ti.template(), pl: ti.template(), count: ti.i32, x: ti.templa
     closer = 0
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
-        ids, kind = cl.ids[c], cl.kind[c]
-        n, delta = pl.n[c], pl.delta[c]
-        if delta > 0.0:
-            for a, b in ti.static(VERTEX_PAIRS):
-                if spans(kind, a, b):
-                    closer += _separate(ids, a, b, n, delta, x, inv_mass, dx, hits)
+        ids, kind, n, delta = plane_row(cl, pl, c)
+        for a, b in ti.static(VERTEX_PAIRS):
+            if kept_apart(kind, delta, a, b):
+                closer += _separate(ids, a, b, n, delta, x, inv_mass, dx, hits)
     jacobi_apply(x, dx, hits)
     return closer
 
@@ -228,8 +227,7 @@ def violated_rows(cl, pl, count, x1):
     bad = 0
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
-        ids, kind = cl.ids[c], cl.kind[c]
-        n, delta = pl.n[c], pl.delta[c]
+        ids, kind, n, delta = plane_row(cl, pl, c)
         if delta > 0.0:
             worst = 0.0
             for a, b in ti.static(VERTEX_PAIRS):

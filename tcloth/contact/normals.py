@@ -211,6 +211,20 @@ def vertex_normals(table, x, out):
 
 
 @ti.func
+def plane_row(cl, pl, c):
+    """Candidate row c of list cl with its plane (``guard.Planes`` pl): (ids, kind, the
+    plane's normal n, its delta)."""
+    return cl.ids[c], cl.kind[c], pl.n[c], pl.delta[c]
+
+
+@ti.func
+def kept_apart(kind, delta, a: ti.template(), b: ti.template()):
+    """Whether a row's plane keeps its vertices a and b (a pair of VERTEX_PAIRS) apart: the
+    plane is set (delta > 0) and they lie on its two sides (``spans``)."""
+    return delta > 0.0 and spans(kind, a, b)
+
+
+@ti.func
 def spans(kind, a: ti.template(), b: ti.template()):
     """Whether vertices a and b (a pair of VERTEX_PAIRS) lie on the two sides of a contact
     of ``kind``: the point and a triangle's vertex, or a vertex of each edge."""

@@ -17,7 +17,7 @@ import taichi as ti
 from .. import runtime
 from ..runtime import serial
 from .guard import SLACK
-from .normals import VERTEX_PAIRS, spans
+from .normals import VERTEX_PAIRS, kept_apart, plane_row, spans
 
 HELD_ALONG = 0.5         # a held vertex moves along a normal only if this much is left
 JACOBI = False           # the Jacobi passes on CPUs too (``project``)
@@ -188,13 +188,11 @@ def _gauss_seidel(cl: ti.template(), pl: ti.template(), count: ti.i32, x1: ti.te
     for _ in range(sweeps):
         corrected = 0
         for c in range(count):
-            ids, kind = cl.ids[c], cl.kind[c]
-            n, delta = pl.n[c], pl.delta[c]
-            if delta > 0.0:
-                for a, b in ti.static(VERTEX_PAIRS):
-                    if spans(kind, a, b):
-                        corrected += _correct_now(ids, kind + pl.surface[c], a, b, n,
-                                                  delta, x1, v1, inv_mass, held, log)
+            ids, kind, n, delta = plane_row(cl, pl, c)
+            for a, b in ti.static(VERTEX_PAIRS):
+                if kept_apart(kind, delta, a, b):
+                    corrected += _correct_now(ids, kind + pl.surface[c], a, b, n, delta, x1,
+                                              v1, inv_mass, held, log)
         if ran == 0:
             found = corrected
         ran += 1
@@ -220,18 +218,16 @@ def _project_pass(cl: ti.template(), pl: ti.template(), count: ti.i32, x1: ti.te
     for c in range(count):
         if ti.static(first):
             pl.touched[c] = 0
-        ids, kind = cl.ids[c], cl.kind[c]
-        n, delta, touched = pl.n[c], pl.delta[c], pl.touched[c]
-        if delta > 0.0:
-            for a, b in ti.static(VERTEX_PAIRS):
-                if spans(kind, a, b):
-                    _count(ids, a, b, n, delta, x1, v1, inv_mass, held, hits, touched,
-                           velocity)
+        ids, kind, n, delta = plane_row(cl, pl, c)
+        touched = pl.touched[c]
+        for a, b in ti.static(VERTEX_PAIRS):
+            if kept_apart(kind, delta, a, b):
+                _count(ids, a, b, n, delta, x1, v1, inv_mass, held, hits, touched, velocity)
     corrected = 0
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
-        ids, kind = cl.ids[c], cl.kind[c]
-        n, delta, touched = pl.n[c], pl.delta[c], pl.touched[c]
+        ids, kind, n, delta = plane_row(cl, pl, c)
+        touched = pl.touched[c]
         if delta > 0.0:
             for a, b in ti.static(VERTEX_PAIRS):
                 if spans(kind, a, b):
