@@ -66,11 +66,11 @@ class SolveContact:
         they hold the motion x0 -> x, else searched again for it; with ``choose``, the
         planes x crosses chosen again for that motion (``guard.choose_again``)."""
         cl, count = self.solve_list
-        held = (self.broad.covers(x0, x) if cl is self.broad.candidates
-                else self.swept.holds(x0, x))
-        if held and choose:
+        covered = (self.broad.covers(x0, x) if cl is self.broad.candidates
+                   else self.swept.holds(x0, x))
+        if covered and choose:
             guard.choose_again(cl, self.planes_of(cl), count, x0, x, self.thickness)
-        return ((cl, self.planes_of(cl), count) if held
+        return ((cl, self.planes_of(cl), count) if covered
                 else self.search_solve(x0, x, self.solve_near, self.solve_surface))
 
     def truncate_solve(self, x0, x_pred, v):

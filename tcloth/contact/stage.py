@@ -123,7 +123,7 @@ class ContactStage(SolveContact, BatchSteps, WarmUp):
         self.x_start = (ti.Vector.field(3, real, shape=n)
                         if self.colliders or self.table is not None else None)
         # the collider's outward normal where it stopped a particle's path this step, else 0
-        self.held = ti.Vector.field(3, real, shape=n)
+        self.stop_normal = ti.Vector.field(3, real, shape=n)
         # paths the collider sweep cut inside batches of substeps: in all, in the last step
         self.batch_cuts = ti.field(ti.i32, shape=2)
         self.stats = {key: 0 for key in STATS}
@@ -270,7 +270,7 @@ class ContactStage(SolveContact, BatchSteps, WarmUp):
                 if not cut and not guard.violations(cl, self.planes_of(cl), count, x1):
                     break
             corrected, sweeps = projection.project(cl, self.planes_of(cl), count, x1, v1,
-                                                   self.inv_mass, self.held, SWEEPS,
+                                                   self.inv_mass, self.stop_normal, SWEEPS,
                                                    self.work, self.log)
             self.stats["guard_corrections"] += corrected
             self.stats["guard_sweeps"] += sweeps
@@ -292,17 +292,17 @@ class ContactStage(SolveContact, BatchSteps, WarmUp):
 
     def _sweep(self, x0, x1, v1, t0, dt, first, obstacle=True):
         """The colliders' sweep (``guard.sweep_colliders``; ``first``: the step's first,
-        which forgets who was held) and, with ``obstacle``, the mesh colliders' planes
+        which forgets who was stop_normal) and, with ``obstacle``, the mesh colliders' planes
         (x0, t0 and dt then the step's); the paths it cut and the vertices it moved."""
         if self.colliders is None:
             return 0
         cut = int(guard.sweep_colliders_kernel(self.colliders, self.inv_mass, x0, x1, v1, t0,
-                                               dt, self.held, first, self.sweep_log))
+                                               dt, self.stop_normal, first, self.sweep_log))
         self.stats["collider_paths_cut"] += cut
         if self.obstacle is not None and obstacle:
             if cut or not first:        # x1 moved since ``begin`` computed the planes
                 self.obstacle.cover(x0, x1, t0, dt, OBSTACLE_MARGIN * self.obstacle.thickness)
-            corrected = self.obstacle.project(x0, x1, v1, self.held, t0, dt, SWEEPS, ROUNDS)
+            corrected = self.obstacle.project(x0, x1, v1, self.stop_normal, t0, dt, SWEEPS, ROUNDS)
             self.stats["obstacle_corrections"] += corrected
             cut += corrected
         return cut

@@ -223,9 +223,9 @@ class Projective(Integrator):
                 first = last if first is None else first
                 if aa is not None and last > 0.0:
                     aa.mix(x, v, self.x0, h, last)
-        held = 0
+        hold_iterations = 0
         if self.has_hold:
-            held, iters = self._hold(state_in, x, v, h, t1)
+            hold_iterations, iters = self._hold(state_in, x, v, h, t1)
             cg_total += iters
         if self.has_colliders:
             self._friction(x, v, h)
@@ -234,7 +234,7 @@ class Projective(Integrator):
         state_out.t = self._t1 = t1
         self.stats = {"iterations": self.options["iterations"], "cg_iterations": cg_total,
                       "residual": float(np.sqrt(last / first)) if first else 0.0,
-                      "hold_iterations": held,
+                      "hold_iterations": hold_iterations,
                       "anderson_restarts": aa.restarts if aa is not None else 0,
                       "plane_pairs": self._plane_pairs, "plane_cuts": self._plane_cuts}
 
