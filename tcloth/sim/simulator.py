@@ -102,7 +102,7 @@ class Simulator(LiveParameters, CurrentMesh):
         integrator: the integrator, built for ``model`` and ``contact``.
     """
 
-    def __init__(self, scene: Scene, integrator: str = "symplectic_euler", dt: float = 1e-3,
+    def __init__(self, scene: Scene, integrator: str = "symplectic_euler", dt: float = 1e-3, *,
                  grid_stencil: bool = True, position_bound: float = 1e6,
                  velocity_bound: float = 1e8, strain_bound: Optional[float] = 1.0,
                  energy_bound: bool = True, strain_limiting: bool = True,
