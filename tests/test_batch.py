@@ -237,9 +237,9 @@ def test_fusion_names_what_keeps_a_scene_out_of_batches(f64):
     scene.set_self_collision()          # the explicit integrators batch between its stops
     sim = tcloth.Simulator(scene)
     assert sim.fusion() is None
-    sim.model.contact.record(True)          # a gradient's run: every step from Python
+    sim.contact.record(True)          # a gradient's run: every step from Python
     assert "gradient" in sim.fusion()
-    sim.model.contact.record(False)
+    sim.contact.record(False)
     assert sim.fusion() is None
     assert "projects" in tcloth.Simulator(scene, "xpbd").fusion()
     assert "every iteration" in tcloth.Simulator(scene, "vbd").fusion()

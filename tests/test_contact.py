@@ -157,7 +157,7 @@ def test_the_frame_rate_solvers_keep_the_planes_inside_their_iterations(f32, int
                                                                          jacobi, monkeypatch):
     """Two 12 x 12 cloths thrown at each other at 10 m/s, one step of 1/60 per frame and
     one substep: with the contact stage's planes inside the iterations
-    (``ContactStage.begin_solve``, ``guard.keep_apart``) the run has no crossing, keeps
+    (``ContactStage.search_solve``, ``ContactStage.keep_apart``) the run has no crossing, keeps
     the layers' order and leaves the guard less to correct: without them (the planes'
     list emptied) the guard moved 795 vertex pairs apart after either solver, with them
     26 after XPBD and 553 after VBD (whose Jacobi self-contact terms and Newton steps
@@ -303,7 +303,7 @@ def test_displacement_bounds_keep_any_moves_inside_them_crossing_free(f64):
     x = sim.positions()
     assert count_crossings(x, scene.triangles) == 0
     bounds = DisplacementBounds(sim.model.inv_mass)
-    sim.model.contact.detect_bounds(bounds, sim.state.x)
+    sim.contact.detect_bounds(bounds, sim.state.x)
     radius = bounds.radius.to_numpy()
     # graph distance >= 3 from each particle, by breadth-first rings of the mesh edges
     topo = contact_topology(scene)
@@ -454,7 +454,7 @@ def test_the_swept_list_holds_every_pair_that_can_meet_on_a_motion_it_holds(f64)
     thickness, margin = 0.01, 0.004
     scene.set_self_collision(thickness=thickness)
     sim = tcloth.Simulator(scene)
-    swept = sim.model.contact.swept
+    swept = sim.contact.swept
     x0 = scene.positions + rng.normal(scale=0.003, size=scene.positions.shape)
     layer = np.repeat(np.arange(3), 36)[:, None]
     # the outer layers close on the middle one by 1 cm each, which turns a little; a

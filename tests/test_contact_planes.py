@@ -1,4 +1,4 @@
-"""Self-contact inside projective dynamics' global step (tcloth/integrators/contact_planes.py):
+"""Self-contact inside projective dynamics' global step (tcloth/contact/planes.py):
 the planes' active vertex pairs, forces and matrix against a NumPy reference and finite
 differences, and what they change at one step per frame against the same runs without
 them (``planes=False``), side by side."""
@@ -12,7 +12,7 @@ import tcloth
 from tcloth import runtime
 from tcloth.contact.search import POINT_TRIANGLE
 from tcloth.grad import Trajectory
-from tcloth.integrators import contact_planes
+from tcloth.contact import planes as contact_planes
 
 from tcloth.testing import folding
 from tcloth.testing.contact_cases import CLOTH, run_case, thrown
@@ -43,7 +43,7 @@ def layers_pressed(seed=0):
     pressed = x0.copy()
     pressed[:36, 1] -= 0.008
     pressed += np.random.default_rng(seed).normal(scale=5e-4, size=x0.shape)
-    contacts = sim.model.contact.begin_solve(field(x0), field(pressed))
+    contacts = sim.contact.search_solve(field(x0), field(pressed))
     return sim, contacts, pressed
 
 
@@ -121,7 +121,7 @@ def test_planes_between_two_layers_let_one_slide_over_the_other(f64):
     x0 = scene.positions.astype(np.float64)
     moved = x0.copy()
     moved[36:, 0] += 1.0 / 60.0
-    cl, pl, rows = sim.model.contact.begin_solve(field(x0), field(moved))
+    cl, pl, rows = sim.contact.search_solve(field(x0), field(moved))
     ids, kind = cl.ids.to_numpy()[:rows], cl.kind.to_numpy()[:rows]
     n, delta = pl.n.to_numpy()[:rows], pl.delta.to_numpy()[:rows]
     low = set(lower.particles.ravel().tolist())

@@ -157,7 +157,7 @@ def test_the_guards_projection_is_differentiated_as_its_corrections(f64, prepare
     masses through its corrections) matches central differences within 1e-5 (measured:
     1e-10 to 2e-7; with the planes frozen it missed by 4e-2)."""
     trajectory = prepared("backward_euler")[0]
-    sim, stage = trajectory.sim, trajectory.sim.model.contact
+    sim, stage = trajectory.sim, trajectory.sim.contact
     thrown = _thrown(trajectory, 1.5)
     sim.reset()
     sim.set_state(trajectory.value("positions"), thrown)
@@ -239,7 +239,7 @@ def test_the_fail_safe_is_differentiated_as_its_cuts(f64, monkeypatch):
         result = trajectory.gradient(loss)
     assert result.projected_steps == [0] and not result.guarded_steps
     assert trajectory.sim.contact_stats()["failsafe_vertices"] > 0
-    kinds = trajectory.sim.model.contact.truncation_log.entries()[2]
+    kinds = trajectory.sim.contact.truncation_log.entries()[2]
     assert (kinds >= SURFACE).sum() > 10 and (kinds < SURFACE).sum() > 5
     check_gradients(trajectory, loss, result, ("positions", "velocities", "masses"), rng,
                     1e-8)
@@ -325,7 +325,7 @@ def test_a_planes_normal_and_margin_have_their_gradient(f64, choice):
     1e-6 relative (measured 4e-10 for the surfaces' at a step of 1e-8)."""
     scene = _stack()
     sim = tcloth.Simulator(scene, "backward_euler", dt=2e-3)
-    broad = sim.model.contact.broad
+    broad = sim.contact.broad
     rows = broad.count
     ids = ti.Vector.field(4, ti.i32, shape=rows)
     kind = ti.field(ti.i32, shape=rows)
@@ -340,7 +340,7 @@ def test_a_planes_normal_and_margin_have_their_gradient(f64, choice):
     wn.from_numpy(rng.standard_normal((rows, 3)))
     wd.from_numpy(rng.standard_normal(rows))
     x0 = scene.positions.astype(np.float64) + 2e-4 * rng.standard_normal((n, 3))
-    table = sim.model.contact.table
+    table = sim.contact.table
 
     def value(positions):
         x.from_numpy(positions)

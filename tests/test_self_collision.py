@@ -311,7 +311,7 @@ def test_kept_candidate_list_misses_no_contact(f64):
     the forces from the kept list equal, every 20 steps, those from a list rebuilt at that
     state."""
     sim = tcloth.Simulator(scene_module("fold").build(resolution=(12, 12)), dt=2.5e-4)
-    broad = sim.model.contact.broad
+    broad = sim.contact.broad
     sim.step(2800)
     stepping_rebuilds, contacts = 0, []
     for _ in range(40):
@@ -319,7 +319,7 @@ def test_kept_candidate_list_misses_no_contact(f64):
         sim.step(20)
         stepping_rebuilds += broad.rebuilds - before
         kept = sim.forces()
-        sim.model.contact.refresh(sim.state.x)          # a fresh list at this state
+        sim.contact.refresh(sim.state.x)          # a fresh list at this state
         fresh = sim.forces()
         contacts.append(sum(sim.self_contacts().values()))
         np.testing.assert_allclose(kept, fresh, rtol=0, atol=1e-12 * np.abs(fresh).max())
@@ -388,7 +388,7 @@ def test_the_list_holds_each_pair_within_reach_once_and_skips_only_far_rows(f64)
     x_ref = scene.positions + rng.normal(scale=0.004, size=scene.positions.shape)
     sim = tcloth.Simulator(scene)
     sim.set_state(positions=x_ref)
-    broad = sim.model.contact.broad
+    broad = sim.contact.broad
     cl, count = broad.candidates, broad.count
     ids, kinds = cl.ids.to_numpy()[:count], cl.kind.to_numpy()[:count]
     listed = [pair_key(i, k) for i, k in zip(ids, kinds)]
@@ -434,7 +434,7 @@ def test_displacement_test_matches_numpy_on_one_thread_and_on_several():
             scene.add_cloth(resolution=(40, 40), **CLOTH)
             scene.set_self_collision(thickness=0.005)
             sim = tcloth.Simulator(scene, dt=1e-3)
-            broad = sim.model.contact.broad
+            broad = sim.contact.broad
             x_ref = sim.positions()
             other = sim.model.state()
             assert len(x_ref) > 1.5 * broad_phase.DISPLACEMENT_BLOCK

@@ -141,7 +141,7 @@ def test_each_vertex_self_contact_is_evaluated_afresh_and_matches_finite_differe
     x, start_x = sim.state.x, vbd.potential.x0
     vbd.potential.begin(sim.state.x, sim.state.v, h, 0.0, vbd.prev)
     term = vbd.vertex_terms[0]
-    cl, rows = sim.model.contact.candidates, sim.model.contact.count
+    cl, rows = sim.contact.candidates, sim.contact.count
     ids = cl.ids.to_numpy()[:rows]
     start, entries = term.rows.start.to_numpy(), term.rows.entries.to_numpy()
     for p in range(len(x0)):
@@ -182,7 +182,7 @@ def test_vbd_reads_the_contact_list_the_stage_made_again_larger(f64):
     grown, fresh = (tcloth.Simulator(layers(), "vbd", dt=1 / 60, substeps=1)
                     for _ in range(2))
     grown.step(1)
-    broad = grown.model.contact.broad
+    broad = grown.contact.broad
     term = grown.integrator.vertex_terms[0]
     before = term.layout()
     broad.candidates = broad._list(2 * broad.candidates.capacity)
@@ -192,7 +192,7 @@ def test_vbd_reads_the_contact_list_the_stage_made_again_larger(f64):
     grown.step(2)
     fresh.step(2)
     assert term.layout() > before
-    assert grown.model.contact.candidates is broad.candidates
+    assert grown.contact.candidates is broad.candidates
     assert np.array_equal(grown.positions(), fresh.positions())
     assert np.abs(grown.positions() - x).max() > 1e-3
 

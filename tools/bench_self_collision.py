@@ -148,7 +148,7 @@ def main():
             sim.set_state(positions=x, velocities=v)
             sim.step(max(200, int(round(args.settle / dt))))
             if mode == "on":
-                broad = sim.model.contact.broad
+                broad = sim.contact.broad
                 first = broad.rebuilds
             ms, stepped = time_steps(sim, args.steps)
             result[f"{mode}_ms_per_substep"] = ms

@@ -45,18 +45,24 @@ def _device_arguments(parser):
     parser.add_argument("--precision", choices=["f32", "f64"], help="float precision")
 
 
+def _stepping_arguments(parser, steps, integrator_help):
+    """--integrator, --dt, the steps a frame (their flag: ``steps``) and the device, as
+    render and view take them."""
+    parser.add_argument("--integrator", help=integrator_help)
+    parser.add_argument("--dt", type=float, help="time step, s (steps per frame follow it: "
+                                                 f"as many as fill a frame, unless {steps} "
+                                                 "is given too)")
+    parser.add_argument(steps, type=int, help="simulator steps per frame (default: the "
+                                              "script's steps_per_frame; with --dt: as many "
+                                              "as fill a frame)")
+    _device_arguments(parser)
+
+
 def _render_parser(parser):
     parser.add_argument("--out", help="output .mp4, or a folder for PNG frames "
                                       "(default out/NAME.mp4)")
     parser.add_argument("--frames", type=int, help="number of frames")
-    parser.add_argument("--integrator", help="integrator name")
-    parser.add_argument("--dt", type=float, help="time step, s (steps per frame follow it: "
-                                                 "as many as fill a frame, unless "
-                                                 "--steps-per-frame is given too)")
-    parser.add_argument("--steps-per-frame", type=int, help="simulator steps per frame "
-                                                            "(default: the script's; with "
-                                                            "--dt: as many as fill a frame)")
-    _device_arguments(parser)
+    _stepping_arguments(parser, "--steps-per-frame", "integrator name")
     parser.add_argument("--width", type=int, help="image width, pixels")
     parser.add_argument("--height", type=int, help="image height, pixels")
     parser.add_argument("--supersample", type=int, help="s x s samples per pixel")
@@ -236,14 +242,7 @@ def main(argv=None):
     p_view = sub.add_parser("view", help="the live sandbox: simulate a scene in a window and "
                                          "play with it")
     p_view.add_argument("script", help="path of a scene script, e.g. scenes/hanging_cloth.py")
-    p_view.add_argument("--integrator", help="integrator name (switchable in the window)")
-    p_view.add_argument("--dt", type=float, help="time step, s (substeps follow it: as "
-                                                 "many as fill a frame, unless --substeps "
-                                                 "is given too)")
-    p_view.add_argument("--substeps", type=int, help="simulator steps per frame (default: "
-                                                     "the script's steps_per_frame; with --dt: "
-                                                     "as many as fill a frame)")
-    _device_arguments(p_view)
+    _stepping_arguments(p_view, "--substeps", "integrator name (switchable in the window)")
     p_view.add_argument("--width", type=int, default=1280, help="window width, pixels")
     p_view.add_argument("--height", type=int, default=800, help="window height, pixels")
     p_view.add_argument("--wind", action="store_true",

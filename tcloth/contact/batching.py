@@ -32,10 +32,10 @@ class BatchSteps:
         cut = 0
         if ti.static(bool(self.colliders)):
             if ti.static(bool(self.broad)):
-                for p in range(self.held.shape[0]):
-                    self.held[p] = ti.Vector([0.0, 0.0, 0.0])
+                for p in range(self.stop_normal.shape[0]):
+                    self.stop_normal[p] = ti.Vector([0.0, 0.0, 0.0])
             cut = guard.sweep_colliders(self.colliders, self.inv_mass, self.x_start, x, v,
-                                        t, dt, self.held, self.sweep_log, False)
+                                        t, dt, self.stop_normal, self.sweep_log, False)
             self.batch_cuts[0] += cut
             self.batch_cuts[1] = cut
         unfinished = 0

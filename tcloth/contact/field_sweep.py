@@ -26,7 +26,7 @@ HALVINGS = 30     # bisection steps for a path's stop (a billionth of the way to
 
 
 @ti.func
-def field_paths(table, g: ti.template(), p, x0, x1, v1, t0, dt, held, back_off):
+def field_paths(table, g: ti.template(), p, x0, x1, v1, t0, dt, stop_normal, back_off):
     """Particle p's path x0 -> x1 against each switched-on field row of mesh group g
     (module docstring); a stopped path ends ``back_off`` or more before the entry.
     Returns how many rows stopped it."""
@@ -53,7 +53,7 @@ def field_paths(table, g: ti.template(), p, x0, x1, v1, t0, dt, held, back_off):
                     stop = 0.0
             if stop >= 0.0:
                 _ride(table.sdf, f, col, r1, c1, a + stop * rel / ti.max(length, 1e-30), p,
-                      t0 + dt, x1, v1, held)
+                      t0 + dt, x1, v1, stop_normal)
                 cut += 1
     return cut
 
@@ -77,13 +77,13 @@ def _stop_before(sdf, f, a, d, phi0, thickness, hit, back_off):
 
 
 @ti.func
-def _ride(sdf, f, col, r1, c1, q, p, t1, x1, v1, held):
+def _ride(sdf, f, col, r1, c1, q, p, t1, x1, v1, stop_normal):
     """Particle p ends at q (the mesh's frame) carried to the pose (r1, c1) at t1, its
-    velocity into the surface relative to the surface's there removed; ``held`` gets the
+    velocity into the surface relative to the surface's there removed; ``stop_normal`` gets the
     surface's normal."""
     x1[p] = r1 @ q + c1
     _phi, n, u, _banded = sdf.contact(col, f, x1[p], t1)
     vn = (v1[p] - u).dot(n)
     if vn < 0.0:
         v1[p] -= vn * n
-    held[p] = n
+    stop_normal[p] = n

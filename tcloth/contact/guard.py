@@ -53,7 +53,8 @@ from ..runtime import jacobi_apply, jacobi_zero, serial
 from ..geometry.shapes import SHAPES
 from .broad import near
 from .field_sweep import field_paths
-from .normals import LEAST_GAP, VERTEX_PAIRS, normal_margin, room, spans, vertex_normals
+from .normals import (LEAST_GAP, VERTEX_PAIRS, kept_apart, normal_margin, plane_row, room,
+                      spans, vertex_normals)
 from .search import POINT_TRIANGLE
 
 SLACK = 1e-3             # a violation below this fraction of delta is no violation
@@ -204,12 +205,10 @@ def keep_apart(cl: ti.template(), pl: ti.template(), count: ti.i32, x: ti.templa
     closer = 0
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
-        ids, kind = cl.ids[c], cl.kind[c]
-        n, delta = pl.n[c], pl.delta[c]
-        if delta > 0.0:
-            for a, b in ti.static(VERTEX_PAIRS):
-                if spans(kind, a, b):
-                    closer += _separate(ids, a, b, n, delta, x, inv_mass, dx, hits)
+        ids, kind, n, delta = plane_row(cl, pl, c)
+        for a, b in ti.static(VERTEX_PAIRS):
+            if kept_apart(kind, delta, a, b):
+                closer += _separate(ids, a, b, n, delta, x, inv_mass, dx, hits)
     jacobi_apply(x, dx, hits)
     return closer
 
@@ -228,8 +227,7 @@ def violated_rows(cl, pl, count, x1):
     bad = 0
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
-        ids, kind = cl.ids[c], cl.kind[c]
-        n, delta = pl.n[c], pl.delta[c]
+        ids, kind, n, delta = plane_row(cl, pl, c)
         if delta > 0.0:
             worst = 0.0
             for a, b in ti.static(VERTEX_PAIRS):
@@ -390,15 +388,15 @@ class SweepLog(_CutLog):
 
 
 @ti.func
-def _stop(p, at, n, u, dt, x1, v1, held):
+def _stop(p, at, n, u, dt, x1, v1, stop_normal):
     """Particle p stopped at ``at`` (at the step's start, in the frame of a collider moving
     at u, outward normal n there): it ends at ``at`` carried by the collider, its velocity
-    into the collider removed, and held with n."""
+    into the collider removed, and its stop_normal set to n."""
     x1[p] = at + dt * u
     vn = (v1[p] - u).dot(n)
     if vn < 0.0:
         v1[p] -= vn * n
-    held[p] = n
+    stop_normal[p] = n
 
 
 @ti.func
@@ -424,14 +422,14 @@ def _offset_stop(table: ti.template(), shape: ti.template(), col, start, d, phi0
 
 
 @ti.func
-def sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held, log: ti.template(),
+def sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, stop_normal, log: ti.template(),
                     keep: ti.template()):
     """Each free particle's path from x0 to x1 against every switched-on collider, in the
     collider's frame (it moves by dt times its velocity): a path from outside that enters
     it ends at the entry, riding with the collider, its velocity into it removed; a
     particle that started inside and would end deeper stays where it was relative to it.
     Returns how many paths were cut (a mesh field's: ``field_sweep.py``);
-    ``held`` gets the collider's outward normal at the stop of each particle cut."""
+    ``stop_normal`` gets the collider's outward normal at the stop of each particle cut."""
     clamped = 0
     ti.loop_config(serialize=ti.static(serial(x1)))
     for p in range(x1.shape[0]):
@@ -440,7 +438,7 @@ def sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held, log: ti.template(
                 # a certified mesh's paths are kept off it by its pairs' planes
                 # (``obstacle.py``), a field's by its own sweep
                 if ti.static(SHAPES[g.shape].meshed and table.fields > 0):
-                    clamped += field_paths(table, g, p, x0, x1, v1, t0, dt, held, BACK_OFF)
+                    clamped += field_paths(table, g, p, x0, x1, v1, t0, dt, stop_normal, BACK_OFF)
                 if ti.static(not SHAPES[g.shape].meshed):
                     for k in range(g.first, g.first + g.count):
                         col = table.data[k]
@@ -459,7 +457,7 @@ def sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held, log: ti.template(
                                                         hit, t0)
                                     entry = start + stop * d
                                     _phi, n = table.distance(g.shape, col, entry, t0)
-                                    _stop(p, entry, n, u, dt, x1, v1, held)
+                                    _stop(p, entry, n, u, dt, x1, v1, stop_normal)
                                     entered = True
                                     if ti.static(keep):
                                         log.keep(p, k, PATH if stop > 0.0 else START,
@@ -471,7 +469,7 @@ def sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held, log: ti.template(
                                 # stays where it was
                                 phi1, _n1 = table.distance(g.shape, col, x1[p], t0 + dt)
                                 if phi1 < ti.min(phi0, 0.0):
-                                    _stop(p, start, n0, u, dt, x1, v1, held)
+                                    _stop(p, start, n0, u, dt, x1, v1, stop_normal)
                                     entered = True
                                     if ti.static(keep):
                                         log.keep(p, k, START, 0.0)
@@ -483,16 +481,16 @@ def sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held, log: ti.template(
 @ti.kernel
 def sweep_colliders_kernel(table: ti.template(), inv_mass: ti.template(), x0: ti.template(),
                            x1: ti.template(), v1: ti.template(), t0: float, dt: float,
-                           held: ti.template(), first: ti.template(),
+                           stop_normal: ti.template(), first: ti.template(),
                            log: ti.template()) -> ti.i32:
-    """``sweep_colliders``; ``first``: held = 0 before (the step's first sweep), and its
+    """``sweep_colliders``; ``first``: stop_normal = 0 before (the step's first sweep), and its
     cuts kept in ``log`` while it is on."""
     cut = 0
     if ti.static(first):
-        ti.loop_config(serialize=ti.static(serial(held)))
-        for p in range(held.shape[0]):
-            held[p] = ti.Vector([0.0, 0.0, 0.0])
-        cut = sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held, log, True)
+        ti.loop_config(serialize=ti.static(serial(stop_normal)))
+        for p in range(stop_normal.shape[0]):
+            stop_normal[p] = ti.Vector([0.0, 0.0, 0.0])
+        cut = sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, stop_normal, log, True)
     else:
-        cut = sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, held, log, False)
+        cut = sweep_colliders(table, inv_mass, x0, x1, v1, t0, dt, stop_normal, log, False)
     return cut

@@ -41,7 +41,7 @@ SURFACE = 2              # a plane along the surfaces' normal: added to its kind
 # would choose, and the gradient's branch (``chosen_margin``) would not be the one
 # central differences see
 PREFER = 1e-3
-# ``normal_margin``'s choice for a solver's predicted motion (``ContactStage.begin_solve``):
+# ``normal_margin``'s choice for a solver's predicted motion (``ContactStage.search_solve``):
 # where the prediction crosses both planes (a layer landing on another), the surfaces'
 # normal. A prediction is not the motion the solver ends with: the closest points' plane
 # of a landing pair would turn the landing's correction into braking along the layers at
@@ -208,6 +208,20 @@ def vertex_normals(table, x, out):
         c = (x[tri[1]] - x[tri[0]]).cross(x[tri[2]] - x[tri[0]])
         for k in ti.static(range(3)):
             out[tri[k]] += c
+
+
+@ti.func
+def plane_row(cl, pl, c):
+    """Candidate row c of list cl with its plane (``guard.Planes`` pl): (ids, kind, the
+    plane's normal n, its delta)."""
+    return cl.ids[c], cl.kind[c], pl.n[c], pl.delta[c]
+
+
+@ti.func
+def kept_apart(kind, delta, a: ti.template(), b: ti.template()):
+    """Whether a row's plane keeps its vertices a and b (a pair of VERTEX_PAIRS) apart: the
+    plane is set (delta > 0) and they lie on its two sides (``spans``)."""
+    return delta > 0.0 and spans(kind, a, b)
 
 
 @ti.func

@@ -226,7 +226,7 @@ class ObstaclePairs:
         return max(float(excess(self.every_point, self.origin, self.anchor, x))
                    for x in (x0, x1)) <= self.margin
 
-    def project(self, x0, x1, v1, held, t0, dt, sweeps, rounds):
+    def project(self, x0, x1, v1, stop_normal, t0, dt, sweeps, rounds):
         """Rounds of: the rows and planes of the motion as it now is (``cover``), then
         Gauss-Seidel sweeps of the half-spaces on the cloth's vertices until one corrects
         nothing (at most ``sweeps``), until a round corrects nothing (at most
@@ -236,7 +236,8 @@ class ObstaclePairs:
         for round_ in range(rounds):
             if round_:
                 self.cover(x0, x1, t0, dt, self.margin)
-            corrected, _ = _project(self, self.rows, self.count, x0, x1, v1, held, dt, sweeps)
+            corrected, _ = _project(self, self.rows, self.count, x0, x1, v1, stop_normal, dt,
+                                    sweeps)
             total += int(corrected)
             self.current = not corrected
             if not corrected:
@@ -412,7 +413,7 @@ def _patch_normal(o: ti.template(), ids, face, alpha, s, g, m):
 
 @ti.kernel
 def _project(o: ti.template(), rows: ti.template(), count: ti.i32, x0: ti.template(),
-             x1: ti.template(), v1: ti.template(), held: ti.template(), dt: float,
+             x1: ti.template(), v1: ti.template(), stop_normal: ti.template(), dt: float,
              sweeps: ti.i32) -> ti.types.vector(2, ti.i32):
     """``ObstaclePairs.project``: a vertex short of a half-space moves onto it along its
     normal (it slides along the plane of the contact its path made)."""
@@ -432,7 +433,7 @@ def _project(o: ti.template(), rows: ti.template(), count: ti.i32, x0: ti.templa
                         vn = (v1[a] - rows.u[c]).dot(m)
                         if vn < 0.0:
                             v1[a] -= vn * m
-                        held[a] = m
+                        stop_normal[a] = m
                         corrected += 1
         total += corrected
         ran += 1

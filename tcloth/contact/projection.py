@@ -17,9 +17,9 @@ import taichi as ti
 from .. import runtime
 from ..runtime import serial
 from .guard import SLACK
-from .normals import VERTEX_PAIRS, spans
+from .normals import VERTEX_PAIRS, kept_apart, plane_row, spans
 
-HELD_ALONG = 0.5         # a held vertex moves along a normal only if this much is left
+STOP_ALONG = 0.5         # a stopped vertex moves along a normal only if this much is left
 JACOBI = False           # the Jacobi passes on CPUs too (``project``)
 LOG_CAPACITY = 1 << 14   # the corrections a step's ``Log`` keeps
 
@@ -61,10 +61,10 @@ class Log:
 @ti.func
 def _allowed(m, d):
     """Unit direction d less its part into a collider whose outward normal is m (m = 0:
-    none); zero where less than HELD_ALONG of d's length along d is left (the vertex
+    none); zero where less than STOP_ALONG of d's length along d is left (the vertex
     would slide far along the collider for a small gain along d)."""
     free = d - ti.min(d.dot(m), 0.0) * m
-    return free if free.dot(d) >= HELD_ALONG else ti.Vector.zero(float, 3)
+    return free if free.dot(d) >= STOP_ALONG else ti.Vector.zero(float, 3)
 
 
 @ti.func
@@ -74,11 +74,11 @@ def _bit(a: ti.template(), b: ti.template()):
 
 
 @ti.func
-def _violated(ids, a: ti.template(), b: ti.template(), n, delta, x1, v1, inv_mass, held,
+def _violated(ids, a: ti.template(), b: ti.template(), n, delta, x1, v1, inv_mass, stop_normal,
               touched, velocity: ti.template()):
     """Whether vertices a and b of a candidate need a correction, with what ``_correct``
     needs: their directions da and db (+n for a, -n for b, less the part into a collider
-    that holds the vertex this step: ``held`` is the collider's outward normal m where it
+    that holds the vertex this step: ``stop_normal`` is the collider's outward normal m where it
     stopped the vertex's path, else 0; the collider takes the rest), the sum w of their
     inverse masses along n and how much to take away: with ``velocity`` False, their
     distance along n short of delta (a correction where it is above SLACK delta); with
@@ -87,7 +87,7 @@ def _violated(ids, a: ti.template(), b: ti.template(), n, delta, x1, v1, inv_mas
     0)."""
     pa, pb = ids[a], ids[b]
     short = delta - n.dot(x1[pa] - x1[pb])
-    da, db = _allowed(held[pa], n), _allowed(held[pb], -n)
+    da, db = _allowed(stop_normal[pa], n), _allowed(stop_normal[pb], -n)
     w = inv_mass[pa] * n.dot(da) - inv_mass[pb] * n.dot(db)
     need = short
     needed = short > SLACK * delta
@@ -98,16 +98,16 @@ def _violated(ids, a: ti.template(), b: ti.template(), n, delta, x1, v1, inv_mas
 
 
 @ti.func
-def _count(ids, a: ti.template(), b: ti.template(), n, delta, x1, v1, inv_mass, held, hits,
+def _count(ids, a: ti.template(), b: ti.template(), n, delta, x1, v1, inv_mass, stop_normal, hits,
            touched, velocity: ti.template()):
     """Count the vertex pair's correction on both its vertices (``_violated``)."""
-    if _violated(ids, a, b, n, delta, x1, v1, inv_mass, held, touched, velocity)[0]:
+    if _violated(ids, a, b, n, delta, x1, v1, inv_mass, stop_normal, touched, velocity)[0]:
         hits[ids[a]] += 1
         hits[ids[b]] += 1
 
 
 @ti.func
-def _correct(ids, a: ti.template(), b: ti.template(), n, delta, x1, v1, inv_mass, held,
+def _correct(ids, a: ti.template(), b: ti.template(), n, delta, x1, v1, inv_mass, stop_normal,
              hits, dx, touched, velocity: ti.template()):
     """The move that takes vertices a and b of a candidate apart along n until
     n . (x_a - x_b) = delta (with ``velocity``: the impulse that removes their approaching
@@ -119,7 +119,7 @@ def _correct(ids, a: ti.template(), b: ti.template(), n, delta, x1, v1, inv_mass
     same way). Returns (1 if they needed it, else 0; ``touched`` with their bit set where
     a position pass moved them)."""
     pa, pb = ids[a], ids[b]
-    needed, da, db, w, need = _violated(ids, a, b, n, delta, x1, v1, inv_mass, held,
+    needed, da, db, w, need = _violated(ids, a, b, n, delta, x1, v1, inv_mass, stop_normal,
                                         touched, velocity)
     corrected = 0
     mark = touched
@@ -135,12 +135,12 @@ def _correct(ids, a: ti.template(), b: ti.template(), n, delta, x1, v1, inv_mass
 
 @ti.func
 def _correct_now(ids, kind, a: ti.template(), b: ti.template(), n, delta, x1, v1, inv_mass,
-                 held, log):
+                 stop_normal, log):
     """``_correct`` in place, positions and velocities at once (a Gauss-Seidel step):
     the vertex pair moved onto its plane and its approaching normal velocity removed,
     written to ``log`` where it is on. 1 if they were closer, else 0."""
     pa, pb = ids[a], ids[b]
-    closer, da, db, w, short = _violated(ids, a, b, n, delta, x1, v1, inv_mass, held, 0,
+    closer, da, db, w, short = _violated(ids, a, b, n, delta, x1, v1, inv_mass, stop_normal, 0,
                                          False)
     corrected = 0
     if closer:
@@ -178,7 +178,7 @@ def _log(log, ids, kind, pa, pb, n, delta, w, da, db, gap_x, gap_v, stopped):
 
 @ti.kernel
 def _gauss_seidel(cl: ti.template(), pl: ti.template(), count: ti.i32, x1: ti.template(),
-                  v1: ti.template(), inv_mass: ti.template(), held: ti.template(),
+                  v1: ti.template(), inv_mass: ti.template(), stop_normal: ti.template(),
                   sweeps: ti.i32, log: ti.template()) -> ti.types.vector(2, ti.i32):
     """Serial sweeps of ``_correct_now`` over the candidates until one corrects nothing,
     at most ``sweeps``: (corrections of the first sweep, the sweeps run)."""
@@ -188,13 +188,11 @@ def _gauss_seidel(cl: ti.template(), pl: ti.template(), count: ti.i32, x1: ti.te
     for _ in range(sweeps):
         corrected = 0
         for c in range(count):
-            ids, kind = cl.ids[c], cl.kind[c]
-            n, delta = pl.n[c], pl.delta[c]
-            if delta > 0.0:
-                for a, b in ti.static(VERTEX_PAIRS):
-                    if spans(kind, a, b):
-                        corrected += _correct_now(ids, kind + pl.surface[c], a, b, n,
-                                                  delta, x1, v1, inv_mass, held, log)
+            ids, kind, n, delta = plane_row(cl, pl, c)
+            for a, b in ti.static(VERTEX_PAIRS):
+                if kept_apart(kind, delta, a, b):
+                    corrected += _correct_now(ids, kind + pl.surface[c], a, b, n, delta, x1,
+                                              v1, inv_mass, stop_normal, log)
         if ran == 0:
             found = corrected
         ran += 1
@@ -205,7 +203,7 @@ def _gauss_seidel(cl: ti.template(), pl: ti.template(), count: ti.i32, x1: ti.te
 
 @ti.kernel
 def _project_pass(cl: ti.template(), pl: ti.template(), count: ti.i32, x1: ti.template(),
-                  v1: ti.template(), inv_mass: ti.template(), held: ti.template(),
+                  v1: ti.template(), inv_mass: ti.template(), stop_normal: ti.template(),
                   hits: ti.template(), dx: ti.template(), velocity: ti.template(),
                   first: ti.template()) -> ti.i32:
     """One Jacobi pass of ``project`` on x1 (with ``velocity``: on v1): every vertex pair
@@ -220,22 +218,20 @@ def _project_pass(cl: ti.template(), pl: ti.template(), count: ti.i32, x1: ti.te
     for c in range(count):
         if ti.static(first):
             pl.touched[c] = 0
-        ids, kind = cl.ids[c], cl.kind[c]
-        n, delta, touched = pl.n[c], pl.delta[c], pl.touched[c]
-        if delta > 0.0:
-            for a, b in ti.static(VERTEX_PAIRS):
-                if spans(kind, a, b):
-                    _count(ids, a, b, n, delta, x1, v1, inv_mass, held, hits, touched,
-                           velocity)
+        ids, kind, n, delta = plane_row(cl, pl, c)
+        touched = pl.touched[c]
+        for a, b in ti.static(VERTEX_PAIRS):
+            if kept_apart(kind, delta, a, b):
+                _count(ids, a, b, n, delta, x1, v1, inv_mass, stop_normal, hits, touched, velocity)
     corrected = 0
     ti.loop_config(serialize=ti.static(serial(cl.ids)))
     for c in range(count):
-        ids, kind = cl.ids[c], cl.kind[c]
-        n, delta, touched = pl.n[c], pl.delta[c], pl.touched[c]
+        ids, kind, n, delta = plane_row(cl, pl, c)
+        touched = pl.touched[c]
         if delta > 0.0:
             for a, b in ti.static(VERTEX_PAIRS):
                 if spans(kind, a, b):
-                    done, touched = _correct(ids, a, b, n, delta, x1, v1, inv_mass, held,
+                    done, touched = _correct(ids, a, b, n, delta, x1, v1, inv_mass, stop_normal,
                                              hits, dx, touched, velocity)
                     corrected += done
             pl.touched[c] = touched
@@ -249,7 +245,7 @@ def _project_pass(cl: ti.template(), pl: ti.template(), count: ti.i32, x1: ti.te
     return corrected
 
 
-def project(cl, pl, count, x1, v1, inv_mass, held, sweeps, work, log):
+def project(cl, pl, count, x1, v1, inv_mass, stop_normal, sweeps, work, log):
     """The candidates' projection (their ``planes``): sweeps until one corrects nothing,
     at most ``sweeps``. On CPUs (unless JACOBI) Gauss-Seidel on one thread
     (``_gauss_seidel``: a few sweeps where Jacobi's passes take many, and the same
@@ -263,7 +259,7 @@ def project(cl, pl, count, x1, v1, inv_mass, held, sweeps, work, log):
     if JACOBI or not runtime.cpu():
         found = ran = 0
         while ran < sweeps:
-            corrected = int(_project_pass(cl, pl, count, x1, v1, inv_mass, held, *work,
+            corrected = int(_project_pass(cl, pl, count, x1, v1, inv_mass, stop_normal, *work,
                                           False, ran == 0))
             found = found or corrected
             ran += 1
@@ -271,22 +267,22 @@ def project(cl, pl, count, x1, v1, inv_mass, held, sweeps, work, log):
                 break
         if found:
             for _ in range(sweeps):
-                if not int(_project_pass(cl, pl, count, x1, v1, inv_mass, held, *work,
+                if not int(_project_pass(cl, pl, count, x1, v1, inv_mass, stop_normal, *work,
                                          True, False)):
                     break
         return found, ran
-    return (int(v) for v in _gauss_seidel(cl, pl, count, x1, v1, inv_mass, held, sweeps,
+    return (int(v) for v in _gauss_seidel(cl, pl, count, x1, v1, inv_mass, stop_normal, sweeps,
                                           log))
 
 
-def warm(cl, pl, x1, v1, inv_mass, held, work, log):
+def warm(cl, pl, x1, v1, inv_mass, stop_normal, work, log):
     """Compile the kernels ``project`` launches for these fields, each run on no rows
     (nothing moves; ``contact/warm.py``)."""
     if JACOBI or not runtime.cpu():
         for velocity, first in ((False, True), (False, False), (True, False)):
-            _project_pass(cl, pl, 0, x1, v1, inv_mass, held, *work, velocity, first)
+            _project_pass(cl, pl, 0, x1, v1, inv_mass, stop_normal, *work, velocity, first)
     else:
-        _gauss_seidel(cl, pl, 0, x1, v1, inv_mass, held, 1, log)
+        _gauss_seidel(cl, pl, 0, x1, v1, inv_mass, stop_normal, 1, log)
 
 
 @ti.data_oriented

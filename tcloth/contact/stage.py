@@ -1,8 +1,10 @@
 """The contact stage: one per simulator, the contact set every consumer reads, and the
 guarantee that no step takes cloth through cloth or a particle into a collider.
 
-It is built with the model (``Model.contact``) of a scene with self-collision or
-colliders, and updated only at named points, all called by the ``Simulator``:
+The ``Simulator`` builds it (``Simulator.contact``) for a scene with self-collision or
+colliders and hands it to its integrator, the one object through which a solver takes
+contact inside its step (``solve.py``: ``search_solve``, ``follow_solve``, ``keep_apart``,
+``detect_bounds``, the hold). It is updated only at named points:
 
   - ``warm_up(steps, x, t0, dt)``: once, when the simulator is built: every kernel
     ``end_step`` may launch compiled then, not in a later frame (``warm.py``).
@@ -14,17 +16,9 @@ colliders, and updated only at named points, all called by the ``Simulator``:
     (``swept.py``); then the colliders; then, where pairs are still too close, the
     fail-safe. Afterwards the proximity list covers x1 (rebuilt at x1 if not, with
     the default skin).
-  - ``begin_solve(x0, x_pred)`` and ``follow_solve(x0, x)``: called by a solver (XPBD,
-    VBD, projective) at a step's start and after each iteration: the candidates its
-    iterations keep on their separating planes, searched once for the predicted motion
-    and again only where an iterate leaves what was searched
-    (``stats["solve_searches"]``); the guard takes them at the step's end where they
-    still hold its motion. ``truncate_solve(x0, x_pred, v)``: the predicted motion cut
-    short at those pairs' dividing planes (projective dynamics' first iterate).
-  - ``detect_bounds(bounds, x)``: called by a solver with displacement bounds (VBD's
-    ``bounds=True``) at a step's start and after an iteration that clamped a move: the
-    bounds from the proximity list, which it builds again at x where it has grown stale
-    for them (the one rebuild inside a solve, and the stage's own).
+  - ``search_solve`` / ``follow_solve`` and ``detect_bounds``: called by a solver inside
+    its step (``solve.py``); ``detect_bounds`` builds the proximity list again where it
+    has grown stale for the bounds (the one rebuild inside a solve, and the stage's own).
   - ``record(on)``: a gradient's runs keep each step's projection corrections and the
     solver's end of the step (``tcloth/grad/frozen.py``).
   - ``batch_begin`` / ``batch_end`` (``ti.func``s of a batch of substeps' kernel,
@@ -48,22 +42,14 @@ from .. import runtime
 from . import guard, projection
 from .batching import BatchSteps
 from .broad import BroadPhase
-from .normals import PREDICTED
 from .obstacle import ObstaclePairs
+from .solve import FAR, OBSTACLE_MARGIN, SolveContact
 from .swept import SweptSearch, search_step
 from .warm import WarmUp
 
 SWEEPS = 20          # sweeps of the pairs' projection a round (projection.project)
 ROUNDS = 4           # rounds of the projection and the colliders' sweep before the fail-safe
-MARGIN = 0.5         # the swept boxes' margin for the guard's moves, in thicknesses
-SOLVE_MARGIN = 2.0   # the swept boxes' margin for a solve's iterates, in thicknesses
-# a near search's margin (``SweptSearch.holds``: each particle within it of its searched
-# start and end), in thicknesses. Projective on the 64 x 64 fold: a second in 16.0 s at 1
-# and 17.0 s at 1.5; on the twisted cloth the guard corrected 7,524 pairs at 1, 3,306 at
-# 1.5 and 3,190 at 2 (docs/contact.md)
-NEAR_SOLVE_MARGIN = 1.5
-OBSTACLE_MARGIN = 0.25  # the obstacle pairs' boxes' margin, in thicknesses
-FAR = 1e30           # m: a reach that keeps every candidate of the proximity list
+GUARD_MARGIN = 0.5   # the swept boxes' margin for the guard's moves, in thicknesses
 STATS = {
     "candidates": "rows of the proximity list (pairs within thickness + skin)",
     "rebuilds": "builds of the proximity list so far",
@@ -96,8 +82,8 @@ STATS = {
 
 
 @ti.data_oriented
-class ContactStage(BatchSteps, WarmUp):
-    """The contact set and the guard of one model (module docstring).
+class ContactStage(SolveContact, BatchSteps, WarmUp):
+    """The contact set and the guard of one simulator (module docstring).
 
     Attributes:
         table: the model's ``topology.SelfCollisionTable`` or None.
@@ -137,13 +123,13 @@ class ContactStage(BatchSteps, WarmUp):
         self.x_start = (ti.Vector.field(3, real, shape=n)
                         if self.colliders or self.table is not None else None)
         # the collider's outward normal where it stopped a particle's path this step, else 0
-        self.held = ti.Vector.field(3, real, shape=n)
+        self.stop_normal = ti.Vector.field(3, real, shape=n)
         # paths the collider sweep cut inside batches of substeps: in all, in the last step
         self.batch_cuts = ti.field(ti.i32, shape=2)
         self.stats = {key: 0 for key in STATS}
         self.stats["seconds"] = 0.0
-        self.solve_list = None      # the list a solve reads (``begin_solve``), or None
-        self.solve_near = self.solve_surface = False    # ``begin_solve``'s options
+        self.solve_list = None      # the list a solve reads (``search_solve``), or None
+        self.solve_near = self.solve_surface = False    # ``search_solve``'s options
         self._planes = {}           # the guard's ``Planes`` beside each list, by its owner
         self.obstacle = None
         if self.colliders is not None and self.colliders.meshes is not None \
@@ -166,54 +152,6 @@ class ContactStage(BatchSteps, WarmUp):
         if not self.broad.covers(x):
             self.broad.build(x, self.skin)
 
-    # -- contact inside a solve ---------------------------------------------------------------
-    def begin_solve(self, x0, x_pred, near=False, keep_surface=False):
-        """The candidates a solver's iterations keep apart on a step from x0 whose
-        iterates are predicted to end near x_pred: every pair that can come within the
-        thickness on a motion from x0 whose ends lie within SOLVE_MARGIN thicknesses of
-        the boxes of x0 and x_pred (the proximity list where it covers that, else a
-        swept search), or with ``near`` (a solver whose iterates stay near x_pred) on a
-        motion whose particles start within NEAR_SOLVE_MARGIN thicknesses of x0 and end
-        within it of x_pred (``swept.py``), with their separating planes at x0
-        (``guard.planes``: a pair keeps n . (x_a - x_b) >= delta). Returns (list, its
-        planes, rows) as ``guard.keep_apart`` takes them; ``follow_solve`` keeps them
-        covering the iterates, and ``end_step`` checks the step with them where they
-        still hold it. keep_surface: the planes take the surfaces' normal also where
-        the prediction crosses both (``normals.PREDICTED``)."""
-        self.solve_near, self.solve_surface = near, keep_surface
-        choose = PREDICTED if keep_surface else True
-        if self.broad.covers(x0, x_pred):
-            cl, count = self.broad.candidates, self.broad.count
-        else:
-            self.stats["solve_searches"] += 1
-            margin = (NEAR_SOLVE_MARGIN if near else SOLVE_MARGIN) * self.thickness
-            count = search_step(self.swept, x0, x_pred, self.thickness, margin, near)
-            cl = self.swept.candidates
-        guard.planes(cl, self.planes_of(cl), count, x0, x_pred, self.thickness, FAR, choose)
-        self.solve_list = (cl, count)
-        return cl, self.planes_of(cl), count
-
-    def follow_solve(self, x0, x, choose=False):
-        """(list, its planes, rows) of ``begin_solve`` for the iterate x: the same while
-        they hold the motion x0 -> x, else searched again for it; with ``choose``, the
-        planes x crosses chosen again for that motion (``guard.choose_again``)."""
-        cl, count = self.solve_list
-        held = (self.broad.covers(x0, x) if cl is self.broad.candidates
-                else self.swept.holds(x0, x))
-        if held and choose:
-            guard.choose_again(cl, self.planes_of(cl), count, x0, x, self.thickness)
-        return ((cl, self.planes_of(cl), count) if held
-                else self.begin_solve(x0, x, self.solve_near, self.solve_surface))
-
-    def truncate_solve(self, x0, x_pred, v):
-        """The predicted motion of the last ``begin_solve``, from x0 to x_pred, cut short
-        where it would take a vertex across the dividing plane of one of its candidates
-        (``guard.truncate``, the fail-safe's cut: x_pred = x0 + t (x_pred - x0), v scaled
-        by t). Returns how many vertices were cut."""
-        cl, count = self.solve_list
-        return int(guard.truncate(cl, self.planes_of(cl), count, x0, x_pred, v,
-                                  self.inv_mass, self.cut, self.solve_cuts))
-
     @property
     def proximity_planes(self):
         """``planes_of`` the proximity list."""
@@ -227,43 +165,6 @@ class ContactStage(BatchSteps, WarmUp):
         if planes is None or planes.capacity != cl.capacity:
             planes = self._planes[owner] = guard.Planes(cl.capacity)
         return planes
-
-    def detect_bounds(self, bounds, x):
-        """A solver's displacement bounds (``bounds.DisplacementBounds``, VBD's
-        ``bounds=True``) detected at x, from the proximity list, built again at x first
-        where particles moved relative to each other by more than half its reach since
-        its build (the balls would shrink towards nothing). Returns whether it built the
-        list (its rows changed: what a solver keeps per row is stale)."""
-        floor = self.broad.unlisted_distance(x)
-        rebuilt = floor < 0.5 * float(self.broad.reach[None])
-        if rebuilt:
-            self.broad.build(x, self.broad.skin)
-            floor = self.broad.unlisted_distance(x)
-        bounds.detect(self.broad.candidates, self.broad.count, x, floor)
-        return rebuilt
-
-    @property
-    def hold(self):
-        """The mesh colliders' ``hold.Hold`` (a per-particle potential term a solver
-        includes), or None without mesh colliders."""
-        return None if self.obstacle is None else self.obstacle.hold
-
-    def begin_hold(self, x0, x, t0, dt):
-        """The mesh colliders' pairs and planes for a solver's motion x0 -> x over the
-        step (t0, dt), searched where the list does not hold that motion; where a cloth
-        vertex ends below one, the hold on (``hold.py``: the solver iterates again with
-        the planes as a stiff penalty, then calls ``end_hold``). Returns the rows short of
-        their plane (0: the hold stays off)."""
-        o = self.obstacle
-        o.begin(x0, x, t0, dt, OBSTACLE_MARGIN * o.thickness)
-        short = o.violations(x)
-        if short:
-            o.hold.begin(o.rows, o.count, dt)
-            self.stats["hold_steps"] += 1
-        return short
-
-    def end_hold(self):
-        self.obstacle.hold.end()
 
     # -- the guard ---------------------------------------------------------------------------
     def record(self, on):
@@ -369,7 +270,7 @@ class ContactStage(BatchSteps, WarmUp):
                 if not cut and not guard.violations(cl, self.planes_of(cl), count, x1):
                     break
             corrected, sweeps = projection.project(cl, self.planes_of(cl), count, x1, v1,
-                                                   self.inv_mass, self.held, SWEEPS,
+                                                   self.inv_mass, self.stop_normal, SWEEPS,
                                                    self.work, self.log)
             self.stats["guard_corrections"] += corrected
             self.stats["guard_sweeps"] += sweeps
@@ -391,17 +292,17 @@ class ContactStage(BatchSteps, WarmUp):
 
     def _sweep(self, x0, x1, v1, t0, dt, first, obstacle=True):
         """The colliders' sweep (``guard.sweep_colliders``; ``first``: the step's first,
-        which forgets who was held) and, with ``obstacle``, the mesh colliders' planes
+        which forgets who was stop_normal) and, with ``obstacle``, the mesh colliders' planes
         (x0, t0 and dt then the step's); the paths it cut and the vertices it moved."""
         if self.colliders is None:
             return 0
         cut = int(guard.sweep_colliders_kernel(self.colliders, self.inv_mass, x0, x1, v1, t0,
-                                               dt, self.held, first, self.sweep_log))
+                                               dt, self.stop_normal, first, self.sweep_log))
         self.stats["collider_paths_cut"] += cut
         if self.obstacle is not None and obstacle:
             if cut or not first:        # x1 moved since ``begin`` computed the planes
                 self.obstacle.cover(x0, x1, t0, dt, OBSTACLE_MARGIN * self.obstacle.thickness)
-            corrected = self.obstacle.project(x0, x1, v1, self.held, t0, dt, SWEEPS, ROUNDS)
+            corrected = self.obstacle.project(x0, x1, v1, self.stop_normal, t0, dt, SWEEPS, ROUNDS)
             self.stats["obstacle_corrections"] += corrected
             cut += corrected
         return cut
@@ -433,7 +334,7 @@ class ContactStage(BatchSteps, WarmUp):
         within the thickness on the motion x0 -> x1, with their separating planes at x0:
         the proximity list where it covers the motion (then it covers x1 too; built
         again at x0 where the motion is within the skin), else the
-        swept search's, grown by MARGIN thicknesses for the guard's moves, less the pairs
+        swept search's, grown by GUARD_MARGIN thicknesses for the guard's moves, less the pairs
         that cannot come within the thickness on this motion (``guard.planes``: the
         rounds compute them again for the motion as it then is). ``near``: the proximity
         list's planes only for the rows that can come within the thickness (enough to
@@ -460,7 +361,7 @@ class ContactStage(BatchSteps, WarmUp):
             else:
                 self.stats["swept_searches"] += 1
                 count = search_step(self.swept, x0, x1, self.thickness,
-                                    MARGIN * self.thickness)
+                                    GUARD_MARGIN * self.thickness)
             cl = self.swept.candidates        # after the search, which may grow the list
         guard.planes(cl, self.planes_of(cl), count, x0, x1, self.thickness, reach, True)
         return cl, count, covered

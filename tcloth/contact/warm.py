@@ -15,12 +15,12 @@ them once, on the fields the simulator's steps will pass, when it is built:
     colliders' sweeps and the mesh colliders' projection and carry run on the state (a
     particle that starts inside a collider can be moved), which is put back after.
 
-Afterwards the step's fields hold what they held, the proximity list is built again at
+Afterwards the step's fields hold what they stop_normal, the proximity list is built again at
 the state, and ``stats`` and the mesh colliders' counts are as before: nothing counted,
 nothing moved, nothing kept in a gradient's logs (they are off until ``record``).
 
 What this does not cover compiles later: a solver's calls with its own fields
-(``begin_solve``, ``follow_solve``, ``truncate_solve``, ``begin_hold``: they run in its
+(``search_solve``, ``follow_solve``, ``truncate_solve``, ``begin_hold``: they run in its
 first step, but a branch first taken later compiles then), a list that outgrows its capacity (``search.CandidateSearch.fit``
 doubles it, and every kernel that reads it compiles again; the capacities are chosen so
 that the shipped scenes never do: docs/contact.md, "Compile once"), and a simulator's
@@ -54,7 +54,7 @@ class WarmUp:
                 self._warm_colliders(x0, x1, v1, t0, dt)
         for f, values in saved:
             f.from_numpy(values)
-        self.held.fill(0)
+        self.stop_normal.fill(0)
         self.stats = stats
         self._counts(counts)
         self.refresh(x)
@@ -96,7 +96,7 @@ class WarmUp:
             for choose in (True, PREDICTED):
                 guard.planes(cl, pl, count, x0, x1, thickness, thickness, choose)
             guard.violations(cl, pl, count, x1)
-            projection.warm(cl, pl, x1, v1, self.inv_mass, self.held, self.work, self.log)
+            projection.warm(cl, pl, x1, v1, self.inv_mass, self.stop_normal, self.work, self.log)
             guard.truncate(cl, pl, 0, x0, x1, v1, self.inv_mass, self.cut,
                            self.truncation_log)
         if self.x_swept is not None:

@@ -8,7 +8,8 @@ integrator's own CG, or by flexible GMRES).
 """
 from .losses import (ChordAngle, DrapeCoefficient, KernelLoss, Loss, Measured, Sum,
                      TargetCloud, TargetPositions)
-from .trajectory import INTEGRATORS, Result, Trajectory
+from .result import Result
+from .trajectory import INTEGRATORS, Trajectory
 
 __all__ = ["Trajectory", "Result", "INTEGRATORS", "Loss", "KernelLoss", "Sum",
            "TargetPositions", "TargetCloud", "Measured", "ChordAngle", "DrapeCoefficient"]

@@ -64,8 +64,8 @@ class StepRecord:
     projection made more corrections than its log keeps (``guarded``), and those whose
     guard's changes it takes (``projected``)."""
 
-    def __init__(self, model, projection=None):
-        self.stage = model.contact
+    def __init__(self, model, contact, projection=None):
+        self.stage = contact
         # the rows the solve reads (projective dynamics projects its self-contacts instead:
         # ``projection``, the self-contact term whose corrections are kept)
         self.self_contact = model.self_collision is not None and projection is None

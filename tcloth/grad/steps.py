@@ -64,7 +64,7 @@ class StepAdjoints:
         # the step's Hessian at its end, with its lagged quantities from its start
         adj.set_inputs(x, v, x1)
         if adj.self_contact:        # the stage's list at x, for the Hessian's contacts
-            sim.model.contact.refresh(adj.x)
+            sim.contact.refresh(adj.x)
         integ.potential.begin(adj.x, adj.v, h, t0, self._x_start)
         integ.hessian.assemble(adj.x1, h, t0 + h)
         if adj.self_contact:

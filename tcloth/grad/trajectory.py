@@ -14,6 +14,7 @@ step (they move x += h u during step n); their gradient is the adjoint of those 
 """
 import time
 import warnings
+from typing import Any, Dict, Iterable, List, Optional, Tuple, Union
 
 import numpy as np
 import taichi as ti
@@ -21,49 +22,19 @@ import taichi as ti
 from .. import runtime
 from ..errors import GradientWarning, SceneError
 from ..integrators.implicit import BackwardEuler
-from ..scene.scene import KIND_CODE
+from ..scene.scene import KIND_CODE, Scene
 from ..sim.simulator import Simulator
 from ..validate import as_int
 from .adjoint import StepAdjoint, unsupported
 from .frozen import StepRecord, pull_back
+from .losses import Loss
+from .result import Result
 from .projected import ProjectionAdjoint, before
 from .sweep import SweepAdjoint, TruncationAdjoint
 from .parameters import MEMBRANE, bending_gradient, masses_gradient, membrane_gradient
 from .steps import StepAdjoints
 
 INTEGRATORS = ("symplectic_euler", "backward_euler", "projective")
-
-
-class Result:
-    """What ``Trajectory.gradient`` returns.
-
-    Attributes: loss (float); grad (dict name -> NumPy array, or float for a scalar
-    parameter); forward_seconds, backward_seconds (wall time of the forward run and of the
-    backward run, which includes running each segment again); memory_bytes (the
-    checkpoints and one segment's states, the memory the backward run keeps);
-    adjoint_iterations (the adjoint solves' iterations in all: CG's for backward Euler,
-    flexible GMRES's for projective dynamics); adjoint_residual (the largest relative
-    residual an adjoint solve ended with); forward_residual (projective dynamics: the
-    largest ``stats["residual"]`` of the forward run's steps, how far from its converged
-    step, whose derivative the gradient is, the solver stopped); guarded_steps (the
-    forward run's steps whose end the contact stage's guard changed in a way the
-    gradient does not take: it is the solver's step's there, not the trajectory's);
-    projected_steps (those whose end the guard's projection changed, differentiated as
-    the projections they are: the corrections that fired frozen, their planes through
-    the step's start; ``frozen.py``); unconverged_steps (projective dynamics' steps left
-    above ``forward_tol``).
-    """
-
-    def __init__(self, loss, grad, **stats):
-        self.loss, self.grad = loss, grad
-        for key, value in stats.items():
-            setattr(self, key, value)
-
-    def __repr__(self):
-        return (f"Result(loss={self.loss:.6g}, grad={sorted(self.grad)}, "
-                f"forward_seconds={self.forward_seconds:.3g}, "
-                f"backward_seconds={self.backward_seconds:.3g}, "
-                f"memory_bytes={self.memory_bytes})")
 
 
 class Trajectory(StepAdjoints):
@@ -98,8 +69,9 @@ class Trajectory(StepAdjoints):
     (docs/grad.md: 1.6e33 where central differences of the run give -7.7).
     """
 
-    def __init__(self, scene, steps, dt, integrator="symplectic_euler", checkpoint_every=None,
-                 adjoint_tol=1e-10, forward_tol=1e-6, **options):
+    def __init__(self, scene: Scene, steps: int, dt: float, integrator: str = "symplectic_euler",
+                 *, checkpoint_every: Optional[int] = None, adjoint_tol: float = 1e-10,
+                 forward_tol: float = 1e-6, **options: Any):
         if integrator not in INTEGRATORS:
             raise SceneError(f"integrator must be one of {INTEGRATORS} for gradients (got "
                              f"{integrator!r})")
@@ -128,7 +100,7 @@ class Trajectory(StepAdjoints):
         self.adjoint.load()
         projection = next((term for term in getattr(self.sim.integrator, "projections", ())
                            if term.name == "self_contact"), None)
-        self.record = StepRecord(self.sim.model, projection)
+        self.record = StepRecord(self.sim.model, self.sim.contact, projection)
         self._projection = (ProjectionAdjoint(projection.table, projection.log.capacity)
                             if projection is not None else None)
         self._sweep = None          # the collider sweep's adjoint, built at its first cut
@@ -148,7 +120,7 @@ class Trajectory(StepAdjoints):
                                                         shape=scene.num_particles)
                                         for _ in range(2))
 
-    def set_steps(self, steps):
+    def set_steps(self, steps: int) -> None:
         """Run ``steps`` steps from now on (the controls, where set, must have as many)."""
         steps = as_int("steps", steps, 1)
         if self.controls is not None and len(self.controls) != steps:
@@ -158,7 +130,7 @@ class Trajectory(StepAdjoints):
 
     # -- parameters ---------------------------------------------------------------------------
     @property
-    def names(self):
+    def names(self) -> List[str]:
         """The parameters' names (see the class)."""
         names = [f"{kind}.{what}" for kind in self._kind_rows
                  for what in ("stiffness", "damping")]
@@ -177,7 +149,7 @@ class Trajectory(StepAdjoints):
         if name not in self.names:
             raise SceneError(f"no parameter {name!r} (this trajectory's: {self.names})")
 
-    def value(self, name):
+    def value(self, name: str) -> Union[float, np.ndarray]:
         """The parameter's current value (a float or a NumPy array)."""
         self._check_name(name)
         scene = self.scene
@@ -212,7 +184,8 @@ class Trajectory(StepAdjoints):
                              f"{values.min():.6g} .. {values.max():.6g}): it needs one")
         return float(values[0])
 
-    def central_difference(self, loss, name, direction, step):
+    def central_difference(self, loss: Loss, name: str, direction: Union[float, np.ndarray],
+                           step: float) -> float:
         """The loss's central difference along ``direction`` of parameter ``name`` (a
         step of ``step``; two forward runs), the parameter set back after: the check of
         a gradient's component or directional derivative."""
@@ -224,7 +197,7 @@ class Trajectory(StepAdjoints):
         self.set(name, value)
         return (ends[0] - ends[1]) / (2.0 * step)
 
-    def set(self, name, value):
+    def set(self, name: str, value: Union[float, np.ndarray]) -> None:
         """Change a parameter (see the class) for the next ``gradient``."""
         self._check_name(name)
         n = self.scene.num_particles
@@ -309,7 +282,7 @@ class Trajectory(StepAdjoints):
         states.append(self._state())
         return states
 
-    def forward(self, loss):
+    def forward(self, loss: Loss) -> Tuple[float, Dict[int, Tuple[np.ndarray, np.ndarray]]]:
         """The forward run alone: (loss value, the checkpoints {step: (x, v)}); the steps
         the guard changed in ``guarded_steps`` and ``projected_steps`` (``Result``)."""
         k, steps = self.checkpoint_every, self.steps
@@ -332,7 +305,7 @@ class Trajectory(StepAdjoints):
             checkpoints[stop] = state
         return value, checkpoints
 
-    def gradient(self, loss, wrt=None):
+    def gradient(self, loss: Loss, wrt: Optional[Iterable[str]] = None) -> Result:
         """The loss (``tcloth.grad.Loss``) over the trajectory and its gradient with
         respect to the parameters ``wrt`` (names; default all). Returns a ``Result``."""
         wrt = list(self.names) if wrt is None else list(wrt)

@@ -49,7 +49,10 @@ class Integrator:
     """One entry point: ``simulate(model, state_in, state_out, dt)``, which also sets
     ``state_out.t = state_in.t + dt``. An integrator keeps its workspace (forces, solver
     buffers), built from the model it is made for; it holds no simulation state, except a
-    cache of forces where it says so (``Verlet``).
+    cache of forces where it says so (``Verlet``). ``contact`` is the simulator's contact
+    stage (``Simulator.contact``: ``contact.ContactStage``, or None in a scene with
+    neither self-collision nor colliders), the one object through which a solver takes
+    contact inside its step: its searches, separating planes and hold.
 
     Subclasses list their options in ``defaults`` (name -> default); an unknown option
     raises SceneError naming it. ``options`` is read-only: ``set_options`` changes the
@@ -76,14 +79,15 @@ class Integrator:
             raise TypeError(f"{cls.__name__}: batched = {cls.batched} but it "
                             f"{'lacks' if cls.batched else 'defines'} advance")
 
-    def __init__(self, model, **options):
+    def __init__(self, model, contact=None, **options):
         unknown = sorted(set(options) - set(self.defaults))
         if unknown:
             raise SceneError(f"unknown option {unknown[0]!r} for integrator {self.name!r} "
                              f"(its options: {sorted(self.defaults) or 'none'})")
         self._options = {**self.defaults, **options}
         self.options = MappingProxyType(self._options)
-        self.forces = Forces(model)
+        self.contact = contact
+        self.forces = Forces(model, contact=contact)
         self.inv_mass = model.inv_mass
 
     def set_options(self, **changes):

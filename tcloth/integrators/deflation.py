@@ -1,5 +1,5 @@
 """A second level for projective dynamics' conjugate gradients with the contact planes in
-its matrix (``contact_planes.py``): the active vertex pairs' directions deflated.
+its matrix (``contact/planes.py``): the active vertex pairs' directions deflated.
 
 Each active pair k pushes along u_k = (n_k on its vertex a, -n_k on b), with a weight up
 to ten times A's diagonal. The V-cycle that preconditions CG (``multigrid.MultigridPCG``)
@@ -63,7 +63,7 @@ class PlaneDeflation:
         self.c = ti.field(real, shape=most)
 
     def prepare(self, rows):
-        """Deflate the active pairs of ``rows`` (``contact_planes._Rows``) in the solves
+        """Deflate the active pairs of ``rows`` (``contact.planes._Rows``) in the solves
         that follow, where there are at most ``most``; returns how many are deflated."""
         k = int(rows.count[None])
         self.count = k if k <= self.most else 0

@@ -160,8 +160,8 @@ class RK4(Integrator):
     name = "rk4"
     batched = True
 
-    def __init__(self, model, **options):
-        super().__init__(model, **options)
+    def __init__(self, model, contact=None, **options):
+        super().__init__(model, contact, **options)
         self._stage = model.state()
         self._coefficients = ti.field(runtime.real(), shape=8)
         self._coefficients.from_numpy(np.array(_RK4_WEIGHTS + _RK4_ADVANCES,

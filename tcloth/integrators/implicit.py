@@ -86,8 +86,8 @@ class BackwardEuler(Integrator):
                 "exact_hessian": None}
     live_options = frozenset({"newton_iterations", "newton_tol", "cg_tol", "cg_max_iterations"})
 
-    def __init__(self, model, **options):
-        super().__init__(model, **options)
+    def __init__(self, model, contact=None, **options):
+        super().__init__(model, contact, **options)
         exact = self.options["exact_hessian"]
         line_search = self.options["line_search"]
         if exact not in (None, True, False):
@@ -103,11 +103,11 @@ class BackwardEuler(Integrator):
                                  "couplings: use 'cg' (or 'auto')")
             solver = "cg"
         self.grid = single_grid(model, solver)
-        self.potential = IncrementalPotential(model, exact=self.exact)
+        self.potential = IncrementalPotential(model, contact, exact=self.exact)
         self.hessian = hessian.make(model, self.potential, self.exact, self.grid)
         self.x_try = ti.Vector.field(3, model.mass.dtype, shape=model.particle_count)
         # mesh colliders: the stage's planes as a penalty after the solve (``hold.py``)
-        self.stage = model.contact if self.potential.hold is not None else None
+        self.stage = contact if self.potential.hold is not None else None
         self.stats = {}
         self.unconverged = 0
         self._eps = float(np.finfo(runtime.numpy_real()).eps)
@@ -123,27 +123,28 @@ class BackwardEuler(Integrator):
         tol = max(opt["newton_tol"] * h * (1.0 + linalg.max_norm(state_in.v)),
                   8.0 * self._eps * linalg.max_norm(state_in.x))
         it, cg_total, residual, converged, energies = self._newton(x, h, t1, tol)
-        held = None
+        hold_run = None
         if self.stage is not None and self.stage.begin_hold(state_in.x, x, state_in.t, h):
             # the mesh colliders' planes the step ends below, as a penalty in E
             # (``contact/hold.py``): Newton again on the new E
-            held = self._newton(x, h, t1, tol)
+            hold_run = self._newton(x, h, t1, tol)
             self.stage.end_hold()
-            cg_total += held[1]
-            residual, converged = held[2], held[3]
+            cg_total += hold_run[1]
+            residual, converged = hold_run[2], hold_run[3]
         _velocities(e.x0, x, 1.0 / h, state_out.v)
         state_out.t = t1
         self.stats = {"newton_iterations": it, "cg_iterations": cg_total, "residual": residual,
                       "converged": converged, "fallbacks": self._fallbacks,
                       "potential": energies,
-                      "hold": None if held is None else {"newton_iterations": held[0],
-                                                         "potential": held[4]}}
+                      "hold": None if hold_run is None else {
+                          "newton_iterations": hold_run[0], "potential": hold_run[4]}}
         if not converged and opt["newton_iterations"] > 1:
             self.unconverged += 1
             if self.unconverged == 1:
                 warnings.warn(
-                    f"backward Euler stopped after {it if held is None else held[0]} Newton "
-                    f"iterations{'' if held is None else ' (of the hold)'} without converging "
+                    f"backward Euler stopped after "
+                    f"{it if hold_run is None else hold_run[0]} Newton "
+                    f"iterations{'' if hold_run is None else ' (of the hold)'} without converging "
                     f"(t = {t1:.6g} s, dt = {h:.3g} s): the step keeps the iterate with the "
                     f"lowest incremental potential found. Give newton_iterations > "
                     f"{opt['newton_iterations']} or a smaller dt; the integrator's "

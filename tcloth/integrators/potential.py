@@ -31,23 +31,24 @@ class IncrementalPotential:
         pair_terms: the other potential terms (bending, membrane, pressure, self-contact),
             which provide "couplings" (``terms/base.py``).
 
-    ``term_options`` go to the terms that declare them (``terms.build``).
+    ``contact`` is the simulator's contact stage or None; ``term_options`` go to the terms
+    that declare them (``terms.build``).
     """
 
-    def __init__(self, model, **term_options):
+    def __init__(self, model, contact=None, **term_options):
         n, real = model.particle_count, runtime.real()
         terms = term_modules.build(model, lambda cls: cls.implicit == "potential",
-                                   **term_options)
+                                   contact, **term_options)
         self.particle_terms = tuple(t for t in terms if t.per_particle)
         # the mesh colliders' planes as a penalty, on while a solver holds the cloth to
         # them (``contact/hold.py``; weight 0 otherwise)
-        self.hold = model.contact.hold if model.contact is not None else None
+        self.hold = contact.hold if contact is not None else None
         if self.hold is not None:
             self.particle_terms += (self.hold,)
         self.springs = term_modules.find(terms, term_modules.Springs)
         self.pair_terms = tuple(t for t in terms if not t.per_particle and t is not self.springs)
         self.terms = terms
-        self.lagged = Forces(model, lambda cls: cls.implicit == "lagged")
+        self.lagged = Forces(model, lambda cls: cls.implicit == "lagged", contact)
         self.has_lagged = bool(self.lagged.terms)
         self.mass, self.inv_mass = model.mass, model.inv_mass
         self.x_hat, self.x0, self.grad, self.f_lag = (

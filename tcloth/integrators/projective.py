@@ -65,7 +65,7 @@ from ..terms.springs import grid_spring_sum, owned_grid_springs
 from . import linalg
 from .anderson import Anderson, check_depth
 from .base import Integrator
-from .contact_planes import PlaneConstraints
+from ..contact import PlaneConstraints
 from .deflation import PlaneDeflation
 from .multigrid import GridMultigrid, MultigridPCG, single_grid
 
@@ -84,7 +84,7 @@ class Projective(Integrator):
         plain iterations; with 5, a hundred iterations of a drape at one step per frame
         left a tenth of the plain ones' residual, in the same time (docs/realtime.md).
     planes (True): with self-collision, the contact stage's separating planes as one-sided
-        constraints of the step (``contact_planes.py``: their forces in the residual,
+        constraints of the step (``contact/planes.py``: their forces in the residual,
         their stiffness in the global matrix), so that the iterate arrives without
         crossings; False leaves the contact work to the contact law's projection and to
         the guard after the step (which tore cloths thrown at each other at 10 m/s, a
@@ -104,8 +104,8 @@ class Projective(Integrator):
                 "planes": True, "deflation": True}
     live_options = frozenset({"iterations", "cg_tol", "cg_max_iterations"})
 
-    def __init__(self, model, **options):
-        super().__init__(model, **options)
+    def __init__(self, model, contact=None, **options):
+        super().__init__(model, contact, **options)
         depth = check_depth(self.options["anderson"])
         self.grid = single_grid(model, self.options["linear_solver"])
         # the model's fields, read by the kernels without being passed (Python launch time)
@@ -113,16 +113,16 @@ class Projective(Integrator):
         n, real = model.particle_count, runtime.real()
         self.x0, self.y, self.f = (ti.Vector.field(3, real, shape=n) for _ in range(3))
         # the terms by their treatment: in the force residual, in y, or projected after
-        self.residual_forces = Forces(model, lambda cls: cls.projective == "force")
-        self.field_forces = Forces(model, lambda cls: cls.projective == "lagged")
+        self.residual_forces = Forces(model, lambda cls: cls.projective == "force", contact)
+        self.field_forces = Forces(model, lambda cls: cls.projective == "lagged", contact)
         self.has_field_forces = bool(self.field_forces.terms)
-        self.projections = term_modules.build(model, lambda cls: cls.projective == "projection")
+        self.projections = term_modules.build(model, lambda cls: cls.projective == "projection",
+                                              contact)
         self.colliders = Colliders(model) if Colliders.present(model) else None
         self.has_colliders = self.colliders is not None
         # mesh colliders: the stage's half-spaces the iterations pull the cloth onto
         # after the solve (``_hold``, ``contact/hold.py``)
-        self.stage = model.contact
-        self.hold = self.stage.hold if self.stage is not None else None
+        self.hold = self.contact.hold if self.contact is not None else None
         self.has_hold = self.hold is not None
         self.deflation = None
         self.planes = (PlaneConstraints(n) if self.options["planes"]
@@ -223,9 +223,9 @@ class Projective(Integrator):
                 first = last if first is None else first
                 if aa is not None and last > 0.0:
                     aa.mix(x, v, self.x0, h, last)
-        held = 0
+        hold_iterations = 0
         if self.has_hold:
-            held, iters = self._hold(state_in, x, v, h, t1)
+            hold_iterations, iters = self._hold(state_in, x, v, h, t1)
             cg_total += iters
         if self.has_colliders:
             self._friction(x, v, h)
@@ -234,27 +234,27 @@ class Projective(Integrator):
         state_out.t = self._t1 = t1
         self.stats = {"iterations": self.options["iterations"], "cg_iterations": cg_total,
                       "residual": float(np.sqrt(last / first)) if first else 0.0,
-                      "hold_iterations": held,
+                      "hold_iterations": hold_iterations,
                       "anderson_restarts": aa.restarts if aa is not None else 0,
                       "plane_pairs": self._plane_pairs, "plane_cuts": self._plane_cuts}
 
     def _begin_planes(self, x0, x, v, h):
         """The planes of the step (the stage's candidates of the motion from x0 to the
-        first iterate x, ``ContactStage.begin_solve``), and that iterate, x0 + h v0,
+        first iterate x, ``ContactStage.search_solve``), and that iterate, x0 + h v0,
         cut short at their dividing planes (``ContactStage.truncate_solve``): two
         cloths thrown at each other at 10 m/s pass wholly through each other in it,
         every vertex pair of their candidates was active, and the first global solve,
         holding each at its plane, threw them 0.29 m apart."""
-        self.stage.begin_solve(x0, x, near=True)
-        self._plane_cuts = self.stage.truncate_solve(x0, x, v)
+        self.contact.search_solve(x0, x, near=True)
+        self._plane_cuts = self.contact.truncate_solve(x0, x, v)
         if self._plane_cuts:
             self._velocities(x, v, h)
 
     def _hold_planes(self, x0, x):
         """The planes' active vertex pairs at the iterate x and their forces into f
-        (``contact_planes.py``), from the stage's candidates of the step's motion,
+        (``contact/planes.py``), from the stage's candidates of the step's motion,
         searched again where an iterate leaves them (``ContactStage.follow_solve``)."""
-        contacts = self.stage.follow_solve(x0, x)
+        contacts = self.contact.follow_solve(x0, x)
         found = self.planes.gather(contacts, x, self.inv_mass, self.bound)
         if self.deflation is not None:
             self.deflation.prepare(self.planes.rows)
@@ -276,7 +276,7 @@ class Projective(Integrator):
         after the step moved the touching particles alone (a cloth landing on a
         turntable's platter: its particles past the rim held up while their neighbours
         fell on, 4.6 J in the springs). Returns (iterations, CG iterations)."""
-        if not self.stage.begin_hold(state_in.x, x, state_in.t, h):
+        if not self.contact.begin_hold(state_in.x, x, state_in.t, h):
             return 0, 0
         cg_total = 0
         for _ in range(self.options["iterations"]):
@@ -286,7 +286,7 @@ class Projective(Integrator):
                                              self.options["cg_max_iterations"])
                 cg_total += iters
                 self._update(x, v, h)
-        self.stage.end_hold()
+        self.contact.end_hold()
         return self.options["iterations"], cg_total
 
     def step_residual(self, x):

@@ -29,9 +29,9 @@ stiffness switches on at the thickness, where a Newton step from outside oversho
 that can bring a row into contact is searched along (``vbd_local.py``), so that VBD
 converges to backward Euler's step in contact too (tested). Each iteration ends keeping the
 contact stage's pairs on their sides of their separating planes at the whole step's start,
-in every substep (``ContactStage.begin_solve`` once a step, for the first substep's guess
+in every substep (``ContactStage.search_solve`` once a step, for the first substep's guess
 carried over the step, searched again where an iterate leaves it, a plane it crosses chosen
-again for its motion; ``guard.keep_apart``): the guard checks the step's motion against
+again for its motion; ``ContactStage.keep_apart``): the guard checks the step's motion against
 these planes, and substeps that kept only their own left it corrections that stretch the
 cloth (``docs/realtime.md``). Chebyshev's mix is skipped in an iteration after one whose
 planes moved a vertex (extrapolating a plane's move tore the fold at its first step); the
@@ -58,8 +58,6 @@ lying on a frictionless floor creep across it (``accelerate``).
 import numpy as np
 import taichi as ti
 
-from ..contact.bounds import DisplacementBounds
-from ..contact.guard import keep_apart
 from ..errors import SceneError
 from ..geometry.graph import colour_graph, colour_order, csr_layout
 from ..runtime import serial
@@ -124,13 +122,13 @@ class VBD(VertexLocal, ForceCache, Integrator):
                 "substeps": "auto"}
     live_options = frozenset({"iterations", "rho", "initial_guess", "substeps"})
 
-    def __init__(self, model, **options):
-        super().__init__(model, **options)
+    def __init__(self, model, contact=None, **options):
+        super().__init__(model, contact, **options)
         opt = self.options
         n, real = model.particle_count, model.mass.dtype
         self.model = model
         self._configure()
-        self.potential = IncrementalPotential(model, jacobi=True, per_vertex=True,
+        self.potential = IncrementalPotential(model, contact, jacobi=True, per_vertex=True,
                                               friction_majorant=True)
         self.springs = self.potential.springs
         self.has_springs = self.springs is not None
@@ -154,16 +152,15 @@ class VBD(VertexLocal, ForceCache, Integrator):
         self.prev, self.prev2, self.contact_grad, self.v_start, self.dx = (
             ti.Vector.field(3, real, shape=n) for _ in range(5))
         self.hits, self.deferred = (ti.field(ti.i32, shape=n) for _ in range(2))
-        stage = model.contact
+        stage = contact
         # mesh colliders: their planes as a penalty after the sweeps (``hold.py``)
         self.hold_stage = stage if self.potential.hold is not None else None
         # the colliders' planes of each step (``accelerate`` skips the particles they reach)
         self.colliders = next((t for t in self.potential.particle_terms
                                if t.has("contact_planes")), None)
         self.has_colliders = self.colliders is not None
-        self.bounds = (DisplacementBounds(model.inv_mass)
-                       if opt["bounds"] and stage is not None and stage.broad is not None
-                       else None)
+        self.bounds = (stage.displacement_bounds()
+                       if opt["bounds"] and stage is not None else None)
         self.bounded = self.bounds is not None
         # with self-collision and no bounds, the stage's pairs kept on their planes
         self.stage = (stage if not self.bounded and stage is not None
@@ -227,13 +224,14 @@ class VBD(VertexLocal, ForceCache, Integrator):
             guess = "gravity"
         self._guess(x, state_in.f, h, GUESSES.index(guess))
         if self.bounds is not None:
-            model.contact.detect_bounds(self.bounds, x0)
+            self.contact.detect_bounds(self.bounds, x0)
             self._clamp(x)
         if self.stage is not None and predict:      # the step's start and predicted end
             self.x_start.copy_from(x0)
             extrapolate_into(self.dx, self.x_start, float(predict), x)
-            self.stage.begin_solve(self.x_start, self.dx)
-        planes = self.stage.follow_solve(self.x_start, x, True) if self.stage else None
+            self.stage.search_solve(self.x_start, self.dx)
+        if self.stage is not None:      # the planes chosen again for the first iterate
+            self.stage.follow_solve(self.x_start, x, True)
         pushed = False
         energies = [e.evaluate(x, h, t1, False)[0]] if self.track_potential else []
         rho = float(opt["rho"])
@@ -245,11 +243,11 @@ class VBD(VertexLocal, ForceCache, Integrator):
             self._sweep(x, h, t1)
             if rho > 0.0 and it > 1 and not pushed:
                 self._accelerate(x, omegas[it])
-            if planes is not None:
-                planes = self.stage.follow_solve(self.x_start, x, True)
-                pushed = keep_apart(*planes, x, self.potential.inv_mass, self.dx, self.hits) > 0
+            if self.stage is not None:
+                pushed = self.stage.keep_apart(self.x_start, x, self.potential.inv_mass,
+                                               self.dx, self.hits, True) > 0
             if self.bounds is not None and self.bounds.any_clamped() and it < opt["iterations"]:
-                if model.contact.detect_bounds(self.bounds, x):
+                if self.contact.detect_bounds(self.bounds, x):
                     for term in self.pair_terms + self.vertex_terms:  # the rows changed
                         term.begin_step(x0, state_in.t)
         if self.hold_stage is not None and self.hold_stage.begin_hold(x0, x, state_in.t, h):

@@ -28,8 +28,8 @@ moving the particles along dV/dx at the substep's start. A step of h (dt / subst
      lands on one is held by it through its springs within the step, not only where its
      particles touch. With self-collision every pass then keeps the contact stage's
      pairs on their sides of their separating planes at the step's start
-     (``ContactStage.begin_solve``: the candidates of the step's predicted motion,
-     searched again where an iterate leaves it; ``guard.keep_apart``, a parallel Jacobi
+     (``ContactStage.search_solve``: the candidates of the step's predicted motion,
+     searched again where an iterate leaves it; ``ContactStage.keep_apart``, a parallel Jacobi
      pass): the planes are inequality
      constraints of the Gauss-Seidel iterations, and the guard after the step finds
      little left to correct;
@@ -50,7 +50,6 @@ import taichi as ti
 
 from .. import runtime
 from .. import terms as term_modules
-from ..contact import guard
 from ..errors import SceneError
 from ..terms.forces import Forces
 from ..runtime import serial
@@ -78,8 +77,8 @@ class XPBD(Integrator):
     defaults = {"iterations": 10, "substeps": "auto"}
     live_options = frozenset({"iterations", "substeps"})
 
-    def __init__(self, model, **options):
-        super().__init__(model, **options)
+    def __init__(self, model, contact=None, **options):
+        super().__init__(model, contact, **options)
         self.scene = model.scene
         self._configure()
         n, real = model.particle_count, runtime.real()
@@ -87,22 +86,22 @@ class XPBD(Integrator):
         # the terms with constraints (springs, hinges, triangles, pressure chambers), in
         # TERMS order, and the other forces at each substep's start
         self.constraints = term_modules.build(model, lambda cls: cls.has("constraints"),
-                                              constraints=True)
+                                              contact, constraints=True)
         springs = term_modules.find(self.constraints, term_modules.Springs)
         self.colours = springs.colours if springs is not None else 0
         self.external = Forces(model, lambda cls: cls.projective in ("force", "lagged")
-                               and not cls.has("constraints"))
-        self.projections = term_modules.build(model, lambda cls: cls.projective == "projection")
+                               and not cls.has("constraints"), contact)
+        self.projections = term_modules.build(model, lambda cls: cls.projective == "projection",
+                                              contact)
         self.colliders = Colliders(model) if Colliders.present(model) else None
         self.has_colliders = self.colliders is not None
         self.x_prev, self.f, self.dx = (ti.Vector.field(3, real, shape=n) for _ in range(3))
         self.hits = ti.field(ti.i32, shape=n)
-        self.stage = model.contact if model.self_collision is not None else None
+        self.stage = contact if model.self_collision is not None else None
         self.x_start = ti.Vector.field(3, real, shape=n) if self.stage is not None else None
         self.pushed = ti.field(real, shape=n)   # how far the colliders pushed, this substep
         # mesh colliders: their planes as constraints after the substeps (``hold.py``)
-        self.hold_stage = (model.contact if model.contact is not None
-                           and model.contact.hold is not None else None)
+        self.hold_stage = contact if contact is not None and contact.hold is not None else None
         self.hold = self.hold_stage.hold if self.hold_stage is not None else None
         self.constrained = bool(self.constraints)
         self.iterated = self.constrained or self.has_colliders
@@ -134,7 +133,7 @@ class XPBD(Integrator):
                 if self.stage is not None and sub == 0:
                     # the step's predicted end: count times the first substep's move
                     extrapolate_into(self.dx, self.x_start, float(count), x)
-                    self.stage.begin_solve(self.x_start, self.dx, keep_surface=True)
+                    self.stage.search_solve(self.x_start, self.dx, keep_surface=True)
                 self._solve(x, h, opt["iterations"])
             self._velocities(x, v, 1.0 / h)
             t += h
@@ -162,16 +161,15 @@ class XPBD(Integrator):
     def _solve(self, x, h, iterations):
         """The substep's iterations from the prediction x; with self-collision each pass
         ends keeping the contact stage's pairs on their sides of their planes at the
-        step's start (``ContactStage.begin_solve`` once a step, for the first substep's
-        prediction carried over the step; ``guard.keep_apart``). Every state of the step
+        step's start (``ContactStage.search_solve`` once a step, for the first substep's
+        prediction carried over the step; ``ContactStage.keep_apart``). Every state of the step
         then keeps every pair on its side of one plane, and so do the straight paths
         between them."""
         self._zero_multipliers()
         for _ in range(iterations):
             self._iterate(x, h)
             if self.stage is not None:
-                contacts = self.stage.follow_solve(self.x_start, x)
-                guard.keep_apart(*contacts, x, self.inv_mass, self.dx, self.hits)
+                self.stage.keep_apart(self.x_start, x, self.inv_mass, self.dx, self.hits)
 
     def batch_obstacle(self):
         """None where a step can run inside a batch of substeps (``batch.py``): not with

@@ -16,8 +16,6 @@ import numpy as np
 import taichi as ti
 
 from .. import runtime
-from ..contact.stage import ContactStage
-from ..contact.topology import cloth_primitives
 from ..errors import SceneError
 from ..features import FEATURES
 from .grid import GridBlock, GridTable
@@ -93,8 +91,6 @@ class Model:
                 max_stretch, iterations;
             tearing: ``features.tearing.TearingData``: count, rows, max_strain, alive,
                 broken, torn, rows_broken, gridded, grid_alive, grid_slot.
-        contact: ``contact.stage.ContactStage`` (self-collision's candidates and the guard
-            of every step) or None in a scene with neither self-collision nor colliders.
         grab: the grab spring (``terms.grab.GrabSpring``, the mouse spring of the viewer)
             or None.
 
@@ -145,9 +141,6 @@ class Model:
         self.colliders = ColliderTable(scene.colliders, colliders_off)
         self.grab = grab
         self.refresh(colliders_off)
-        # the contact set and the guard, one per model (and so per simulator)
-        self.contact = (ContactStage(self, cloth_primitives(scene))
-                        if self.self_collision is not None or self.colliders.count else None)
 
     @staticmethod
     def _grid_block(cloth):

@@ -318,7 +318,7 @@ class Renderer(Shading):
 _RENDERERS = weakref.WeakKeyDictionary()
 
 
-def render(sim: "Simulator", width: int = 640, height: int = 480,
+def render(sim: "Simulator", width: int = 640, height: int = 480, *,
            camera: Optional[dict] = None, supersample: int = 2,
            **options: Any) -> np.ndarray:
     """(H,W,3) uint8 image of ``sim``'s current state; no display needed.

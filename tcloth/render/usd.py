@@ -153,7 +153,7 @@ class UsdWriter:
 
 
 def record_usd(sim: Simulator, path: str, frames: int = 120,
-               steps_per_frame: Optional[int] = None, fps: float = 30, progress: bool = True,
+               steps_per_frame: Optional[int] = None, *, fps: float = 30, progress: bool = True,
                cloth_colours: Optional[Sequence] = None,
                particle_radius: Optional[float] = None) -> None:
     """Simulate ``frames`` frames into one OpenUSD stage at ``path``, as ``tcloth.record``

@@ -239,7 +239,7 @@ class _MeshSink:
         pass
 
 
-def record(sim: Simulator, path: str, frames: int = 240, steps_per_frame: int = 10,
+def record(sim: Simulator, path: str, frames: int = 240, steps_per_frame: int = 10, *,
            fps: float = 30, width: int = 640, height: int = 480, camera: Optional[dict] = None,
            supersample: int = 2, quality: int = 7, progress: bool = True,
            mesh_dir: Optional[str] = None, writers: Sequence = (),

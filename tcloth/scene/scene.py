@@ -160,7 +160,7 @@ class Scene:
         self.num_springs += m
         return sids
 
-    def sew(self, a: ArrayLike, b: ArrayLike, stiffness: float, damping: float = 0.0,
+    def sew(self, a: ArrayLike, b: ArrayLike, stiffness: float, damping: float = 0.0, *,
             weld: bool = False, weld_distance: Optional[float] = None) -> np.ndarray:
         """Sew particle a[i] to particle b[i]: seam springs of rest length 0 (kind "seam",
         force -k_s x_ij - k_d (v_ij . d) d) that pull each pair together; self-contact
@@ -227,7 +227,7 @@ class Scene:
     # -- builders --------------------------------------------------------------------------
     def add_cloth(self, resolution: Tuple[int, int] = (32, 32),
                   size: Tuple[float, float] = (1.0, 1.0), center: ArrayLike = (0.0, 1.0, 0.0),
-                  plane: str = "xz", mass: float = unset(0.2),
+                  *, plane: str = "xz", mass: float = unset(0.2),
                   structural: Optional[Spring] = unset((1000.0, 0.05)),
                   shear: Optional[Spring] = unset((200.0, 0.02)),
                   flexion: Optional[Spring] = unset((50.0, 0.01)),
@@ -259,7 +259,7 @@ class Scene:
                                   shear, flexion, pinned, rotation, fabric)
 
     def add_mesh_cloth(self, vertices: Union[ArrayLike, str], faces: Optional[ArrayLike] = None,
-                       mass: float = unset(0.2),
+                       *, mass: float = unset(0.2),
                        structural: Optional[Spring] = unset((1000.0, 0.05)),
                        shear: Optional[Spring] = unset(None),
                        flexion: Optional[Spring] = unset((50.0, 0.01)),
@@ -307,7 +307,7 @@ class Scene:
                                        flexion, pinned, fabric, uvs, prim)
 
     def add_rope(self, start: ArrayLike, end: ArrayLike, segments: int, mass: float,
-                 stiffness: float, damping: float = 0.0,
+                 stiffness: float, damping: float = 0.0, *,
                  pinned: Sequence = ("start",)) -> builders.Rope:
         """Add a straight rope of ``segments`` springs from ``start`` to ``end``.
 
@@ -325,7 +325,7 @@ class Scene:
         return builders.add_rope(self, start, end, segments, mass, stiffness, damping, pinned)
 
     # -- colliders -------------------------------------------------------------------------
-    def add_mesh_collider(self, mesh, position=(0.0, 0.0, 0.0), rotation=None, scale=1.0,
+    def add_mesh_collider(self, mesh, position=(0.0, 0.0, 0.0), rotation=None, scale=1.0, *,
                           friction=0.0, thickness=0.005, stiffness=1000.0, damping=0.5,
                           stick_velocity=1e-3, velocity=None, angular_velocity=None,
                           keyframes=None, deform=None, deform_fps=30.0, prim=None,
@@ -371,7 +371,7 @@ class Scene:
                                               velocity, angular_velocity, keyframes, deform,
                                               deform_fps, prim, sdf)
 
-    def add_collider(self, kind: str, shape: dict, friction: float = 0.0,
+    def add_collider(self, kind: str, shape: dict, *, friction: float = 0.0,
                      velocity: ArrayLike = (0.0, 0.0, 0.0), thickness: float = 0.005,
                      stiffness: float = 1000.0, damping: float = 0.5,
                      stick_velocity: float = 1e-3) -> dict:

@@ -126,13 +126,13 @@ class Batches:
         if self.start is None:
             self.start = sim.model.state()
         key = (sim.integrator, limiter, a)
-        fields = sim._contact and sim._contact.batch_key()
+        fields = sim.contact and sim.contact.batch_key()
         if key not in self.kernels or self.kernels[key][0] != fields:
             self.kernels[key] = fields, kernel(
-                sim.integrator, limiter, sim._contact, sim.budget, sim._tearing, a, b,
+                sim.integrator, limiter, sim.contact, sim.budget, sim._tearing, a, b,
                 self.start, sim.position_bound, sim.velocity_bound)
         run = self.kernels[key][1]
-        counts = sim._contact and sim._contact.batch_counts()
+        counts = sim.contact and sim.contact.batch_counts()
         self.mark = sim._tearing and sim._tearing.mark(synced=True)
         fresh = 0 if sim.integrator.holds_forces(a) else 1
         args = (fresh, sim._time_base, sim.num_steps - sim._step_base, sim.dt)
@@ -161,7 +161,7 @@ class Batches:
             done, error = self._checked_steps(run, a, done, args)
         sim.num_steps += done
         sim.state.t = sim.time
-        swept = sim._contact is not None and sim._contact.batch_cut_last()
+        swept = sim.contact is not None and sim.contact.batch_cut_last()
         if limiter is None and error is None and not swept and not changed:
             sim.integrator.adopt_forces(sim.state)
         else:
@@ -177,7 +177,7 @@ class Batches:
         """The rest of the contact stage's guard (``ContactStage.batch_finish``) for step
         steps + 1, whose end a holds as a batch left it; whether it changed a."""
         sim = self.sim
-        return sim._contact.batch_finish(a.x, a.v, sim.time_at(steps), sim.dt)
+        return sim.contact.batch_finish(a.x, a.v, sim.time_at(steps), sim.dt)
 
     def _restore_start(self, a, counts=None):
         """a, the contact stage's counts (``batch_counts``, where given) and the springs
@@ -187,7 +187,7 @@ class Batches:
         for name in ("x", "v", "f"):
             getattr(a, name).copy_from(getattr(self.start, name))
         if counts:
-            sim._contact.batch_replay(counts)
+            sim.contact.batch_replay(counts)
         if sim._tearing is not None:
             sim._tearing.rollback(self.mark)
 
@@ -206,6 +206,6 @@ class Batches:
             if error is not None:
                 self._restore_start(a)
                 return k, error
-            fresh = 1 if changed or (sim._contact is not None
-                                     and sim._contact.batch_cut_last()) else 0
+            fresh = 1 if changed or (sim.contact is not None
+                                     and sim.contact.batch_cut_last()) else 0
         return n, None

@@ -341,8 +341,8 @@ def load(simulator_class, path):
         sim._welds.welded.from_numpy(files["state_welded"])
     if meta["forces_valid"]:
         sim.integrator.adopt_forces(state)
-    if sim._contact is not None:
-        sim._contact.refresh(state.x)
+    if sim.contact is not None:
+        sim.contact.refresh(state.x)
     sim.num_steps = int(meta["num_steps"])
     sim._time_base = float(meta.get("time_base", 0.0))
     sim._step_base = int(meta.get("step_base", 0))

@@ -30,9 +30,9 @@ def _particle_sums(x: ti.template(), v: ti.template(), mass: ti.template(),
 class Diagnostics:
     """Reductions over one model; owns its terms and a small accumulator field."""
 
-    def __init__(self, model):
+    def __init__(self, model, contact=None):
         self.model = model
-        self.terms = term_modules.build(model)
+        self.terms = term_modules.build(model, contact=contact)
         self.springs = term_modules.find(self.terms, term_modules.Springs)
         self._out = ti.field(runtime.accumulator(), shape=8)
 

@@ -11,6 +11,7 @@ from .batch import Batches
 from .. import runtime
 from .budget import EnergyBudget
 from .constraints import StrainLimiter
+from .current_mesh import CurrentMesh
 from .diagnostics import Diagnostics
 from ..errors import InstabilityError, SceneError
 from ..features.wind import wind_velocity
@@ -19,6 +20,8 @@ from .live import LiveParameters
 from .split import StepSplitter, check_split
 from .tearing import Tearing
 from .welds import Welds
+from ..contact import ContactStage
+from ..contact.topology import cloth_primitives
 from ..integrators import INTEGRATORS
 from ..model.model import Model, copy_state
 from ..runtime import serial_count
@@ -37,7 +40,7 @@ def _default_grab_stiffness(scene):
                  if k is not None), 100.0)
 
 
-class Simulator(LiveParameters):
+class Simulator(LiveParameters, CurrentMesh):
     """Advance a scene in time.
 
     Args:
@@ -90,9 +93,17 @@ class Simulator(LiveParameters):
     ``set_collider``, ``set_collider_enabled``, ``set_strain_limiting``,
     ``grab``/``release``. Scene values they change are changed in ``scene`` too, and the
     switches are settings, so a checkpoint saved afterwards continues the changed run.
+
+    Attributes:
+        model: the scene's ``Model`` (static: what the kernels read of the scene).
+        contact: the contact stage (``tcloth.contact.ContactStage``: self-collision's
+            candidates, the mesh colliders' pairs and the guard of every step), or None in
+            a scene with neither self-collision nor colliders. The simulator owns it and
+            hands it to its integrator, which takes contact inside its step through it.
+        integrator: the integrator, built for ``model`` and ``contact``.
     """
 
-    def __init__(self, scene: Scene, integrator: str = "symplectic_euler", dt: float = 1e-3,
+    def __init__(self, scene: Scene, integrator: str = "symplectic_euler", dt: float = 1e-3, *,
                  grid_stencil: bool = True, position_bound: float = 1e6,
                  velocity_bound: float = 1e8, strain_bound: Optional[float] = 1.0,
                  energy_bound: bool = True, strain_limiting: bool = True,
@@ -117,16 +128,20 @@ class Simulator(LiveParameters):
         self.model = Model(scene, grid_stencil=bool(grid_stencil), colliders_off=off,
                            grab=GrabSpring() if grab else None)
         self.precision = runtime.precision()
-        self.integrator = integrator_class(self.model, **options)
+        # the contact set and the guard, handed to the integrator for its step
+        self.contact = (ContactStage(self.model, cloth_primitives(scene))
+                        if self.model.self_collision is not None or self.model.colliders.count
+                        else None)
+        self.integrator = integrator_class(self.model, self.contact, **options)
         self._generation = self.model.generation
         self._states = [self.model.state(), self.model.state()]
         limit = self.model.strain_limit
         self._limiter = (StrainLimiter(self.model) if limit is not None and limit.count
                          else None)
-        contact = scene.self_collision
-        self._welds = Welds(self.model, 1e-3 if contact is None else contact["thickness"]) \
+        touching = scene.self_collision
+        self._welds = Welds(self.model, 1e-3 if touching is None else touching["thickness"]) \
             if scene.welds else None
-        self.diagnostics = Diagnostics(self.model)
+        self.diagnostics = Diagnostics(self.model, self.contact)
         self.budget = EnergyBudget(self.model, bool(energy_bound))
         self._checker = StepCheck(self)
         self._splitter = StepSplitter(self, self.settings["split"])
@@ -135,9 +150,8 @@ class Simulator(LiveParameters):
         self._batches = Batches(self)
         self._fusion = None          # (fusion(),) once computed; reset by the live changes
         self._tearing = Tearing(self.model) if self.model.tearing is not None else None
-        self._contact = self.model.contact
-        if self._contact is not None:
-            self._contact.refresh(self.state.x)
+        if self.contact is not None:
+            self.contact.refresh(self.state.x)
             if self.settings["compile_ahead"]:
                 self._warm_contact()
         self._rebase()
@@ -147,8 +161,8 @@ class Simulator(LiveParameters):
         (a batch's, from the stage's start to the State; else from the State to the
         other), rather than in a later frame (``contact/warm.py``)."""
         a, b = self._states
-        step = (self._contact.x_start, a.x, a.v) if self.fusion() is None else (a.x, b.x, b.v)
-        self._contact.warm_up([step], a.x, a.t, self.dt)
+        step = (self.contact.x_start, a.x, a.v) if self.fusion() is None else (a.x, b.x, b.v)
+        self.contact.warm_up([step], a.x, a.t, self.dt)
 
     @property
     def scene(self) -> Scene:
@@ -200,7 +214,7 @@ class Simulator(LiveParameters):
             self.integrator.invalidate()
         if self._welds is not None and self._welds.apply(s_out):
             self.integrator.invalidate()
-        if self._contact is not None and self._contact.end_step(
+        if self.contact is not None and self.contact.end_step(
                 s_in.x, s_out.x, s_out.v, s_in.t, dt):
             self.integrator.invalidate()
             if self._welds is not None:        # a pair the guard's cuts took apart
@@ -239,7 +253,7 @@ class Simulator(LiveParameters):
         self._check()
         if self._fusion is None:
             self._fusion = (self._why_not_batched(),)
-        if self._fusion[0] is None and self._contact is not None and self._contact.recording:
+        if self._fusion[0] is None and self.contact is not None and self.contact.recording:
             return "a gradient's run keeps every step's contact guard from Python"
         return self._fusion[0]
 
@@ -257,8 +271,8 @@ class Simulator(LiveParameters):
         n = self.model.particle_count
         if not serial_count(n):
             return f"the {n} particles' loops run on several threads"
-        why = self.integrator.batch_obstacle() or (self._contact and
-                                                   self._contact.batch_obstacle())
+        why = self.integrator.batch_obstacle() or (self.contact and
+                                                   self.contact.batch_obstacle())
         if why is None and self._limiter is not None and self.settings["strain_limiting"]:
             why = self._limiter.batch_obstacle()
         return why or (self._tearing and self._tearing.batch_obstacle())
@@ -322,8 +336,8 @@ class Simulator(LiveParameters):
         """The state was set from outside the step (``set_state``, a split step's start
         restored): the integrator's caches dropped, the contact list made to cover it."""
         self.integrator.invalidate()
-        if self._contact is not None:
-            self._contact.refresh(self.state.x)
+        if self.contact is not None:
+            self.contact.refresh(self.state.x)
 
     def reset(self, dt: Optional[float] = None) -> None:
         """Back to the scene's initial positions and velocities at t = 0, optionally with a
@@ -337,8 +351,8 @@ class Simulator(LiveParameters):
         self.state.t = 0.0
         if self._welds is not None:
             self._welds.reset()
-        if self._contact is not None:
-            self._contact.reset_stats()          # a new run counts from zero
+        if self.contact is not None:
+            self.contact.reset_stats()          # a new run counts from zero
         self._splitter.reset()
         if self._tearing is not None:
             self._tearing.mend()
@@ -350,7 +364,7 @@ class Simulator(LiveParameters):
         """Continue with another integrator (and options) from the current state, on the
         same model (its kernels compile on first use)."""
         self._check()
-        self.integrator = _integrator_class(integrator)(self.model, **options)
+        self.integrator = _integrator_class(integrator)(self.model, self.contact, **options)
         self.integrator_name = integrator
         self._batches.forget()
         self._fusion = None
@@ -448,9 +462,9 @@ class Simulator(LiveParameters):
         self-contacts ("point_triangle", "edge_edge") and collider contacts ("collider":
         free particles within a collider's thickness)."""
         self._check()
-        if self._contact is None:
+        if self.contact is None:
             return {}
-        return {**self._contact.contact_stats(), **self.self_contacts(),
+        return {**self.contact.contact_stats(), **self.self_contacts(),
                 "collider": self.diagnostics.collider_contacts(self.state)}
 
     def self_contacts(self) -> dict:
@@ -459,43 +473,7 @@ class Simulator(LiveParameters):
         self._check()
         return self.diagnostics.self_contacts(self.state)
 
-    def welded(self) -> np.ndarray:
-        """(W, 2) the pairs (a, b) of welded seams that have met so far, now one particle
-        each (``Scene.sew(..., weld=True)``, ``welds.py``)."""
-        self._check()
-        return np.zeros((0, 2), np.int64) if self._welds is None else self._welds.welded_pairs()
-
-    def triangles(self) -> np.ndarray:
-        """(T, 3) the cloths' triangles with each welded pair's second particle replaced by
-        its first: the merged mesh (``Scene.triangles`` before any weld)."""
-        tri = self.scene.triangles
-        welded = self.welded()
-        if not len(welded):
-            return tri
-        one = np.arange(self.model.particle_count)
-        one[welded[:, 1]] = welded[:, 0]
-        return one[tri]
-
     def max_strain(self) -> float:
         """Max over springs of (length - rest) / rest (springs that broke left out)."""
         self._check()
         return self.diagnostics.max_strain(self.state)
-
-    def torn(self) -> np.ndarray:
-        """(B,) int64: the scene spring ids that broke so far (``Scene.set_tearing``), in
-        the order they did; empty without tearing."""
-        self._check()
-        return (np.zeros(0, np.int64) if self._tearing is None else self._tearing.torn())
-
-    def surface(self) -> np.ndarray:
-        """(T,) bool over ``scene.triangles``: the cloth triangles that hold (all of them
-        without tearing; a torn one has a broken spring along an edge)."""
-        self._check()
-        if self._tearing is None:
-            return np.ones(len(self.scene.triangles), dtype=bool)
-        return self._tearing.surface()
-
-    @property
-    def surface_version(self) -> int:
-        """A number that changes whenever ``surface()`` may have (a spring broke)."""
-        return 0 if self._tearing is None else self._tearing.version

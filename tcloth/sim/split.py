@@ -91,7 +91,7 @@ class StepSplitter:
         kept): take it again as 2, 4, ... pieces, or raise ``error`` where splitting is off
         or cannot be taken (a gradient's run records every step)."""
         sim = self.sim
-        if self.most == 1 or (sim._contact is not None and sim._contact.recording):
+        if self.most == 1 or (sim.contact is not None and sim.contact.recording):
             raise error
         self.counts["retries"] += 1
         self._keep_start()

@@ -19,11 +19,18 @@ TERMS = (GravityDrag, Springs, Bending, Membrane, Wind, Attraction, Pressure, Co
          SelfContact, Grab)
 
 
-def build(model, select=None, **options):
+def build(model, select=None, contact=None, **options):
     """The present terms, in ``TERMS`` order; select(term class) -> bool filters them.
-    Each term is given the ``options`` it declares (``Term.options``)."""
-    return [cls(model, **{k: v for k, v in options.items() if k in cls.options})
-            for cls in TERMS if cls.present(model) and (select is None or select(cls))]
+    Each term is given the ``options`` it declares (``Term.options``), and those that read
+    the simulator's contact stage (``Term.reads_contact``) that stage, ``contact``."""
+    made = []
+    for cls in TERMS:
+        if cls.present(model) and (select is None or select(cls)):
+            given = {k: v for k, v in options.items() if k in cls.options}
+            if cls.reads_contact:
+                given["contact"] = contact
+            made.append(cls(model, **given))
+    return made
 
 
 def find(terms, cls):

@@ -115,6 +115,8 @@ class Term:
     in_batch = False
     provides = frozenset()
     options = {}
+    # built with the simulator's contact stage (``contact=``; ``terms.build``)
+    reads_contact = False
     work = 1            # what a particle's evaluation costs, in simple items (runtime.serial)
 
     def __init_subclass__(cls, **kwargs):

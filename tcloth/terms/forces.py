@@ -52,14 +52,16 @@ class Forces:
         select: None (every term), or term class -> bool: which terms this workspace
             evaluates (projective leaves colliders to its projection, wind and attraction
             to the start of the step).
+        contact: the simulator's contact stage (``Simulator.contact``), for the terms that
+            read it (self-contact), or None.
 
     Attributes: terms (in ``TERMS`` order), first (the GravityDrag term or None), springs
     (the Springs term or None), runs (the launches of ``compute``: ``_Run``s of in-kernel
     terms and the other terms, in order).
     """
 
-    def __init__(self, model, select=None):
-        terms = term_modules.build(model, select)
+    def __init__(self, model, select=None, contact=None):
+        terms = term_modules.build(model, select, contact)
         springs = term_modules.find(terms, term_modules.Springs)
         self.first = first = terms[0] if terms and isinstance(
             terms[0], term_modules.GravityDrag) else None

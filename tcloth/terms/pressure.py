@@ -94,7 +94,8 @@ class Pressure(Term):
         # h^2 times the applied pressure's change (``project``)
         self.volume, self.scale, self.bound, self.dot, self.lam, self.weight, self.dlam = (
             ti.field(ti.f64, shape=count) for _ in range(7))
-        self.held = ti.Vector.field(2, ti.f64, shape=count)     # (k, p) at ``prepare_blocks``
+        # (k, p) at ``prepare_blocks``
+        self.block_terms = ti.Vector.field(2, ti.f64, shape=count)
         # per particle: dV/dx_i, the positions of the last ``prepare_blocks`` and XPBD's
         # dV/dx_i at the substep's start
         self.grad_v, self.x_at, self.grad_start = (
@@ -204,7 +205,7 @@ class Pressure(Term):
         ti.loop_config(serialize=ti.static(serial(bound)))
         for c in range(bound.shape[0]):
             bound[c] = 0
-            self.held[c] = ti.Vector([gas[c][0] / volume[c] ** 2,
+            self.block_terms[c] = ti.Vector([gas[c][0] / volume[c] ** 2,
                                       gas[c][0] / volume[c] - gas[c][1]])
         ti.loop_config(serialize=ti.static(serial(x)))
         for p in range(x.shape[0]):
@@ -228,7 +229,7 @@ class Pressure(Term):
         g = self.grad_v[p]
         length = g.norm()
         if c >= 0 and length > 0.0:
-            weight = self.held[c][0]
+            weight = self.block_terms[c][0]
             if ti.static(self.jacobi):
                 weight *= self.bound[c] / length
             block = ti.cast(weight, float) * g.outer_product(g)
@@ -254,11 +255,11 @@ class Pressure(Term):
             coupled = ti.Vector.zero(float, 3)
             c = self.chamber_of(p)
             if c >= 0:
-                coupled = ti.cast(self.held[c][0] * dot[c], float) * self.grad_v[p]
+                coupled = ti.cast(self.block_terms[c][0] * dot[c], float) * self.grad_v[p]
                 if ti.static(not whole):
                     coupled -= self.diagonal_block(p) @ v[p]
                     if ti.static(self.exact):
-                        coupled -= ti.cast(self.held[c][1], float) * \
+                        coupled -= ti.cast(self.block_terms[c][1], float) * \
                             self.normal_derivative(p, self.x_at, v)
             add_or_set(out, p, coupled, first)
 

@@ -305,11 +305,11 @@ def _project_pass(cl: ti.template(), count: ti.i32, x: ti.template(), v: ti.temp
 @ti.data_oriented
 class SelfContact(Term):
     """Self-collision of the scene's cloths and ropes (see the module docstring), over the
-    candidates of the model's contact stage (``model.contact``).
+    candidates of the simulator's contact stage.
 
     Attributes:
         table: the model's ``contact.topology.SelfCollisionTable``.
-        stage: the model's ``contact.stage.ContactStage``.
+        stage: the simulator's ``contact.ContactStage`` (``Simulator.contact``).
     """
     name = "self_contact"
     feature = SELF_COLLISION
@@ -321,14 +321,15 @@ class SelfContact(Term):
     # per_vertex: built for VBD, whose sweeps evaluate each particle's rows
     # (``vertex_system``) from an index made at each step's start
     options = {"per_vertex": False}
+    reads_contact = True
 
     @staticmethod
     def present(model):
         return model.self_collision is not None
 
-    def __init__(self, model, per_vertex=False):
+    def __init__(self, model, contact, per_vertex=False):
         self.table = model.self_collision
-        self.stage = model.contact
+        self.stage = contact
         self.inv_mass = model.inv_mass
         self._scratch = {}
         self.lag = None             # ``Lagged``, as long as the stage's list at least

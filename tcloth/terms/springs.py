@@ -164,20 +164,9 @@ def owned_grid_springs(x, v, offset, nx, ny, g, families: ti.template(), grid_fo
                        mask: ti.template()):
     """A loop over the grid: the forces of the springs each particle owns (``OWNED``)
     into grid_forces[p, 2 family + s]. g: the grid's ``GridTable.reals`` row. mask: None,
-    or the tearing's per-slot flags (0: that spring broke, no force).
-
-    On CPUs rows in parallel and the particles of a row in order (no index division per
-    particle); elsewhere every particle in parallel."""
-    rest = grid_layout.rest_lengths(g)
-    if ti.static(cpu()):
-        ti.loop_config(serialize=ti.static(serial(grid_forces)))
-        for j in range(ny):
-            for i in range(nx):
-                _owned_springs(x, v, offset, nx, ny, i, j, g, rest, families, grid_forces,
-                               mask)
-    else:
-        for j, i in ti.ndrange(ny, nx):
-            _owned_springs(x, v, offset, nx, ny, i, j, g, rest, families, grid_forces, mask)
+    or the tearing's per-slot flags (0: that spring broke, no force)."""
+    _grid_pass(False, x, v, 0.0, offset, nx, ny, g, families, None, grid_forces, mask, None,
+               grid_forces)
 
 
 @ti.func
@@ -189,6 +178,37 @@ def _gather_grid(x, v, t, offset, nx, ny, i, j, families: ti.template(), first: 
         f_out[p] = first.force(p, x, v, t) + acc
     else:
         f_out[p] += acc
+
+
+@ti.func
+def _grid_cell(gather: ti.template(), x, v, t, offset, nx, ny, i, j, g, rest,
+               families: ti.template(), first: ti.template(), grid_forces,
+               mask: ti.template(), f_out: ti.template()):
+    if ti.static(gather):
+        _gather_grid(x, v, t, offset, nx, ny, i, j, families, first, grid_forces, f_out)
+    else:
+        _owned_springs(x, v, offset, nx, ny, i, j, g, rest, families, grid_forces, mask)
+
+
+@ti.func
+def _grid_pass(gather: ti.template(), x, v, t, offset, nx, ny, g, families: ti.template(),
+               first: ti.template(), grid_forces, mask: ti.template(), f_out: ti.template(),
+               written: ti.template()):
+    """One loop over a grid's particles: the springs each owns into grid_forces, or (with
+    ``gather``) their sums into f_out (``_gather_grid``). On CPUs rows in parallel and the
+    particles of a row in order (no index division per particle), serial where the field
+    it writes (``written``) is small; elsewhere every particle in parallel."""
+    rest = grid_layout.rest_lengths(g)
+    if ti.static(cpu()):
+        ti.loop_config(serialize=ti.static(serial(written)))
+        for j in range(ny):
+            for i in range(nx):
+                _grid_cell(gather, x, v, t, offset, nx, ny, i, j, g, rest, families, first,
+                           grid_forces, mask, f_out)
+    else:
+        for j, i in ti.ndrange(ny, nx):
+            _grid_cell(gather, x, v, t, offset, nx, ny, i, j, g, rest, families, first,
+                       grid_forces, mask, f_out)
 
 
 @ti.func
@@ -204,16 +224,10 @@ def grid_springs(grids, k, families: ti.template(), first: ti.template(), x, v, 
     grid_forces: (particles, 6) vec3 scratch. mask: None, or the tearing's per-slot flags.
     """
     offset, nx, ny = grids.ints[k][0], grids.ints[k][1], grids.ints[k][2]
-    owned_grid_springs(x, v, offset, nx, ny, grids.reals[k], families, grid_forces, mask)
-    if ti.static(cpu()):
-        ti.loop_config(serialize=ti.static(serial(f_out)))
-        for j in range(ny):
-            for i in range(nx):
-                _gather_grid(x, v, t, offset, nx, ny, i, j, families, first, grid_forces,
-                             f_out)
-    else:
-        for j, i in ti.ndrange(ny, nx):
-            _gather_grid(x, v, t, offset, nx, ny, i, j, families, first, grid_forces, f_out)
+    g = grids.reals[k]
+    owned_grid_springs(x, v, offset, nx, ny, g, families, grid_forces, mask)
+    _grid_pass(True, x, v, t, offset, nx, ny, g, families, first, grid_forces, mask, f_out,
+               f_out)
 
 
 # -- diagnostics ------------------------------------------------------------------------------

@@ -165,7 +165,7 @@ def guard_step(sim, x, v, dt):
     fields = (s_in.x, s_out.x, s_out.v)
     for f, value in zip(fields, (x, x + dt * v, v)):
         f.from_numpy(value.astype(np.float64 if real == ti.f64 else np.float32))
-    sim.model.contact.end_step(*fields, 0.0, dt)
+    sim.contact.end_step(*fields, 0.0, dt)
     return fields[1].to_numpy().astype(np.float64), fields[2].to_numpy().astype(np.float64)
 
 

@@ -1,5 +1,5 @@
 """Self-contact inside projective dynamics' step: the contact stage's separating
-planes (``ContactStage.begin_solve``, ``contact/guard.py``) as one-sided constraints of the
+planes (``ContactStage.search_solve``, ``contact/guard.py``) as one-sided constraints of the
 step's minimisation.
 
 Each candidate pair keeps, for every vertex a of its first side and b of its second,
@@ -34,7 +34,7 @@ import taichi as ti
 
 from .. import runtime
 from ..runtime import serial
-from ..contact.normals import VERTEX_PAIRS, spans
+from .normals import VERTEX_PAIRS, kept_apart, plane_row
 
 PLANE_STIFFNESS = 10.0   # the most a vertex's constraints weigh together, over its A_pp
 # active vertex pairs a particle held at first (more grows the list: the kernels that
@@ -103,19 +103,17 @@ class _Rows:
         self.count[None] = 0
         ti.loop_config(serialize=ti.static(serial(cl.ids)))
         for c in range(rows):
-            ids, kind = cl.ids[c], cl.kind[c]
-            n, delta = pl.n[c], pl.delta[c]
-            if delta > 0.0:
-                for a, b in ti.static(VERTEX_PAIRS):
-                    if spans(kind, a, b):
-                        pa, pb = ids[a], ids[b]
-                        free = inv_mass[pa] + inv_mass[pb] > 0.0
-                        if free and n.dot(x[pa] - x[pb]) < delta * REACH:
-                            k = ti.atomic_add(self.count[None], 1)
-                            if k < self.capacity:
-                                self.pairs[k] = ti.Vector([pa, pb])
-                                self.n[k] = n
-                                self.gap[k] = delta * REACH
+            ids, kind, n, delta = plane_row(cl, pl, c)
+            for a, b in ti.static(VERTEX_PAIRS):
+                if kept_apart(kind, delta, a, b):
+                    pa, pb = ids[a], ids[b]
+                    free = inv_mass[pa] + inv_mass[pb] > 0.0
+                    if free and n.dot(x[pa] - x[pb]) < delta * REACH:
+                        k = ti.atomic_add(self.count[None], 1)
+                        if k < self.capacity:
+                            self.pairs[k] = ti.Vector([pa, pb])
+                            self.n[k] = n
+                            self.gap[k] = delta * REACH
         found = self.count[None]
         self.count[None] = ti.min(found, self.capacity)
         return found
