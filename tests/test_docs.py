@@ -65,7 +65,7 @@ def test_collider_builders_signatures_match():
         if shape.meshed:
             continue
         parameters = list(inspect.signature(collider_builder(shape)).parameters.values())[1:]
-        call = f"scene.add_{shape.name}({', '.join(str(p) for p in parameters)})"
+        call = f"scene.add_{shape.name}{inspect.Signature(parameters)}"
         assert call in text, f"docs/reference/scene.md should show {call}"
 
 
