@@ -107,7 +107,7 @@ class BackwardEuler(Integrator):
         self.hessian = hessian.make(model, self.potential, self.exact, self.grid)
         self.x_try = ti.Vector.field(3, model.mass.dtype, shape=model.particle_count)
         # mesh colliders: the stage's planes as a penalty after the solve (``hold.py``)
-        self.stage = contact if self.potential.hold is not None else None
+        self.holds = self.potential.hold is not None
         self.stats = {}
         self.unconverged = 0
         self._eps = float(np.finfo(runtime.numpy_real()).eps)
@@ -124,11 +124,11 @@ class BackwardEuler(Integrator):
                   8.0 * self._eps * linalg.max_norm(state_in.x))
         it, cg_total, residual, converged, energies = self._newton(x, h, t1, tol)
         hold_run = None
-        if self.stage is not None and self.stage.begin_hold(state_in.x, x, state_in.t, h):
+        if self.holds and self.contact.begin_hold(state_in.x, x, state_in.t, h):
             # the mesh colliders' planes the step ends below, as a penalty in E
             # (``contact/hold.py``): Newton again on the new E
             hold_run = self._newton(x, h, t1, tol)
-            self.stage.end_hold()
+            self.contact.end_hold()
             cg_total += hold_run[1]
             residual, converged = hold_run[2], hold_run[3]
         _velocities(e.x0, x, 1.0 / h, state_out.v)

@@ -152,20 +152,19 @@ class VBD(VertexLocal, ForceCache, Integrator):
         self.prev, self.prev2, self.contact_grad, self.v_start, self.dx = (
             ti.Vector.field(3, real, shape=n) for _ in range(5))
         self.hits, self.deferred = (ti.field(ti.i32, shape=n) for _ in range(2))
-        stage = contact
         # mesh colliders: their planes as a penalty after the sweeps (``hold.py``)
-        self.hold_stage = stage if self.potential.hold is not None else None
+        self.holds = self.potential.hold is not None
         # the colliders' planes of each step (``accelerate`` skips the particles they reach)
         self.colliders = next((t for t in self.potential.particle_terms
                                if t.has("contact_planes")), None)
         self.has_colliders = self.colliders is not None
-        self.bounds = (stage.displacement_bounds()
-                       if opt["bounds"] and stage is not None else None)
+        self.bounds = (contact.displacement_bounds()
+                       if opt["bounds"] and contact is not None else None)
         self.bounded = self.bounds is not None
         # with self-collision and no bounds, the stage's pairs kept on their planes
-        self.stage = (stage if not self.bounded and stage is not None
-                      and stage.broad is not None else None)
-        self.x_start = ti.Vector.field(3, real, shape=n) if self.stage is not None else None
+        self.keeps_planes = (not self.bounded and contact is not None
+                             and contact.broad is not None)
+        self.x_start = ti.Vector.field(3, real, shape=n) if self.keeps_planes else None
         self.track_potential = False
         self.stats = {}
         if self.has_springs:
@@ -226,12 +225,12 @@ class VBD(VertexLocal, ForceCache, Integrator):
         if self.bounds is not None:
             self.contact.detect_bounds(self.bounds, x0)
             self._clamp(x)
-        if self.stage is not None and predict:      # the step's start and predicted end
+        if self.keeps_planes and predict:      # the step's start and predicted end
             self.x_start.copy_from(x0)
             extrapolate_into(self.dx, self.x_start, float(predict), x)
-            self.stage.search_solve(self.x_start, self.dx)
-        if self.stage is not None:      # the planes chosen again for the first iterate
-            self.stage.follow_solve(self.x_start, x, True)
+            self.contact.search_solve(self.x_start, self.dx)
+        if self.keeps_planes:      # the planes chosen again for the first iterate
+            self.contact.follow_solve(self.x_start, x, True)
         pushed = False
         energies = [e.evaluate(x, h, t1, False)[0]] if self.track_potential else []
         rho = float(opt["rho"])
@@ -243,20 +242,20 @@ class VBD(VertexLocal, ForceCache, Integrator):
             self._sweep(x, h, t1)
             if rho > 0.0 and it > 1 and not pushed:
                 self._accelerate(x, omegas[it])
-            if self.stage is not None:
-                pushed = self.stage.keep_apart(self.x_start, x, self.potential.inv_mass,
-                                               self.dx, self.hits, True) > 0
+            if self.keeps_planes:
+                pushed = self.contact.keep_apart(self.x_start, x, self.potential.inv_mass,
+                                                 self.dx, self.hits, True) > 0
             if self.bounds is not None and self.bounds.any_clamped() and it < opt["iterations"]:
                 if self.contact.detect_bounds(self.bounds, x):
                     for term in self.pair_terms + self.vertex_terms:  # the rows changed
                         term.begin_step(x0, state_in.t)
-        if self.hold_stage is not None and self.hold_stage.begin_hold(x0, x, state_in.t, h):
+        if self.holds and self.contact.begin_hold(x0, x, state_in.t, h):
             # the mesh colliders' planes the step ends below, as a penalty in E
             # (``contact/hold.py``): the sweeps again
             for _ in range(opt["iterations"]):
                 self._contacts(x, h)
                 self._sweep(x, h, t1)
-            self.hold_stage.end_hold()
+            self.contact.end_hold()
         if self.track_potential:
             energies.append(e.evaluate(x, h, t1, False)[0])
         self._finish(x, self.v_start, 1.0 / h, state_out.v, state_out.f)

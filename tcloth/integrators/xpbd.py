@@ -97,12 +97,13 @@ class XPBD(Integrator):
         self.has_colliders = self.colliders is not None
         self.x_prev, self.f, self.dx = (ti.Vector.field(3, real, shape=n) for _ in range(3))
         self.hits = ti.field(ti.i32, shape=n)
-        self.stage = contact if model.self_collision is not None else None
-        self.x_start = ti.Vector.field(3, real, shape=n) if self.stage is not None else None
+        # self-collision: the stage's pairs kept on their planes
+        self.keeps_planes = model.self_collision is not None
+        self.x_start = ti.Vector.field(3, real, shape=n) if self.keeps_planes else None
         self.pushed = ti.field(real, shape=n)   # how far the colliders pushed, this substep
         # mesh colliders: their planes as constraints after the substeps (``hold.py``)
-        self.hold_stage = contact if contact is not None and contact.hold is not None else None
-        self.hold = self.hold_stage.hold if self.hold_stage is not None else None
+        self.hold = contact.hold if contact is not None else None
+        self.holds = self.hold is not None
         self.constrained = bool(self.constraints)
         self.iterated = self.constrained or self.has_colliders
         self.stats = {}
@@ -122,7 +123,7 @@ class XPBD(Integrator):
         x, v = state_out.x, state_out.v
         self._copy(state_in.x, state_in.v, x, v)
         t = state_in.t
-        if self.stage is not None:
+        if self.keeps_planes:
             self.x_start.copy_from(state_in.x)
         for sub in range(count):
             self.external.compute(x, v, t, self.f)
@@ -130,23 +131,22 @@ class XPBD(Integrator):
                 self.colliders.begin_solve(x, v, h, t)
             self._predict(x, v, h)
             if self.iterated:
-                if self.stage is not None and sub == 0:
+                if self.keeps_planes and sub == 0:
                     # the step's predicted end: count times the first substep's move
                     extrapolate_into(self.dx, self.x_start, float(count), x)
-                    self.stage.search_solve(self.x_start, self.dx, keep_surface=True)
+                    self.contact.search_solve(self.x_start, self.dx, keep_surface=True)
                 self._solve(x, h, opt["iterations"])
             self._velocities(x, v, 1.0 / h)
             t += h
             for term in self.projections:
                 term.project(x, v, t)
-        if self.hold_stage is not None and self.hold_stage.begin_hold(state_in.x, x,
-                                                                     state_in.t, dt):
+        if self.holds and self.contact.begin_hold(state_in.x, x, state_in.t, dt):
             # the mesh colliders' planes the step ends below, as inequality constraints
             # of the last substep's iterations, run again (``contact/hold.py``)
             for _ in range(opt["iterations"]):
                 self._iterate(x, h)
                 self._hold_pass(x)
-            self.hold_stage.end_hold()
+            self.contact.end_hold()
             self._velocities(x, v, 1.0 / h)
             for term in self.projections:
                 term.project(x, v, t)
@@ -168,8 +168,8 @@ class XPBD(Integrator):
         self._zero_multipliers()
         for _ in range(iterations):
             self._iterate(x, h)
-            if self.stage is not None:
-                self.stage.keep_apart(self.x_start, x, self.inv_mass, self.dx, self.hits)
+            if self.keeps_planes:
+                self.contact.keep_apart(self.x_start, x, self.inv_mass, self.dx, self.hits)
 
     def batch_obstacle(self):
         """None where a step can run inside a batch of substeps (``batch.py``): not with
