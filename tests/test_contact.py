@@ -360,10 +360,9 @@ def test_a_scene_that_starts_crossed_gets_no_worse(f32, integrator, dt):
 @pytest.mark.slow
 def test_the_fold_bench_counts_crossings_after_every_step(f32, monkeypatch):
     """tools/bench_self_collision.py --implicit reports the worst crossing count over every
-    step of the run with self-collision, whatever the solver (853f19f had it count once,
-    at the end, and only for the solvers with CG iterations): with XPBD, which has none,
-    it counts the positions after each of three steps, and reports the worst."""
-    import crossings
+    step of the run with self-collision, whatever the solver (not only at the end, nor only
+    for the solvers with CG iterations): with XPBD, which has none, it counts the positions
+    after each of three steps, and reports the worst."""
     from tcloth.app.script import load_script
     module = load_script(os.path.join(HERE, "..", "scenes", "fold.py"))[0]
     x40, v40 = folding.folded_state(module, os.path.join(HERE, "..", "tools", "data",
@@ -373,7 +372,7 @@ def test_the_fold_bench_counts_crossings_after_every_step(f32, monkeypatch):
     def count(positions, triangles, edges=None):
         seen.append(np.array(positions))
         return {1: 0, 2: 5, 3: 1}[len(seen)]
-    monkeypatch.setattr(crossings, "count_crossings", count)
+    monkeypatch.setattr(folding, "count_crossings", count)
     out = folding.one_second(module, x40, v40, 8, "xpbd", 1.0 / 60.0, 3.0 / 60.0, {})
     assert len(seen) == 3 and out["crossings_max"] == 5, out
     assert not np.array_equal(seen[0], seen[1]) and not np.array_equal(seen[1], seen[2])

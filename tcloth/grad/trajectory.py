@@ -114,7 +114,7 @@ class Trajectory(StepAdjoints):
                            if (kinds == code).any()}
         if self.projective:
             # projective's adjoint solves are preconditioned by backward Euler's Hessian
-            self._newton = BackwardEuler(self.sim.model, exact_hessian=False)
+            self._newton = BackwardEuler(self.sim.model, self.sim.contact, exact_hessian=False)
         if self.implicit:
             self._x_start, self._rhs = (ti.Vector.field(3, runtime.real(),
                                                         shape=scene.num_particles)
