@@ -154,6 +154,7 @@ def test_planes_between_two_layers_let_one_slide_over_the_other(f64):
     assert across > 20 and layered > 10 and tilted > 10, (across, layered, tilted)
 
 
+@pytest.mark.slow
 def test_the_planes_forces_and_matrix_match_numpy_and_finite_differences(f64):
     """The kernels' active pairs, forces f = -grad E with E = sum w/2 min(0, n.(x_a - x_b)
     - REACH delta)^2 (central differences of a NumPy E) and product H v (central
