@@ -82,11 +82,11 @@ class SolveContact:
         return int(guard.truncate(cl, self.planes_of(cl), count, x0, x_pred, v,
                                   self.inv_mass, self.cut, self.solve_cuts))
 
-    def keep_apart(self, x0, x, inv_mass, dx, hits, choose=False):
+    def keep_apart(self, x0, x, dx, hits, choose=False):
         """Move the iterate x's vertex pairs of ``follow_solve(x0, x, choose)`` that are
         closer along their plane's normal than its delta apart (``guard.keep_apart``: one
         Jacobi pass; dx, hits: (n,) scratch fields). Returns how many pairs were closer."""
-        return guard.keep_apart(*self.follow_solve(x0, x, choose), x, inv_mass, dx, hits)
+        return guard.keep_apart(*self.follow_solve(x0, x, choose), x, self.inv_mass, dx, hits)
 
     def displacement_bounds(self):
         """A solver's ``bounds.DisplacementBounds`` for this stage's particles (for

@@ -243,8 +243,7 @@ class VBD(VertexLocal, ForceCache, Integrator):
             if rho > 0.0 and it > 1 and not pushed:
                 self._accelerate(x, omegas[it])
             if self.keeps_planes:
-                pushed = self.contact.keep_apart(self.x_start, x, self.potential.inv_mass,
-                                                 self.dx, self.hits, True) > 0
+                pushed = self.contact.keep_apart(self.x_start, x, self.dx, self.hits, True) > 0
             if self.bounds is not None and self.bounds.any_clamped() and it < opt["iterations"]:
                 if self.contact.detect_bounds(self.bounds, x):
                     for term in self.pair_terms + self.vertex_terms:  # the rows changed

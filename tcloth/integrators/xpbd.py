@@ -169,7 +169,7 @@ class XPBD(Integrator):
         for _ in range(iterations):
             self._iterate(x, h)
             if self.keeps_planes:
-                self.contact.keep_apart(self.x_start, x, self.inv_mass, self.dx, self.hits)
+                self.contact.keep_apart(self.x_start, x, self.dx, self.hits)
 
     def batch_obstacle(self):
         """None where a step can run inside a batch of substeps (``batch.py``): not with
